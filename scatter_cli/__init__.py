@@ -1,0 +1,31 @@
+"""scatter: spread points uniformly over mesh surfaces.
+
+    >>> import scatter_cli
+    >>> s = scatter_cli.sample("mesh.ply", count=1000, attributes=("normal",))
+    >>> s.points.shape, s.normal.shape
+    ((1000, 3), (1000, 3))
+"""
+
+__version__ = "0.1.0"
+__all__ = ["sample", "prepare", "load_surface", "Samples", "ScatterError"]
+
+
+def __getattr__(name):
+    # Imported on first use so that `scatter --help` does not pay for numpy and trimesh.
+    if name in ("sample", "prepare"):
+        from . import api
+
+        return getattr(api, name)
+    if name == "load_surface":
+        from .surface import load_surface
+
+        return load_surface
+    if name == "Samples":
+        from .samples import Samples
+
+        return Samples
+    if name == "ScatterError":
+        from .errors import ScatterError
+
+        return ScatterError
+    raise AttributeError(f"module 'scatter_cli' has no attribute {name!r}")

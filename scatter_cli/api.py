@@ -1,0 +1,172 @@
+"""The Python API that the command line wraps: ``sample`` and the streaming ``prepare``."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from .attributes import AttributeMaker
+from .errors import ScatterError, ScatterUsageError
+from .samples import Samples, column_layout, parse_attributes
+from .sampling import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
+from .surface import Surface, load_surface
+
+METHODS = ("random", "stratified", "sobol")
+PRECISIONS = ("auto", "float32", "float64")
+# --precision auto keeps float32 while its rounding moves no point by more than this
+# fraction of the bounding-box diagonal.
+AUTO_PRECISION_TOLERANCE = 1e-6
+
+
+class Run:
+    """A prepared sampling job: the plan, the output layout and the point count.
+
+    ``chunks()`` yields :class:`Samples` of at most ``chunk_size`` points, in output
+    order, so a writer can stream any count in flat memory.
+    """
+
+    def __init__(self, surface, plan, count, seed, attributes, dtype, chunk_size, info):
+        self.surface = surface
+        self.plan = plan
+        self.count = count
+        self.seed = seed
+        self.dtype = np.dtype(dtype)
+        self.maker = AttributeMaker(surface, attributes)
+        self.chunk_size = chunk_size
+        self.info = info
+        self.layout = column_layout({_key(a) for a in attributes}, self.dtype)
+
+    def _job(self, start, stop):
+        raw = self.plan.draw(start, stop, self.seed, self.maker.needs_bary)
+        attrs = self.maker.make(raw, self.dtype)
+        return Samples(raw.points.astype(self.dtype, copy=False), attrs)
+
+    def chunks(self, threads=None):
+        yield from run_chunks(self._job, chunk_ranges(self.count, self.chunk_size), threads)
+
+    def collect(self) -> Samples:
+        """All points in one :class:`Samples` (memory grows with the count)."""
+        n = self.count
+        points = np.empty((n, 3), dtype=self.dtype)
+        attributes = {}
+        # Fill preallocated arrays chunk by chunk: no concatenation copy at the end.
+        pos = 0
+        for chunk in self.chunks():
+            k = len(chunk)
+            points[pos : pos + k] = chunk.points
+            for key, arr in chunk.attributes.items():
+                if key not in attributes:
+                    attributes[key] = np.empty((n,) + arr.shape[1:], dtype=arr.dtype)
+                attributes[key][pos : pos + k] = arr
+            pos += k
+        return Samples(points, attributes, self.info)
+
+
+def _key(name):
+    from .samples import ATTRIBUTES
+
+    return ATTRIBUTES[name][0]
+
+
+def prepare(mesh, count=None, *, density=None, seed=0, method="random", attributes=(), poisson=False,
+            radius=None, weight=None, objects=None, precision="auto", chunk_size=None, input_format=None,
+            warn=None) -> Run:
+    """Load (if needed) and plan a sampling job; see :func:`sample` for the arguments."""
+    t0 = time.perf_counter()
+    names = parse_attributes(attributes)
+    _check_options(count, density, seed, method, precision, chunk_size, radius)
+    surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects)
+    t1 = time.perf_counter()
+    plan = SamplePlan(surface)
+    if plan.non_finite and warn:
+        warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
+    if density is not None:
+        count = int(round(density * plan.area))
+    elif count is None:
+        count = 10000
+    dtype = choose_precision(plan, precision, warn)
+    info = {
+        "source": surface.source,
+        "count": count,
+        "area": plan.area,
+        "faces": surface.face_count,
+        "faces_used": plan.faces_used,
+        "seed": seed,
+        "method": method,
+        "precision": np.dtype(dtype).name,
+        "timings": {"load": t1 - t0, "plan": time.perf_counter() - t1},
+    }
+    return Run(surface, plan, count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info)
+
+
+def sample(mesh, count=10000, *, density=None, seed=0, method="random", attributes=(), poisson=False,
+           radius=None, weight=None, objects=None, precision="auto", chunk_size=None) -> Samples:
+    """Sample points uniformly over the surface of ``mesh``.
+
+    mesh: a path, a ``trimesh.Trimesh`` or a ``trimesh.Scene``. Returns :class:`Samples`
+    with ``.points`` (count, 3) and one array per requested attribute. The result is a
+    pure function of the mesh, the options and ``seed``, whatever ``chunk_size``.
+    """
+    run = prepare(mesh, count, density=density, seed=seed, method=method, attributes=attributes,
+                  poisson=poisson, radius=radius, weight=weight, objects=objects, precision=precision,
+                  chunk_size=chunk_size)
+    t = time.perf_counter()
+    samples = run.collect()
+    samples.info["timings"]["sample"] = time.perf_counter() - t
+    return samples
+
+
+def _check_options(count, density, seed, method, precision, chunk_size, radius):
+    if count is not None and density is not None:
+        raise ScatterUsageError("give either a count (-n) or a --density, not both")
+    if count is not None and (not isinstance(count, (int, np.integer)) or count < 0):
+        raise ScatterUsageError(f"the count must be a non-negative integer, not {count!r}")
+    if density is not None and not (math.isfinite(density) and density > 0):
+        raise ScatterUsageError(f"--density must be a positive number, not {density!r}")
+    if not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ScatterUsageError(f"--seed must be a non-negative integer, not {seed!r}")
+    if method not in METHODS:
+        raise ScatterUsageError(f"unknown method '{method}' (choose from: {', '.join(METHODS)})")
+    if precision not in PRECISIONS:
+        raise ScatterUsageError(f"unknown precision '{precision}' (choose from: {', '.join(PRECISIONS)})")
+    if chunk_size is not None and (not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1):
+        raise ScatterUsageError(f"--chunk-size must be a positive integer, not {chunk_size!r}")
+    if radius is not None and not (math.isfinite(radius) and radius > 0):
+        raise ScatterUsageError(f"--radius must be a positive number, not {radius!r}")
+
+
+def sampled_bounds(plan: SamplePlan):
+    """(2, 3) float64 min and max over the world-space vertices of the faces that get points."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for part in plan.parts:
+        tri = part.tri if part.faces is None else part.tri[part.faces]
+        if part.matrix is not None:
+            tri = (tri.reshape(-1, 3) @ part.matrix[:3, :3].T + part.matrix[:3, 3]).reshape(-1, 9)
+        # One strided pass per column: much faster than min(axis=0) over an (n, 3) array.
+        cols = tri.T
+        lo = np.minimum(lo, [min(cols[c].min(), cols[c + 3].min(), cols[c + 6].min()) for c in range(3)])
+        hi = np.maximum(hi, [max(cols[c].max(), cols[c + 3].max(), cols[c + 6].max()) for c in range(3)])
+    return np.stack([lo, hi])
+
+
+def float32_error_bound(bounds) -> float:
+    """Largest distance rounding to float32 can move a point inside ``bounds`` (2, 3)."""
+    biggest = np.abs(bounds).max(axis=0)
+    half_ulp = np.spacing(biggest.astype(np.float32)).astype(np.float64) / 2
+    return float(np.sqrt(np.sum(half_ulp**2)))
+
+
+def choose_precision(plan, precision, warn=None):
+    if precision != "auto":
+        return np.dtype(precision)
+    bounds = sampled_bounds(plan)
+    diag = float(np.linalg.norm(bounds[1] - bounds[0]))
+    err = float32_error_bound(bounds)
+    if err > AUTO_PRECISION_TOLERANCE * diag:
+        if warn:
+            warn(f"writing float64 coordinates: float32 would move points by up to {err:.3g}, "
+                 f"more than 1e-6 of the bounding-box diagonal ({diag:.6g})")
+        return np.dtype(np.float64)
+    return np.dtype(np.float32)

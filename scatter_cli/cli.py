@@ -1,0 +1,191 @@
+"""The ``scatter`` command line: a thin shell over :mod:`scatter_cli.api`."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import time
+from typing import List, Optional
+
+import typer
+
+from .errors import ScatterError, ScatterUsageError
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+    context_settings={"help_option_names": ["-h", "--help"]},
+    help="Spread points uniformly over the surface of a mesh.\n\n"
+    "  scatter sample bunny.obj -n 100000 -o bunny.ply\n\n"
+    "  scatter sample scene.glb --poisson -n 5000 -a normal,color | head\n\n"
+    "  scatter info mesh.ply",
+)
+
+
+def _warner(quiet):
+    if quiet:
+        return None
+    return lambda message: print(f"warning: {message}", file=sys.stderr)
+
+
+@app.command(no_args_is_help=True)
+def sample(
+    mesh: str = typer.Argument(..., help="Mesh file (PLY, OBJ, STL, OFF, GLB/GLTF, ...); '-' reads standard input."),
+    count: Optional[int] = typer.Option(None, "-n", "--count", help="Number of points [default: 10000]."),
+    density: Optional[float] = typer.Option(None, "--density", help="Points per unit of surface area, instead of -n."),
+    output: Optional[str] = typer.Option(None, "-o", "--output", help="Output file; '-' or absent: standard output."),
+    fmt: Optional[str] = typer.Option(None, "-f", "--format", help="ply|csv|xyz|npy [default: from the suffix of -o; CSV on standard output]."),
+    ascii: bool = typer.Option(False, "--ascii", help="ASCII PLY instead of binary little-endian."),
+    seed: int = typer.Option(0, "--seed", help="Random seed: same input, options and seed give the same bytes."),
+    attributes: Optional[str] = typer.Option(None, "-a", "--attributes", help="Comma list of extra columns: normal, smooth-normal, face, bary, color, uv, object."),
+    weight: Optional[str] = typer.Option(None, "--weight", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a."),
+    objects: Optional[List[str]] = typer.Option(None, "--object", help="Sample only this scene object (repeatable)."),
+    poisson: bool = typer.Option(False, "--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached."),
+    radius: Optional[float] = typer.Option(None, "--radius", help="Thin to a maximal Poisson-disk set with this minimum distance."),
+    method: str = typer.Option("random", "--method", help="random (i.i.d., square-root warp) | stratified | sobol."),
+    precision: str = typer.Option("auto", "--precision", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal."),
+    stats: Optional[str] = typer.Option(None, "--stats", help="Write a JSON summary to this file ('-': standard error)."),
+    quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress and no warnings."),
+    chunk_size: Optional[int] = typer.Option(None, "--chunk-size", help="Points generated per chunk (memory/speed knob; never changes the output)."),
+    input_format: Optional[str] = typer.Option(None, "--input-format", help="Mesh format when reading standard input (ply, obj, stl, off, glb)."),
+):
+    """Sample points on the surface of MESH.
+
+    Faces are chosen with probability proportional to their area and the point inside
+    a face comes from the square-root warp, so the points are uniform over the surface.
+    Points of the default random method form an exchangeable sequence: any prefix of
+    the output is itself a uniform sample.
+
+    Examples:
+
+      scatter sample bunny.obj -n 100000 -o bunny.ply
+
+      scatter sample part.stl --density 50 -a normal -o part.csv
+
+      cat mesh.ply | scatter sample - --input-format ply -n 1000 -f xyz
+    """
+    from . import api
+    from .progress import with_progress
+    from .writers import infer_format, write_samples
+
+    started = time.perf_counter()
+    out_format = infer_format(output, fmt)
+    if ascii and out_format != "ply":
+        raise ScatterUsageError("--ascii applies to PLY output only")
+    run = api.prepare(
+        mesh, count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,
+        radius=radius, weight=weight, objects=objects, precision=precision, chunk_size=chunk_size,
+        input_format=input_format, warn=_warner(quiet),
+    )
+    t = time.perf_counter()
+    show = not quiet and sys.stderr.isatty()
+    write_samples(with_progress(run.chunks(), run.count, show), output, out_format, run.layout, run.count, ascii)
+    run.info["timings"]["sample_and_write"] = time.perf_counter() - t
+    run.info["timings"]["total"] = time.perf_counter() - started
+    if stats:
+        _write_stats(run.info, stats)
+
+
+def _write_stats(info, path):
+    text = json.dumps(info, indent=2, default=float) + "\n"
+    if path == "-":
+        sys.stderr.write(text)
+        return
+    from .writers import open_output
+
+    with open_output(path) as stream:
+        stream.write(text.encode())
+
+
+@app.command()
+def info(
+    mesh: str = typer.Argument(..., help="Mesh file; '-' reads standard input."),
+    as_json: bool = typer.Option(False, "--json", help="Machine-readable JSON."),
+    input_format: Optional[str] = typer.Option(None, "--input-format", help="Mesh format when reading standard input."),
+):
+    """Faces, vertices, area, bounding box, degenerate faces, attributes and objects of MESH."""
+    from .info import describe, format_text
+
+    report = describe(mesh, input_format=input_format)
+    print(json.dumps(report, indent=2) if as_json else format_text(report))
+
+
+@app.command()
+def check(
+    mesh: str = typer.Argument(..., help="Mesh file."),
+    count: int = typer.Option(100000, "-n", "--count", help="Points per sampler."),
+    seed: int = typer.Option(0, "--seed"),
+    poisson: bool = typer.Option(False, "--poisson", help="Compare Poisson-disk sets of exactly N points."),
+    radius: Optional[float] = typer.Option(None, "--radius", help="Compare Poisson-disk sets of minimum distance R."),
+):
+    """Compare this tool's samples of MESH with pymeshlab's against the exact distribution.
+
+    Exits 0 when scatter's points are consistent with the exact surface distribution
+    (and so at least as good as pymeshlab's), 1 when not.
+    """
+    from .check import run_check
+
+    raise typer.Exit(run_check(mesh, count=count, seed=seed, poisson=poisson, radius=radius))
+
+
+@app.callback()
+def _root(debug: bool = typer.Option(False, "--debug", help="Show tracebacks on errors.")):
+    pass
+
+
+class _Terminated(BaseException):
+    pass
+
+
+def _on_sigterm(signum, frame):
+    raise _Terminated()
+
+
+def _click_error_types():
+    mro = typer.BadParameter.__mro__
+    usage = next(c for c in mro if c.__name__ == "UsageError")
+    base = next(c for c in mro if c.__name__ == "ClickException")
+    return usage, base
+
+
+def main(argv=None):
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    usage_error, click_error = _click_error_types()
+    command = typer.main.get_command(app)
+    try:
+        code = command.main(args=argv, prog_name="scatter", standalone_mode=False)
+        code = code if isinstance(code, int) else 0
+    except usage_error as exc:
+        hint = f" (see '{exc.ctx.command_path} --help')" if getattr(exc, "ctx", None) else ""
+        code = _fail(exc.format_message() + hint, 2)
+    except ScatterError as exc:
+        code = _fail(str(exc), exc.exit_code)
+    except click_error as exc:
+        code = _fail(exc.format_message(), exc.exit_code)
+    except BrokenPipeError:
+        # The reader went away (`| head`): stop quietly, as Unix tools do.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        code = 141
+    except KeyboardInterrupt:
+        code = _fail("interrupted", 130)
+    except _Terminated:
+        code = _fail("terminated", 143)
+    except MemoryError:
+        code = _fail("out of memory (try a smaller count or --chunk-size)", 1)
+    except Exception as exc:
+        if debug:
+            raise
+        code = _fail(f"internal error: {type(exc).__name__}: {exc} (run with --debug for a traceback)", 1)
+    sys.exit(code)
+
+
+def _fail(message, code):
+    print(f"error: {message}", file=sys.stderr)
+    return code

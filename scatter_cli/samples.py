@@ -1,0 +1,100 @@
+"""The points and their per-point attributes, and the column layout every writer uses."""
+
+from __future__ import annotations
+
+import numpy as np
+
+# Attribute name (as given to -a) -> (key in Samples, output columns, dtype kind).
+# "real" columns take the coordinate precision; the others have a fixed type.
+ATTRIBUTES = {
+    "normal": ("normal", ("nx", "ny", "nz"), "real"),
+    "smooth-normal": ("normal", ("nx", "ny", "nz"), "real"),
+    "face": ("face", ("face_index",), "<i4"),
+    "bary": ("bary", ("bary0", "bary1", "bary2"), "real"),
+    "color": ("color", ("red", "green", "blue", "alpha"), "u1"),
+    "uv": ("uv", ("u", "v"), "real"),
+    "object": ("object", ("object_index",), "<i4"),
+}
+# Columns always come in this order, whatever the order of -a.
+KEY_ORDER = ("normal", "face", "bary", "color", "uv", "object")
+
+
+def column_layout(keys, real_dtype):
+    """[(key, column names, numpy dtype)] for ``points`` then the given keys, in file order."""
+    real = np.dtype(real_dtype).newbyteorder("<")
+    layout = [("points", ("x", "y", "z"), real)]
+    for key in KEY_ORDER:
+        if key in keys:
+            _, cols, kind = next(v for v in ATTRIBUTES.values() if v[0] == key)
+            layout.append((key, cols, real if kind == "real" else np.dtype(kind)))
+    return layout
+
+
+def parse_attributes(text_or_list):
+    """``"normal,face"`` or a list -> tuple of attribute names, validated."""
+    from .errors import ScatterUsageError
+
+    if not text_or_list:
+        return ()
+    items = text_or_list.split(",") if isinstance(text_or_list, str) else list(text_or_list)
+    names = tuple(dict.fromkeys(s.strip().lower() for s in items if s.strip()))
+    unknown = [n for n in names if n not in ATTRIBUTES]
+    if unknown:
+        raise ScatterUsageError(f"unknown attribute {', '.join(map(repr, unknown))} (choose from: {', '.join(ATTRIBUTES)})")
+    if "normal" in names and "smooth-normal" in names:
+        raise ScatterUsageError("'normal' and 'smooth-normal' both write nx ny nz: ask for one of them")
+    return names
+
+
+class Samples:
+    """Points ``(n, 3)`` and one array per requested attribute.
+
+    ``samples.points``, ``samples.normal`` (n, 3), ``samples.face`` (n,) int32,
+    ``samples.bary`` (n, 3), ``samples.color`` (n, 4) uint8, ``samples.uv`` (n, 2),
+    ``samples.object`` (n,) int32. ``info`` holds run statistics (area, radius, ...).
+    """
+
+    def __init__(self, points, attributes=None, info=None):
+        self.points = points
+        self.attributes = dict(attributes or {})
+        self.info = dict(info or {})
+
+    def __getattr__(self, name):
+        attributes = self.__dict__.get("attributes", {})
+        if name in attributes:
+            return attributes[name]
+        raise AttributeError(f"Samples has no attribute {name!r} (requested: {', '.join(attributes) or 'none'})")
+
+    def __len__(self):
+        return len(self.points)
+
+    def __repr__(self):
+        fields = ", ".join(["points"] + list(self.attributes))
+        return f"Samples(n={len(self)}, dtype={self.points.dtype}, fields=[{fields}])"
+
+    def layout(self):
+        return column_layout(self.attributes, self.points.dtype)
+
+    def to_structured(self):
+        """One structured array (n,) with the output columns, as the NPY writer stores it."""
+        layout = self.layout()
+        dtype = np.dtype([(c, dt) for _, cols, dt in layout for c in cols])
+        out = np.empty(len(self), dtype=dtype)
+        for key, cols, _ in layout:
+            data = self.points if key == "points" else self.attributes[key]
+            data = data.reshape(len(self), -1)
+            for j, c in enumerate(cols):
+                out[c] = data[:, j]
+        return out
+
+    def take(self, index):
+        """A new Samples with rows ``index`` of every array."""
+        return Samples(self.points[index], {k: v[index] for k, v in self.attributes.items()}, self.info)
+
+    @staticmethod
+    def concatenate(parts, info=None):
+        if not parts:
+            raise ValueError("nothing to concatenate")
+        points = np.concatenate([p.points for p in parts])
+        attributes = {k: np.concatenate([p.attributes[k] for p in parts]) for k in parts[0].attributes}
+        return Samples(points, attributes, info if info is not None else parts[0].info)

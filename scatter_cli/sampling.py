@@ -1,0 +1,239 @@
+"""Face selection and sampling: a surface -> a sample plan -> chunks of points.
+
+Point ``i`` of the ``random`` method is a pure function of the seed and ``i``: it uses
+draws ``3 i .. 3 i + 2`` of one PCG64DXSM stream (face choice, then the two warp
+inputs). A chunk starting at point ``s`` advances a copy of the stream by ``3 s``,
+so chunks can be made in any size, order or thread and the output is the same bytes.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import ScatterError
+from .surface import Surface, corners, doubled_areas
+from .warps import square_to_triangle
+
+DRAWS_PER_POINT = 3
+DEFAULT_CHUNK = 1 << 17
+
+
+@dataclass
+class Part:
+    """One instance's faces that can receive points.
+
+    faces: (k,) int64 face indices into its geometry, None when every face is used;
+    tri: (F, 9) float64 local corners of the whole geometry (shared between instances
+    of one geometry).
+    """
+
+    instance: int
+    faces: np.ndarray | None
+    tri: np.ndarray
+    matrix: np.ndarray | None
+
+    @property
+    def count(self) -> int:
+        return len(self.tri) if self.faces is None else len(self.faces)
+
+
+@dataclass
+class RawChunk:
+    """What the sampler knows about a run of points, before attributes and precision.
+
+    points: (n, 3) float64 world space; face: (n,) int64 index in the geometry;
+    instance: (n,) int64; bary: (n, 3) float64 weights of the face's vertices 0, 1, 2.
+    """
+
+    start: int
+    points: np.ndarray
+    face: np.ndarray
+    instance: np.ndarray
+    bary: np.ndarray
+
+
+class SamplePlan:
+    """Everything needed to draw points from a surface, built once per run."""
+
+    def __init__(self, surface: Surface, weights=None):
+        self.surface = surface
+        self.parts, doubled, self.non_finite = _parts(surface, weights)
+        self.cdf = np.cumsum(doubled)
+        self.cdf *= 0.5
+        self.offsets = np.cumsum([0] + [p.count for p in self.parts])
+        if not len(self.cdf) or not self.cdf[-1] > 0 or not math.isfinite(self.cdf[-1]):
+            raise ScatterError(f"{surface.source}: the mesh has no faces with a non-zero, finite area")
+        self.guide = _guide_table(self.cdf)
+
+    @property
+    def area(self) -> float:
+        """Total sampled area (weighted area when a weight is given)."""
+        return float(self.cdf[-1])
+
+    @property
+    def faces_used(self) -> int:
+        return len(self.cdf)
+
+    def select(self, u):
+        """Index into the used-face list for each ``u`` (n,) in [0, 1): P(k) = area_k / total.
+
+        Same result as ``searchsorted(cdf, u * total, 'right')`` clipped to the last
+        face, so a draw that rounds up to the total never indexes past the end and a
+        face whose CDF step is zero is never chosen. The guide table starts the search
+        in the right bucket; almost every draw is settled in one or two steps.
+        """
+        cdf, last = self.cdf, len(self.cdf) - 1
+        x = u * cdf[-1]
+        k = (u * len(self.guide)).astype(np.int64)
+        i = np.minimum(self.guide[k], last)
+        todo = np.flatnonzero(cdf[i] <= x)
+        for _ in range(4):
+            todo = todo[i[todo] < last]
+            if not todo.size:
+                return i
+            i[todo] += 1
+            todo = todo[cdf[i[todo]] <= x[todo]]
+        if todo.size:
+            i[todo] = np.minimum(np.searchsorted(cdf, x[todo], side="right"), last)
+        return i
+
+    def draw(self, start: int, stop: int, seed: int, want_bary: bool = False) -> RawChunk:
+        """Points ``start`` to ``stop`` of the random sequence for ``seed``."""
+        u = uniforms(seed, start, stop)
+        used = self.select(u[:, 0])
+        b = square_to_triangle(u[:, 1:3])
+        return self.place(start, used, b, want_bary)
+
+    def place(self, start, used, b, want_bary=False) -> RawChunk:
+        """Points at barycentric ``b`` (n, 2) on used faces ``used`` (n,)."""
+        n = len(used)
+        points = np.empty((n, 3))
+        face = np.empty(n, dtype=np.int64)
+        if len(self.parts) == 1:
+            instance = np.zeros(n, dtype=np.int64)
+            self._place_part(self.parts[0], used, b, points, face)
+        else:
+            part = np.searchsorted(self.offsets, used, side="right") - 1
+            instance = np.asarray([p.instance for p in self.parts], dtype=np.int64)[part]
+            order = np.argsort(part, kind="stable")
+            bounds = np.searchsorted(part[order], np.arange(len(self.parts) + 1))
+            for j, p in enumerate(self.parts):
+                rows = order[bounds[j] : bounds[j + 1]]
+                if rows.size:
+                    pts = np.empty((rows.size, 3))
+                    fc = np.empty(rows.size, dtype=np.int64)
+                    self._place_part(p, used[rows] - self.offsets[j], b[rows], pts, fc)
+                    points[rows], face[rows] = pts, fc
+        bary = None
+        if want_bary:
+            bary = np.empty((n, 3))
+            bary[:, 1:] = b
+            bary[:, 0] = 1.0 - b[:, 0] - b[:, 1]
+            np.maximum(bary[:, 0], 0.0, out=bary[:, 0])
+        return RawChunk(start, points, face, instance, bary)
+
+    @staticmethod
+    def _place_part(part, local, b, points, face):
+        if part.faces is None:
+            face[:] = local
+        else:
+            np.take(part.faces, local, out=face)
+        t = np.take(part.tri, face, axis=0).T
+        b1, b2 = np.ascontiguousarray(b[:, 0]), np.ascontiguousarray(b[:, 1])
+        # Column by column on 1-D arrays: several times faster than (n, 3) broadcasting.
+        # v0 + (b1 e1 + b2 e2) keeps the rounding at the scale of the triangle, not of v0.
+        for c in range(3):
+            col = (t[3 + c] - t[c]) * b1
+            col += (t[6 + c] - t[c]) * b2
+            col += t[c]
+            points[:, c] = col
+        if part.matrix is not None:
+            m = part.matrix
+            points[:] = points @ m[:3, :3].T + m[:3, 3]
+
+
+def uniforms(seed: int, start: int, stop: int):
+    """Draws for points ``start .. stop - 1``: (n, 3) float64 in [0, 1)."""
+    bits = np.random.PCG64DXSM(seed)
+    bits.advance(DRAWS_PER_POINT * start)
+    return np.random.Generator(bits).random((stop - start, DRAWS_PER_POINT))
+
+
+def _parts(surface: Surface, weights):
+    """Per-instance usable faces and twice their (world-space, weighted) areas."""
+    parts, areas = [], []
+    tris = {}
+    skipped = 0
+    for k, inst in enumerate(surface.instances):
+        g = surface.geometries[inst.geometry]
+        if inst.geometry not in tris:
+            tris[inst.geometry] = corners(g.vertices, g.faces)
+        tri = tris[inst.geometry]
+        with np.errstate(invalid="ignore", over="ignore"):
+            a = doubled_areas(tri, inst.matrix)
+        if weights is not None:
+            a = a * weights(k, inst)
+        finite = np.isfinite(a)
+        skipped += int(len(a) - np.count_nonzero(finite))
+        ok = finite & (a > 0)
+        if ok.all():
+            parts.append(Part(k, None, tri, inst.matrix))
+            areas.append(a)
+        else:
+            faces = np.flatnonzero(ok)
+            parts.append(Part(k, faces, tri, inst.matrix))
+            areas.append(a[faces])
+    return parts, (np.concatenate(areas) if areas else np.empty(0)), skipped
+
+
+def _guide_table(cdf):
+    """For 2^m buckets of u, the first face whose CDF exceeds the bucket's lower edge.
+
+    A power-of-two bucket count makes ``u * M`` and ``k / M`` exact, so a draw's face is
+    never before its bucket's guide entry.
+    """
+    m = 1 << max(4, min(24, int(len(cdf) - 1).bit_length()))
+    lower = (np.arange(m, dtype=np.float64) / m) * cdf[-1]
+    return np.searchsorted(cdf, lower, side="right").astype(np.int32 if len(cdf) < 2**31 else np.int64)
+
+
+def chunk_ranges(count: int, chunk_size: int):
+    """(start, stop) pairs covering ``range(count)``."""
+    return [(s, min(s + chunk_size, count)) for s in range(0, count, chunk_size)]
+
+
+def worker_count() -> int:
+    env = os.environ.get("SCATTER_THREADS")
+    if env:
+        return max(1, int(env))
+    return max(1, min(4, os.cpu_count() or 1))
+
+
+def run_chunks(job, ranges, threads=None):
+    """Yield ``job(start, stop)`` for each range, in order, computed by a small pool.
+
+    At most two results per thread wait at a time, so memory stays flat whatever N.
+    """
+    threads = threads or worker_count()
+    if threads == 1 or len(ranges) <= 1:
+        for r in ranges:
+            yield job(*r)
+        return
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        pending = []
+        it = iter(ranges)
+        for r in it:
+            pending.append(pool.submit(job, *r))
+            if len(pending) >= 2 * threads:
+                break
+        while pending:
+            result = pending.pop(0).result()
+            nxt = next(it, None)
+            if nxt is not None:
+                pending.append(pool.submit(job, *nxt))
+            yield result

@@ -1,0 +1,203 @@
+"""Loading a surface: a mesh file, a trimesh object or a scene -> float64 arrays.
+
+A :class:`Surface` is a list of geometries (local vertices and triangles) and a list
+of instances, each placing one geometry in world space with a 4x4 matrix. An
+instanced geometry is stored once, whatever the number of nodes that place it.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import os
+import sys
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ScatterError, ScatterUsageError
+
+MESH_FORMATS = ("ply", "obj", "stl", "off", "glb", "gltf")
+
+
+@dataclass
+class Geometry:
+    """One triangle list in its own frame.
+
+    vertices: (V, 3) float64; faces: (F, 3) int64, in the order trimesh loads them.
+    ``mesh`` is the trimesh object it came from, kept for attributes (UVs, colours).
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    mesh: object = None
+
+
+@dataclass
+class Instance:
+    """A geometry placed in world space; ``matrix`` is (4, 4) float64, None for identity."""
+
+    name: str
+    geometry: int
+    matrix: np.ndarray | None = None
+
+
+@dataclass
+class Surface:
+    geometries: list[Geometry]
+    instances: list[Instance]
+    source: str = "<mesh>"
+    is_scene: bool = False
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def face_count(self) -> int:
+        """Faces in world space, every instance counted."""
+        return sum(len(self.geometries[i.geometry].faces) for i in self.instances)
+
+    def world_vertices(self, instance: Instance) -> np.ndarray:
+        """(V, 3) float64 vertices of one instance's geometry in world space."""
+        v = self.geometries[instance.geometry].vertices
+        if instance.matrix is None:
+            return v
+        m = instance.matrix
+        return v @ m[:3, :3].T + m[:3, 3]
+
+
+def load_surface(source, *, input_format: str | None = None, objects=None) -> Surface:
+    """Load ``source`` (path, ``'-'`` for standard input, trimesh.Trimesh or trimesh.Scene)."""
+    import trimesh
+
+    logging.getLogger("trimesh").setLevel(logging.ERROR)
+    name = "<mesh>"
+    if isinstance(source, (str, os.PathLike)):
+        name = "<stdin>" if str(source) == "-" else os.fspath(source)
+        loaded = _read_file(source, input_format)
+    else:
+        loaded = source
+    if isinstance(loaded, trimesh.Trimesh):
+        surface = Surface([_geometry(name, loaded, name)], [Instance(os.path.basename(name), 0)], name)
+    elif isinstance(loaded, trimesh.Scene):
+        surface = _from_scene(loaded, name)
+    else:
+        raise ScatterError(f"{name}: not a surface mesh (trimesh loaded a {type(loaded).__name__})")
+    if objects:
+        surface = select_objects(surface, objects)
+    if surface.face_count == 0:
+        raise ScatterError(f"{name}: the mesh has no faces")
+    return surface
+
+
+def _read_file(source, input_format):
+    import trimesh
+
+    path = os.fspath(source)
+    if path == "-":
+        if not input_format:
+            raise ScatterUsageError("reading a mesh from standard input needs --input-format (ply, obj, stl, off, glb)")
+        data = sys.stdin.buffer.read()
+        if not data:
+            raise ScatterError("<stdin>: no data on standard input")
+        file_obj, file_type = io.BytesIO(data), input_format.lower()
+    else:
+        _check_readable(path)
+        file_type = (input_format or os.path.splitext(path)[1].lstrip(".")).lower()
+        if not file_type:
+            raise ScatterUsageError(f"{path}: no file suffix to tell the format; pass --input-format")
+        file_obj = path
+    if file_type not in trimesh.available_formats():
+        raise ScatterUsageError(f"{path}: unknown mesh format '{file_type}' (try one of: {', '.join(MESH_FORMATS)})")
+    try:
+        with np.errstate(all="ignore"):
+            return trimesh.load(file_obj, file_type=file_type, process=False)
+    except MemoryError:
+        raise ScatterError(f"{path}: out of memory while reading the mesh") from None
+    except Exception as exc:  # trimesh raises many kinds on malformed input
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ScatterError(f"{path}: not a readable {file_type.upper()} mesh ({reason[:200]})") from None
+
+
+def _check_readable(path):
+    if not os.path.exists(path):
+        raise ScatterError(f"{path}: no such file")
+    if os.path.isdir(path):
+        raise ScatterError(f"{path}: is a directory, not a mesh file")
+    if not os.access(path, os.R_OK):
+        raise ScatterError(f"{path}: permission denied")
+    if os.path.getsize(path) == 0:
+        raise ScatterError(f"{path}: the file is empty")
+
+
+def _geometry(name, mesh, source) -> Geometry:
+    vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+    if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
+        raise ScatterError(f"{source}: face indices out of range in geometry '{name}'")
+    return Geometry(name, vertices, faces, mesh)
+
+
+def _from_scene(scene, source) -> Surface:
+    import trimesh
+
+    geometries, index, instances = [], {}, []
+    for node in scene.graph.nodes_geometry:
+        matrix, geom_name = scene.graph[node]
+        mesh = scene.geometry.get(geom_name)
+        if not isinstance(mesh, trimesh.Trimesh):
+            continue
+        if geom_name not in index:
+            index[geom_name] = len(geometries)
+            geometries.append(_geometry(geom_name, mesh, source))
+        matrix = np.asarray(matrix, dtype=np.float64)
+        instances.append(Instance(str(node), index[geom_name], None if np.array_equal(matrix, np.eye(4)) else matrix))
+    return Surface(geometries, instances, source, is_scene=True)
+
+
+def select_objects(surface: Surface, names) -> Surface:
+    """Keep the instances whose node or geometry name is in ``names`` (instance order kept)."""
+    wanted = set(names)
+    known = {i.name for i in surface.instances} | {g.name for g in surface.geometries}
+    missing = sorted(wanted - known)
+    if missing:
+        raise ScatterUsageError(
+            f"{surface.source}: no object named {', '.join(map(repr, missing))} "
+            f"(objects: {', '.join(sorted(known)) or 'none'})"
+        )
+    kept = [i for i in surface.instances if i.name in wanted or surface.geometries[i.geometry].name in wanted]
+    return Surface(surface.geometries, kept, surface.source, surface.is_scene)
+
+
+def corners(vertices, faces):
+    """The three corners of each face: (F, 9) float64 rows ``[v0, v1, v2]``."""
+    return np.take(vertices, faces, axis=0).reshape(len(faces), 9)
+
+
+def doubled_areas(tri, matrix=None):
+    """Twice the area of each face, in world space under ``matrix`` (4, 4).
+
+    tri: (F, 9) float64 corners -> (F,) float64; non-finite faces give NaN.
+    Under a linear map A, (A e1) x (A e2) = cof(A) (e1 x e2), so one 3x3 product per face
+    gives world areas, for non-uniform scales too, without moving the vertices.
+    """
+    n = face_cross(tri)
+    if matrix is not None:
+        n = n @ cofactor(matrix[:3, :3]).T
+    return np.sqrt(np.einsum("ij,ij->i", n, n))
+
+
+def face_cross(tri):
+    """(v1 - v0) x (v2 - v0) for each face: (F, 9) corners -> (F, 3) float64."""
+    t = tri.T
+    e1 = [t[3 + c] - t[c] for c in range(3)]
+    e2 = [t[6 + c] - t[c] for c in range(3)]
+    n = np.empty((tri.shape[0], 3))
+    for c in range(3):
+        a, b = (c + 1) % 3, (c + 2) % 3
+        np.subtract(e1[a] * e2[b], e1[b] * e2[a], out=n[:, c])
+    return n
+
+
+def cofactor(a):
+    """Cofactor matrix of a (3, 3) matrix, defined for singular ones too."""
+    return np.stack([np.cross(a[1], a[2]), np.cross(a[2], a[0]), np.cross(a[0], a[1])])
