@@ -1,0 +1,192 @@
+"""The command line through the real entry point: exit codes, one-line errors, atomic files."""
+
+import numpy as np
+import pytest
+
+from .conftest import run_scatter, spread_triangles, triangles_mesh
+
+
+def assert_one_line_error(proc, code, *words):
+    err = proc.stderr.decode()
+    assert proc.returncode == code, err
+    lines = [l for l in err.splitlines() if l.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert "Traceback" not in err
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+
+
+@pytest.fixture
+def existing(tmp_path):
+    out = tmp_path / "out.ply"
+    out.write_bytes(b"precious")
+    return out
+
+
+def assert_untouched(existing):
+    assert existing.read_bytes() == b"precious"
+    assert not [p for p in existing.parent.iterdir() if p.name.startswith(".")], "temporary file left behind"
+
+
+def write_obj(path, vertices, faces):
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_missing_file(tmp_path, existing):
+    proc = run_scatter("sample", tmp_path / "nope.obj", "-o", existing)
+    assert_one_line_error(proc, 1, "nope.obj", "no such file")
+    assert_untouched(existing)
+
+
+def test_not_a_mesh(tmp_path, existing):
+    bad = tmp_path / "bad.ply"
+    bad.write_bytes(b"this is not a ply file\x00\x01\x02")
+    assert_one_line_error(run_scatter("sample", bad, "-o", existing), 1, "bad.ply")
+    assert_untouched(existing)
+
+
+def test_empty_file(tmp_path, existing):
+    empty = tmp_path / "empty.stl"
+    empty.write_bytes(b"")
+    assert_one_line_error(run_scatter("sample", empty, "-o", existing), 1, "empty.stl", "empty")
+    assert_untouched(existing)
+
+
+def test_directory(tmp_path):
+    assert_one_line_error(run_scatter("sample", tmp_path), 1, "directory")
+
+
+def test_mesh_without_faces(tmp_path):
+    path = tmp_path / "points.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+    assert_one_line_error(run_scatter("sample", path), 1, "points.obj")
+
+
+def test_mesh_without_area(tmp_path, existing):
+    path = write_obj(tmp_path / "flat.obj", [[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2], [0, 0, 1]])
+    assert_one_line_error(run_scatter("sample", path, "-o", existing), 1, "flat.obj", "area")
+    assert_untouched(existing)
+
+
+def test_non_finite_vertices_are_skipped_with_a_warning(tmp_path):
+    path = write_obj(tmp_path / "nan.obj", [[0, 0, 0], [1, 0, 0], [0, 1, 0], [float("nan"), 0, 0]], [[0, 1, 2], [0, 1, 3]])
+    proc = run_scatter("sample", path, "-n", 100, "-a", "face")
+    assert proc.returncode == 0, proc.stderr
+    assert "warning" in proc.stderr.decode() and "non-finite" in proc.stderr.decode()
+    table = np.loadtxt(proc.stdout.decode().splitlines()[1:], delimiter=",")
+    assert (table[:, 3] == 0).all() and np.isfinite(table).all()
+    quiet = run_scatter("sample", path, "-n", 10, "-q")
+    assert quiet.returncode == 0 and quiet.stderr == b""
+
+
+def test_all_vertices_non_finite(tmp_path):
+    path = write_obj(tmp_path / "allnan.obj", [[float("nan"), 0, 0], [1, 0, 0], [0, float("inf"), 0]], [[0, 1, 2]])
+    assert_one_line_error(run_scatter("sample", path), 1, "allnan.obj")
+
+
+@pytest.mark.parametrize(
+    "args,words",
+    [
+        (["-n", "-5"], ["count"]),
+        (["-n", "1.5"], ["count"]),
+        (["-n", "ten"], ["count"]),
+        (["--radius", "0"], ["radius"]),
+        (["--radius", "-1"], ["radius"]),
+        (["-a", "normal,sparkle"], ["sparkle"]),
+        (["-a", "normal,smooth-normal"], ["normal"]),
+        (["--method", "magic"], ["magic"]),
+        (["--precision", "float16"], ["float16"]),
+        (["-f", "las"], ["las"]),
+        (["--seed", "-1"], ["seed"]),
+        (["--chunk-size", "0"], ["chunk"]),
+        (["--density", "-2"], ["density"]),
+        (["-n", "10", "--density", "2"], ["density"]),
+        (["--bogus-option"], ["bogus"]),
+    ],
+)
+def test_usage_errors_exit_2(sample_mesh, existing, args, words):
+    proc = run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-o", existing, *args)
+    assert_one_line_error(proc, 2, *words)
+    assert_untouched(existing)
+
+
+def test_output_suffix_unknown(sample_mesh, tmp_path):
+    assert_one_line_error(run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-o", tmp_path / "x.las"), 2, "x.las")
+
+
+def test_output_folder_missing(sample_mesh, tmp_path):
+    out = tmp_path / "no" / "such" / "out.ply"
+    assert_one_line_error(run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-o", out), 1, "does not exist")
+
+
+def test_attribute_the_mesh_cannot_provide(sample_mesh, existing):
+    proc = run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-a", "uv", "-o", existing)
+    assert_one_line_error(proc, 1, "uv", "icosahedron_binary.stl")
+    assert_untouched(existing)
+
+
+def test_stdin_needs_input_format(sample_mesh):
+    data = sample_mesh("icosahedron_binary.stl").read_bytes()
+    assert_one_line_error(run_scatter("sample", "-", input=data), 2, "--input-format")
+    proc = run_scatter("sample", "-", "--input-format", "stl", "-n", 10, "-f", "xyz", input=data, check=True)
+    assert len(proc.stdout.decode().splitlines()) == 10
+
+
+def test_output_replaces_existing_file_atomically_on_success(sample_mesh, existing):
+    run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-n", 10, "-o", existing, check=True)
+    assert existing.read_bytes().startswith(b"ply\n")
+    assert not [p for p in existing.parent.iterdir() if p.name.endswith(".part")]
+
+
+def test_new_file_gets_ordinary_permissions(sample_mesh, tmp_path):
+    out = tmp_path / "perm.ply"
+    run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-n", 10, "-o", out, check=True)
+    assert out.stat().st_mode & 0o644 == 0o644
+
+
+def test_count_zero_writes_an_empty_valid_file(sample_mesh, tmp_path):
+    out = tmp_path / "zero.npy"
+    run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-n", 0, "-o", out, check=True)
+    assert np.load(out).shape == (0,)
+
+
+def test_density_sets_the_count(sample_mesh):
+    proc = run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "--density", 100, "-f", "xyz", check=True)
+    assert len(proc.stdout.decode().splitlines()) == round(100 * 9.574541)
+
+
+def test_stats_json(sample_mesh, tmp_path):
+    import json
+
+    stats = tmp_path / "s.json"
+    run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-n", 100, "-o", tmp_path / "o.ply", "--stats", stats, check=True)
+    info = json.loads(stats.read_text())
+    assert info["count"] == 100 and abs(info["area"] - 9.574541) < 1e-5 and info["faces_used"] == 20
+    assert "timings" in info
+
+
+def test_help_teaches():
+    proc = run_scatter("sample", "--help", check=True)
+    out = proc.stdout.decode()
+    for word in ["--count", "--poisson", "--radius", "--attributes", "Examples", "square-root"]:
+        assert word in out
+
+
+def test_python_dash_m_and_no_args():
+    proc = run_scatter()
+    assert proc.returncode in (0, 2) and b"sample" in proc.stdout + proc.stderr
+
+
+def test_closed_pipe_is_quiet(sample_mesh):
+    import subprocess
+    import sys
+
+    p = subprocess.Popen([sys.executable, "-m", "scatter_cli", "sample", str(sample_mesh("koala.obj")), "-n", "2000000"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.readline()
+    p.stdout.close()
+    err = p.stderr.read()
+    p.wait(timeout=60)
+    assert err == b"", err

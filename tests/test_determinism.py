@@ -1,0 +1,60 @@
+"""Same input, options and seed -> the same bytes, whatever the chunk size or threads."""
+
+import hashlib
+
+import numpy as np
+import pytest
+
+import scatter_cli
+from scatter_cli.api import prepare
+from scatter_cli.sampling import uniforms
+
+from .conftest import run_scatter
+
+
+def test_stream_positions_do_not_depend_on_chunking():
+    whole = uniforms(7, 0, 10_000)
+    parts = np.concatenate([uniforms(7, a, min(a + 333, 10_000)) for a in range(0, 10_000, 333)])
+    np.testing.assert_array_equal(whole, parts)
+
+
+@pytest.mark.parametrize("chunk_size", [1, 7, 1000, 4096, 1 << 20])
+def test_api_identical_for_any_chunk_size(sample_mesh, chunk_size):
+    ref = scatter_cli.sample(sample_mesh("koala.obj"), 20_000, attributes=("face", "bary"), seed=3)
+    got = scatter_cli.sample(sample_mesh("koala.obj"), 20_000, attributes=("face", "bary"), seed=3, chunk_size=chunk_size)
+    for key in ("points", "face", "bary"):
+        assert getattr(ref, key).tobytes() == getattr(got, key).tobytes()
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_api_identical_for_any_thread_count(sample_mesh, threads):
+    run = prepare(sample_mesh("cesiummilktruck.glb"), 30_000, attributes=("face", "object"), seed=5, chunk_size=1000)
+    ref = b"".join(c.points.tobytes() + c.face.tobytes() + c.object.tobytes() for c in run.chunks(threads=1))
+    got = b"".join(c.points.tobytes() + c.face.tobytes() + c.object.tobytes() for c in run.chunks(threads=threads))
+    assert ref == got
+
+
+def test_prefix_of_a_larger_run_is_the_smaller_run(sample_mesh):
+    small = scatter_cli.sample(sample_mesh("skull.ply"), 1000, seed=11)
+    large = scatter_cli.sample(sample_mesh("skull.ply"), 50_000, seed=11)
+    assert small.points.tobytes() == large.points[:1000].tobytes()
+
+
+def test_seeds_give_different_points(sample_mesh):
+    a = scatter_cli.sample(sample_mesh("skull.ply"), 100, seed=1).points
+    b = scatter_cli.sample(sample_mesh("skull.ply"), 100, seed=2).points
+    assert not np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("fmt", ["ply", "csv", "npy"])
+def test_command_output_bytes_identical_across_chunk_sizes_and_threads(sample_mesh, tmp_path, fmt):
+    mesh = sample_mesh("spot_triangulated.obj")
+    digests = set()
+    for chunk, threads in [(None, "1"), ("999", "2"), ("65536", "2"), ("1", "1")]:
+        out = tmp_path / f"out-{chunk}-{threads}.{fmt}"
+        args = [ "sample", mesh, "-n", "3000", "-a", "face,bary", "--seed", "9", "-o", out]
+        if chunk:
+            args += ["--chunk-size", chunk]
+        run_scatter(*args, check=True, env={"SCATTER_THREADS": threads})
+        digests.add(hashlib.sha256(out.read_bytes()).hexdigest())
+    assert len(digests) == 1

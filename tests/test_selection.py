@@ -1,0 +1,126 @@
+"""Faces are chosen with probability proportional to their area, exactly.
+
+Chi-square tests at level ALPHA of per-face counts against exact areas, on meshes whose
+face areas span many orders of magnitude; each is paired with a sampler that drops the
+area weights and must fail the same test.
+"""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from scatter_cli.sampling import SamplePlan
+from scatter_cli.surface import load_surface
+
+from .conftest import spread_triangles, triangles_mesh
+
+ALPHA = 1e-3
+
+
+def pooled_chi2_pvalue(observed, expected, min_expected=5.0):
+    """Pearson test after pooling bins, smallest expectation first, to >= min_expected."""
+    order = np.argsort(expected)
+    observed, expected = np.asarray(observed, float)[order], np.asarray(expected, float)[order]
+    groups = np.searchsorted(np.cumsum(expected), np.arange(min_expected, expected.sum(), min_expected))
+    groups = np.unique(np.minimum(groups, len(expected) - 1))
+    edges = np.concatenate([[0], groups + 1])
+    edges = edges[edges < len(expected)]
+    o, e = np.add.reduceat(observed, edges), np.add.reduceat(expected, edges)
+    if e[-1] < min_expected and len(e) > 1:
+        o[-2] += o[-1]; e[-2] += e[-1]; o, e = o[:-1], e[:-1]
+    stat = np.sum((o - e) ** 2 / e)
+    return stats.chi2.sf(stat, len(e) - 1)
+
+
+class UnweightedPlan(SamplePlan):
+    """The classic bug: every face equally likely, whatever its area."""
+
+    def select(self, u):
+        return np.minimum((u * self.faces_used).astype(np.int64), self.faces_used - 1)
+
+
+def face_counts(plan, n, seed=0):
+    counts = np.zeros(plan.surface.face_count)
+    for start in range(0, n, 1 << 18):
+        raw = plan.draw(start, min(n, start + (1 << 18)), seed)
+        counts += np.bincount(raw.face, minlength=len(counts))
+    return counts
+
+
+@pytest.fixture(scope="module")
+def spread_plan_inputs():
+    # areas from 1e-6 to 1e6, four faces per decade
+    tri, areas = spread_triangles(np.repeat(np.arange(-6, 7), 4))
+    return load_surface(triangles_mesh(tri)), areas
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_face_counts_follow_areas_over_twelve_decades(spread_plan_inputs, seed):
+    surface, areas = spread_plan_inputs
+    n = 2_000_000
+    counts = face_counts(SamplePlan(surface), n, seed)
+    assert pooled_chi2_pvalue(counts, n * areas / areas.sum()) > ALPHA
+    assert counts[areas < 1e-6 * areas.sum() / n].sum() <= 3  # no spurious hits on tiny faces
+
+
+def test_dropping_area_weights_fails_the_same_test(spread_plan_inputs):
+    surface, areas = spread_plan_inputs
+    n = 2_000_000
+    counts = face_counts(UnweightedPlan(surface), n)
+    assert pooled_chi2_pvalue(counts, n * areas / areas.sum()) < ALPHA
+
+
+def test_real_mesh_face_counts_follow_areas(sample_mesh):
+    surface = load_surface(sample_mesh("pediment_join_plate_12.stl"))  # area ratio 9.4e6, 12 zero-area faces
+    plan = SamplePlan(surface)
+    tri = surface.geometries[0].vertices[surface.geometries[0].faces]
+    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    n = 1_000_000
+    counts = face_counts(plan, n)
+    assert counts[areas == 0].sum() == 0
+    assert pooled_chi2_pvalue(counts, n * areas / areas.sum()) > ALPHA
+    assert pooled_chi2_pvalue(face_counts(UnweightedPlan(surface), n), n * areas / areas.sum()) < ALPHA
+
+
+def test_tiny_faces_get_their_share_next_to_huge_ones():
+    # 1000 faces of area 1e-12 beside one of area 1: together they hold 1e-9 of the area,
+    # which float32 accumulation would round away; float64 keeps their CDF steps.
+    tri, areas = spread_triangles(np.r_[0.0, np.full(1000, -12.0)])
+    plan = SamplePlan(load_surface(triangles_mesh(tri)))
+    steps = np.diff(np.r_[0.0, plan.cdf])
+    np.testing.assert_allclose(steps[1:], 1e-12, rtol=1e-3)
+
+
+def select_reference(plan, u):
+    """The definition: searchsorted on the CDF, clipped to the last face."""
+    return np.minimum(np.searchsorted(plan.cdf, u * plan.cdf[-1], side="right"), len(plan.cdf) - 1)
+
+
+def adversarial_u(plan):
+    """Draws at and just around every CDF step, and the ends of [0, 1)."""
+    edges = plan.cdf / plan.cdf[-1]
+    u = np.concatenate([edges, np.nextafter(edges, 0), np.nextafter(edges, 1), [0.0, 2.0**-53, np.nextafter(1.0, 0)]])
+    return u[(u >= 0) & (u < 1)]
+
+
+@pytest.mark.parametrize("exponents", [[0, 0, 0], [6, -6, 0, -12, 3], list(range(-12, 7))])
+def test_select_equals_searchsorted_and_never_overruns(exponents):
+    tri, _ = spread_triangles(exponents)
+    plan = SamplePlan(load_surface(triangles_mesh(tri)))
+    u = np.concatenate([adversarial_u(plan), np.random.default_rng(1).random(100_000)])
+    got = plan.select(u)
+    np.testing.assert_array_equal(got, select_reference(plan, u))
+    assert got.max() < plan.faces_used
+
+
+def test_zero_area_faces_are_never_chosen():
+    tri, _ = spread_triangles([0, 0, 0, 0])
+    zero = np.zeros((3, 3, 3))
+    zero[0] = [[0, 0, 9], [1, 0, 9], [2, 0, 9]]  # collinear
+    zero[1] = [[5, 5, 5]] * 3  # one point
+    zero[2] = [[0, 0, 7], [0, 0, 7], [1, 1, 7]]  # repeated vertex
+    mesh = np.concatenate([zero[:1], tri[:2], zero[1:2], tri[2:], zero[2:]])  # last face has zero area
+    plan = SamplePlan(load_surface(triangles_mesh(mesh)))
+    u = np.concatenate([adversarial_u(plan), [np.nextafter(1.0, 0)] * 3])
+    faces = plan.place(0, plan.select(u), np.full((len(u), 2), 0.25)).face
+    assert not np.isin(faces, [0, 3, 6]).any()

@@ -1,0 +1,102 @@
+"""Every output format reads back, through an independent reader, to the same values."""
+
+import io
+
+import numpy as np
+import pytest
+
+import scatter_cli
+
+from .conftest import run_scatter
+
+N = 2000
+
+
+@pytest.fixture(scope="module")
+def reference(request):
+    from .conftest import SAMPLES
+
+    return scatter_cli.sample(SAMPLES / "koala.obj", N, attributes=("face", "bary"), seed=4)
+
+
+def command(sample_mesh, *extra):
+    return ["sample", sample_mesh("koala.obj"), "-n", N, "-a", "bary,face", "--seed", 4, *extra]
+
+
+def test_binary_ply_read_by_trimesh(sample_mesh, tmp_path, reference):
+    import trimesh
+
+    out = tmp_path / "p.ply"
+    run_scatter(*command(sample_mesh, "-o", out), check=True)
+    cloud = trimesh.load(out, process=False)
+    np.testing.assert_array_equal(np.asarray(cloud.vertices, np.float32), reference.points)
+    data = cloud.metadata["_ply_raw"]["vertex"]["data"]
+    np.testing.assert_array_equal(data["face_index"], reference.face)
+    np.testing.assert_array_equal(data["bary1"], reference.bary[:, 1])
+    assert out.read_bytes().startswith(b"ply\nformat binary_little_endian 1.0\n")
+
+
+def test_ascii_ply_read_by_trimesh(sample_mesh, tmp_path, reference):
+    import trimesh
+
+    out = tmp_path / "a.ply"
+    run_scatter(*command(sample_mesh, "-o", out, "--ascii"), check=True)
+    assert b"format ascii 1.0" in out.read_bytes()[:100]
+    cloud = trimesh.load(out, process=False)
+    np.testing.assert_array_equal(np.asarray(cloud.vertices, np.float32), reference.points)
+
+
+def test_binary_ply_read_by_pymeshlab(sample_mesh, tmp_path, reference):
+    pymeshlab = pytest.importorskip("pymeshlab")
+    out = tmp_path / "m.ply"
+    run_scatter("sample", sample_mesh("koala.obj"), "-n", N, "--seed", 4, "-o", out, check=True)
+    ms = pymeshlab.MeshSet()
+    ms.load_new_mesh(str(out))
+    got = ms.current_mesh().vertex_matrix()
+    assert got.shape == (N, 3)
+    np.testing.assert_array_equal(got.astype(np.float32), reference.points)
+
+
+@pytest.mark.parametrize("fmt,sep,header", [("csv", ",", True), ("xyz", " ", False)])
+def test_text_formats_read_by_numpy(sample_mesh, tmp_path, reference, fmt, sep, header):
+    out = tmp_path / f"t.{fmt}"
+    run_scatter(*command(sample_mesh, "-o", out), check=True)
+    text = out.read_text()
+    first = text.splitlines()[0]
+    if header:
+        assert first == "x,y,z,face_index,bary0,bary1,bary2"
+    table = np.loadtxt(io.StringIO(text), delimiter=sep, skiprows=1 if header else 0, dtype=np.float64)
+    np.testing.assert_array_equal(table[:, :3].astype(np.float32), reference.points)
+    np.testing.assert_array_equal(table[:, 3].astype(np.int64), reference.face)
+    np.testing.assert_array_equal(table[:, 4:].astype(np.float32), reference.bary)
+
+
+def test_npy_structured_array(sample_mesh, tmp_path, reference):
+    out = tmp_path / "n.npy"
+    run_scatter(*command(sample_mesh, "-o", out), check=True)
+    arr = np.load(out)
+    assert arr.dtype.names == ("x", "y", "z", "face_index", "bary0", "bary1", "bary2")
+    np.testing.assert_array_equal(np.stack([arr["x"], arr["y"], arr["z"]], 1), reference.points)
+    np.testing.assert_array_equal(arr["face_index"], reference.face)
+
+
+def test_float64_text_round_trips_exactly(sample_mesh, tmp_path):
+    out = tmp_path / "d.csv"
+    run_scatter("sample", sample_mesh("koala.obj"), "-n", 500, "--precision", "float64", "-o", out, check=True)
+    ref = scatter_cli.sample(sample_mesh("koala.obj"), 500, precision="float64").points
+    assert ref.dtype == np.float64
+    np.testing.assert_array_equal(np.loadtxt(out, delimiter=",", skiprows=1), ref)
+
+
+def test_standard_output_is_csv(sample_mesh, reference):
+    proc = run_scatter(*command(sample_mesh), check=True)
+    lines = proc.stdout.decode().splitlines()
+    assert lines[0].startswith("x,y,z,")
+    assert len(lines) == N + 1
+    np.testing.assert_array_equal(np.loadtxt(lines[1:], delimiter=",")[:, :3].astype(np.float32), reference.points)
+
+
+def test_standard_output_binary_formats(sample_mesh, reference):
+    proc = run_scatter(*command(sample_mesh, "-f", "npy"), check=True)
+    arr = np.load(io.BytesIO(proc.stdout))
+    np.testing.assert_array_equal(arr["x"], reference.points[:, 0])
