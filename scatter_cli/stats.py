@@ -262,23 +262,84 @@ def _chunks(n_rows, row_size, budget=CHUNK_ENTRIES):
         yield slice(start, min(n_rows, start + step))
 
 
+def _below_fraction(h0, h1, h2, t):
+    """Fraction of a triangle with sorted vertex heights h0 <= h1 <= h2 lying
+    at height <= t (all arguments broadcast)."""
+    # Each branch is used only where its denominator is positive (h0 <= t < h1
+    # needs h1 > h0; h1 <= t < h2 needs h2 > h1), so the substituted 1.0 never
+    # reaches the result; a face flat in the direction becomes a step.
+    den_lo = (h1 - h0) * (h2 - h0)
+    den_hi = (h2 - h0) * (h2 - h1)
+    lower = (t - h0) ** 2 / np.where(den_lo > 0, den_lo, 1.0)
+    upper = 1.0 - (h2 - t) ** 2 / np.where(den_hi > 0, den_hi, 1.0)
+    return np.where(t >= h2, 1.0, np.where(t >= h1, upper, np.where(t >= h0, lower, 0.0)))
+
+
 def _cdf_from_heights(h, areas, s):
     """Area with height <= s for each s in (m,), from sorted heights (F, 3)."""
     s = np.asarray(s, dtype=float).ravel()
     out = np.zeros(s.size)
-    t = s[None, :]
     for sl in _chunks(len(h), s.size):
-        h0, h1, h2 = h[sl, 0, None], h[sl, 1, None], h[sl, 2, None]
-        # Each branch below is used only where its denominator is positive
-        # (h0 <= t < h1 needs h1 > h0; h1 <= t < h2 needs h2 > h1), so the
-        # substituted 1.0 never reaches the result; flat faces become steps.
-        den_lo = (h1 - h0) * (h2 - h0)
-        den_hi = (h2 - h0) * (h2 - h1)
-        lower = (t - h0) ** 2 / np.where(den_lo > 0, den_lo, 1.0)
-        upper = 1.0 - (h2 - t) ** 2 / np.where(den_hi > 0, den_hi, 1.0)
-        frac = np.where(t >= h2, 1.0, np.where(t >= h1, upper, np.where(t >= h0, lower, 0.0)))
+        frac = _below_fraction(h[sl, 0, None], h[sl, 1, None], h[sl, 2, None], s[None, :])
         out += areas[sl] @ frac
     return out
+
+
+class _Sorted:
+    """Faces sorted by lowest and by highest vertex height, with running areas:
+    bounds the area function cheaply, area(h2 <= t) <= A(t) <= area(h0 <= t)."""
+
+    def __init__(self, h, areas):
+        o0, o2 = np.argsort(h[:, 0], kind="stable"), np.argsort(h[:, 2], kind="stable")
+        self.h0, self.h2 = h[o0, 0], h[o2, 2]
+        self.cum0 = np.concatenate(([0.0], np.cumsum(areas[o0])))
+        self.cum2 = np.concatenate(([0.0], np.cumsum(areas[o2])))
+
+    def bracket(self, targets, floor):
+        """(lo, hi) per target with A(lo) < target <= A(hi) (up to rounding)."""
+        i_hi = np.minimum(np.searchsorted(self.cum2[1:], targets, side="left"), len(self.h2) - 1)
+        hi = self.h2[i_hi]
+        # The first face whose start lifts the upper bound to the target; lo is
+        # the next lower distinct start height, where even the bound is short.
+        i_lo = np.minimum(np.searchsorted(self.cum0[1:], targets, side="left"), len(self.h0) - 1)
+        j = np.searchsorted(self.h0, self.h0[i_lo], side="left")
+        lo = np.where(j > 0, self.h0[np.maximum(j - 1, 0)], floor)
+        return np.minimum(lo, hi), hi
+
+    def area_below(self, t):
+        """Area of faces lying wholly at height <= t."""
+        return self.cum2[np.searchsorted(self.h2, t, side="right")]
+
+
+def _solve_heights(h, areas, targets, iterations, budget=4 * CHUNK_ENTRIES):
+    """Heights (m,) where the area function reaches each of targets (m,), by
+    vectorised bisection.  Each bracket only involves faces straddling it, so
+    the work is those faces rather than all F faces per target."""
+    lo0 = float(h[:, 0].min())
+    extent = float(h[:, 2].max()) - lo0
+    table = _Sorted(h, areas)
+    lo, hi = table.bracket(targets, lo0 - extent)
+    # Straddling faces per target, concatenated: (face index, target index).
+    masks = [(h[:, 2] > l) & (h[:, 0] <= u) for l, u in zip(lo.tolist(), hi.tolist())]
+    sizes = [int(m.sum()) for m in masks]
+    if sum(sizes) > budget:  # long faces everywhere: plain chunked evaluation
+        area_at = lambda t: _cdf_from_heights(h, areas, t)
+    else:
+        faces = np.concatenate([np.nonzero(m)[0] for m in masks]) if masks else np.zeros(0, np.intp)
+        owner = np.repeat(np.arange(len(targets)), sizes)
+        h_sel, a_sel = h[faces], areas[faces]
+        base = table.area_below(lo)
+
+        def area_at(t):
+            frac = _below_fraction(h_sel[:, 0], h_sel[:, 1], h_sel[:, 2], t[owner])
+            return base + np.bincount(owner, a_sel * frac, minlength=len(targets))
+
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        below = area_at(mid) < targets
+        lo = np.where(below, mid, lo)
+        hi = np.where(below, hi, mid)
+    return hi
 
 
 def height_cdf(tri, areas, d, t):
@@ -302,7 +363,7 @@ def equal_area_slabs(tri, areas, d, k, iterations=48):
     function.  Where the area jumps (faces flat in d) an exact split may not
     exist; the edge then sits just above the jump, so use
     ``slab_probabilities`` for the exact share of each slab.  Interior edges
-    are nudged up by ~1e-9 of the extent so points lying on a flat face at an
+    are nudged up by ~1e-11 of the extent so points lying on a flat face at an
     edge's height fall below it whatever their rounding.
     """
     k = int(k)
@@ -313,16 +374,9 @@ def equal_area_slabs(tri, areas, d, k, iterations=48):
     extent = hi0 - lo0
     if extent <= 0:
         return np.full(k + 1, lo0 + off)
-    targets = a.sum() * np.arange(1, k) / k
-    lo = np.full(k - 1, lo0 - extent)  # strictly below every face: area 0 < target
-    hi = np.full(k - 1, hi0)
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        below = _cdf_from_heights(h, a, mid) < targets
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
+    hi = _solve_heights(h, a, a.sum() * np.arange(1, k) / k, iterations)
     reach = max(abs(lo0), abs(hi0)) + abs(off)
-    inner = np.minimum(hi + 1e-9 * extent + 1e-13 * reach, hi0)
+    inner = np.minimum(hi + 1e-11 * extent + 1e-13 * reach, hi0)
     return np.concatenate(([lo0], inner, [hi0])) + off
 
 
