@@ -240,20 +240,31 @@ def _unit(d):
     return d / norm
 
 
-def _face_heights(tri, areas, d):
-    """Sorted vertex heights (F', 3) of the faces with positive area, their
-    areas (F',), and the height offset removed (heights are taken relative to
-    the bounding-box centre so large coordinates do not swamp them)."""
+def _kept(tri, areas):
+    """Faces with positive area (F', 3, 3), their areas (F',) and the
+    bounding-box centre (3,) that heights and moments are taken about, so
+    large coordinates do not swamp them."""
     tri = np.asarray(tri, dtype=float)
     areas = np.asarray(areas, dtype=float)
     keep = areas > 0
     tri, areas = tri[keep], areas[keep]
     if len(tri) == 0:
         raise ValueError("surface has zero area")
+    return tri, areas, 0.5 * (tri.min(axis=(0, 1)) + tri.max(axis=(0, 1)))
+
+
+def _heights(tri, ref, d):
+    """Sorted vertex heights (F, 3) about ref, and the offset ref.d removed."""
     d = _unit(d)
-    ref = 0.5 * (tri.min(axis=(0, 1)) + tri.max(axis=(0, 1)))
-    h = np.sort((tri - ref) @ d, axis=1)
-    return h, areas, float(ref @ d)
+    return np.sort((tri - ref) @ d, axis=1), float(ref @ d)
+
+
+def _face_heights(tri, areas, d):
+    """Sorted heights (F', 3) and areas (F',) of the faces with positive
+    area, and the height offset removed from the heights."""
+    tri, areas, ref = _kept(tri, areas)
+    h, off = _heights(tri, ref, d)
+    return h, areas, off
 
 
 def _chunks(n_rows, row_size, budget=CHUNK_ENTRIES):
@@ -311,16 +322,17 @@ class _Sorted:
         return self.cum2[np.searchsorted(self.h2, t, side="right")]
 
 
-def _solve_heights(h, areas, targets, iterations, budget=4 * CHUNK_ENTRIES):
+def _solve_heights(h, areas, targets, iterations, pad=0.0, budget=4 * CHUNK_ENTRIES):
     """Heights (m,) where the area function reaches each of targets (m,), by
-    vectorised bisection.  Each bracket only involves faces straddling it, so
-    the work is those faces rather than all F faces per target."""
+    vectorised bisection, and the area function for heights (m,) each no more
+    than ``pad`` above its solution.  Each bracket only involves the faces
+    straddling it, so the work is those faces rather than all F per target."""
     lo0 = float(h[:, 0].min())
     extent = float(h[:, 2].max()) - lo0
     table = _Sorted(h, areas)
     lo, hi = table.bracket(targets, lo0 - extent)
     # Straddling faces per target, concatenated: (face index, target index).
-    masks = [(h[:, 2] > l) & (h[:, 0] <= u) for l, u in zip(lo.tolist(), hi.tolist())]
+    masks = [(h[:, 2] > l) & (h[:, 0] <= u + pad) for l, u in zip(lo.tolist(), hi.tolist())]
     sizes = [int(m.sum()) for m in masks]
     if sum(sizes) > budget:  # long faces everywhere: plain chunked evaluation
         area_at = lambda t: _cdf_from_heights(h, areas, t)
@@ -339,7 +351,20 @@ def _solve_heights(h, areas, targets, iterations, budget=4 * CHUNK_ENTRIES):
         below = area_at(mid) < targets
         lo = np.where(below, mid, lo)
         hi = np.where(below, hi, mid)
-    return hi
+    return hi, area_at
+
+
+def _split(h, areas, k, iterations=48):
+    """Interior edges (k-1,) of k equal-area slabs over sorted heights h, and
+    the area below each edge."""
+    lo0, hi0 = float(h[:, 0].min()), float(h[:, 2].max())
+    extent = hi0 - lo0
+    if extent <= 0:
+        return np.full(k - 1, hi0), np.full(k - 1, areas.sum())
+    nudge = 1e-11 * extent + 1e-13 * max(abs(lo0), abs(hi0))
+    hi, area_at = _solve_heights(h, areas, areas.sum() * np.arange(1, k) / k, iterations, pad=nudge)
+    inner = np.minimum(hi + nudge, hi0)
+    return inner, area_at(inner)
 
 
 def height_cdf(tri, areas, d, t):
@@ -369,15 +394,14 @@ def equal_area_slabs(tri, areas, d, k, iterations=48):
     k = int(k)
     if k < 1:
         raise ValueError("equal_area_slabs: k must be >= 1")
-    h, a, off = _face_heights(tri, areas, d)
-    lo0, hi0 = float(h[:, 0].min()), float(h[:, 2].max())
-    extent = hi0 - lo0
-    if extent <= 0:
-        return np.full(k + 1, lo0 + off)
-    hi = _solve_heights(h, a, a.sum() * np.arange(1, k) / k, iterations)
-    reach = max(abs(lo0), abs(hi0)) + abs(off)
-    inner = np.minimum(hi + 1e-11 * extent + 1e-13 * reach, hi0)
-    return np.concatenate(([lo0], inner, [hi0])) + off
+    tri, areas, ref = _kept(tri, areas)
+    h, off = _heights(tri, ref, d)
+    inner, _ = _split(h, areas, k, iterations)
+    return _edges(h, inner) + off
+
+
+def _edges(h, inner):
+    return np.concatenate(([h[:, 0].min()], inner, [h[:, 2].max()]))
 
 
 def slab_probabilities(tri, areas, d, edges):
@@ -406,19 +430,9 @@ def slab_counts(points, d, edges):
 # Moments
 
 
-def _bbox_centre(tri):
-    return 0.5 * (tri.min(axis=(0, 1)) + tri.max(axis=(0, 1)))
-
-
 def _centred_moments(tri, areas):
     """(ref (3,), mean - ref (3,), covariance (3,3), kept tri, kept areas)."""
-    tri = np.asarray(tri, dtype=float)
-    areas = np.asarray(areas, dtype=float)
-    keep = areas > 0
-    tri, areas = tri[keep], areas[keep]
-    if len(tri) == 0:
-        raise ValueError("surface has zero area")
-    ref = _bbox_centre(tri)
+    tri, areas, ref = _kept(tri, areas)
     v = tri - ref
     w = areas / areas.sum()
     s = v.sum(axis=1)
@@ -560,12 +574,17 @@ def default_directions():
 
 
 def _slabs(tri, areas, directions, k):
+    """[(direction, edges (k+1,), exact probabilities (k,))] per direction."""
     dirs = default_directions() if directions is None else np.asarray(directions, dtype=float).reshape(-1, 3)
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    tri, areas, ref = _kept(tri, areas)
+    total = areas.sum()
     out = []
     for d in dirs:  # a handful of directions
-        edges = equal_area_slabs(tri, areas, d, k)
-        out.append((d, edges, slab_probabilities(tri, areas, d, edges)))
+        h, off = _heights(tri, ref, d)
+        inner, below = _split(h, areas, int(k))
+        prob = np.diff(np.concatenate(([0.0], np.minimum(below / total, 1.0), [1.0])))
+        out.append((d, _edges(h, inner) + off, prob))
     return out
 
 
