@@ -410,7 +410,9 @@ def slab_probabilities(tri, areas, d, edges):
     is (e_k-1, inf) — the same convention as ``slab_counts``."""
     h, a, off = _face_heights(tri, areas, d)
     inner = _cdf_from_heights(h, a, np.asarray(edges, dtype=float)[1:-1] - off) / a.sum()
-    return np.diff(np.concatenate(([0.0], np.minimum(inner, 1.0), [1.0])))
+    # Rounding in the per-face sums can make the CDF step back by an ulp: keep it monotone.
+    inner = np.maximum.accumulate(np.clip(inner, 0.0, 1.0))
+    return np.diff(np.concatenate(([0.0], inner, [1.0])))
 
 
 def slab_counts(points, d, edges):
@@ -583,7 +585,8 @@ def _slabs(tri, areas, directions, k):
     for d in dirs:  # a handful of directions
         h, off = _heights(tri, ref, d)
         inner, below = _split(h, areas, int(k))
-        prob = np.diff(np.concatenate(([0.0], np.minimum(below / total, 1.0), [1.0])))
+        below = np.maximum.accumulate(np.clip(below / total, 0.0, 1.0))
+        prob = np.diff(np.concatenate(([0.0], below, [1.0])))
         out.append((d, _edges(h, inner) + off, prob))
     return out
 
