@@ -84,23 +84,24 @@ class SamplePlan:
 
         Same result as ``searchsorted(cdf, u * total, 'right')`` clipped to the last
         face, so a draw that rounds up to the total never indexes past the end and a
-        face whose CDF step is zero is never chosen. The guide table starts the search
-        in the right bucket; almost every draw is settled in one or two steps.
+        face whose CDF step is zero is never chosen. The guide table answers most draws
+        outright; the others start their search at the right face and end in a step or two.
         """
         cdf, last = self.cdf, len(self.cdf) - 1
-        x = u * cdf[-1]
-        k = (u * len(self.guide)).astype(np.int64)
-        i = np.minimum(self.guide[k], last)
-        todo = np.flatnonzero(cdf[i] <= x)
+        face = self.guide[(u * len(self.guide)).astype(np.int64)]
+        todo = np.flatnonzero(face < 0)
+        i = -1 - face[todo]
+        x = u[todo] * cdf[-1]
         for _ in range(4):
-            todo = todo[i[todo] < last]
-            if not todo.size:
-                return i
-            i[todo] += 1
-            todo = todo[cdf[i[todo]] <= x[todo]]
-        if todo.size:
-            i[todo] = np.minimum(np.searchsorted(cdf, x[todo], side="right"), last)
-        return i
+            step = (cdf[i] <= x) & (i < last)
+            if not step.any():
+                break
+            i += step
+        else:
+            more = (cdf[i] <= x) & (i < last)
+            i[more] = np.minimum(np.searchsorted(cdf, x[more], side="right"), last)
+        face[todo] = i
+        return face
 
     def draw(self, start: int, stop: int, seed: int, want_bary: bool = False) -> RawChunk:
         """Points ``start`` to ``stop`` of the random sequence for ``seed``."""
@@ -192,14 +193,20 @@ def _parts(surface: Surface, weights):
 
 
 def _guide_table(cdf):
-    """For 2^m buckets of u, the first face whose CDF exceeds the bucket's lower edge.
+    """For 2^m buckets of u (2 to 4 per face): the face of a bucket, or -1 - first candidate.
 
-    A power-of-two bucket count makes ``u * M`` and ``k / M`` exact, so a draw's face is
-    never before its bucket's guide entry.
+    Entry k is the first face whose CDF exceeds the bucket's lower edge ``k / M * total``.
+    When the next bucket starts on that same face, every draw in bucket k lands there and
+    the entry is stored as is; otherwise it is stored as ``-1 - face`` and the search goes
+    on from it. A power-of-two M makes ``u * M`` and ``k / M`` exact, so no draw's face is
+    before its bucket's entry.
     """
-    m = 1 << max(4, min(24, int(len(cdf) - 1).bit_length()))
-    lower = (np.arange(m, dtype=np.float64) / m) * cdf[-1]
-    return np.searchsorted(cdf, lower, side="right").astype(np.int32 if len(cdf) < 2**31 else np.int64)
+    last = len(cdf) - 1
+    m = 1 << max(4, min(26, int(len(cdf) - 1).bit_length() + 1))
+    lower = (np.arange(m + 1, dtype=np.float64) / m) * cdf[-1]
+    first = np.minimum(np.searchsorted(cdf, lower, side="right"), last)
+    first = first.astype(np.int32 if len(cdf) < 2**31 - 1 else np.int64)
+    return np.where(first[1:] == first[:-1], first[:-1], -1 - first[:-1])
 
 
 def chunk_ranges(count: int, chunk_size: int):
