@@ -152,9 +152,27 @@ def _click_error_types():
     return usage, base
 
 
+def _import_trimesh_lean():
+    """Import trimesh with SciPy hidden: trimesh imports SciPy eagerly when it is installed
+    (0.4 s or more on every call) only for features that loading and sampling never use.
+    Only the command line does this; the Python API leaves the user's trimesh alone.
+    """
+    if "trimesh" in sys.modules or "scipy" in sys.modules:
+        return
+    sys.modules["scipy"] = None  # makes `import scipy` raise ImportError
+    try:
+        import trimesh  # noqa: F401
+    except Exception:
+        pass  # a broken trimesh is reported where the mesh is loaded
+    finally:
+        del sys.modules["scipy"]
+
+
 def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
+    if argv and argv[0] in ("sample", "info"):
+        _import_trimesh_lean()
     signal.signal(signal.SIGTERM, _on_sigterm)
     usage_error, click_error = _click_error_types()
     command = typer.main.get_command(app)

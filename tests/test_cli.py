@@ -190,3 +190,29 @@ def test_closed_pipe_is_quiet(sample_mesh):
     err = p.stderr.read()
     p.wait(timeout=60)
     assert err == b"", err
+
+
+def test_progress_on_a_terminal_only(sample_mesh):
+    import os
+    import pty
+    import subprocess
+    import sys
+
+    args = [sys.executable, "-m", "scatter_cli", "sample", str(sample_mesh("koala.obj")), "-n", "6000000", "-f", "npy", "-o", os.devnull]
+    master, slave = pty.openpty()
+    proc = subprocess.run(args, stderr=slave, stdout=subprocess.DEVNULL, timeout=300)
+    os.close(slave)
+    seen = b""
+    while True:
+        try:
+            data = os.read(master, 65536)
+        except OSError:
+            break
+        if not data:
+            break
+        seen += data
+    os.close(master)
+    assert proc.returncode == 0
+    assert b"sampling:" in seen and b"100.0%" in seen
+    piped = subprocess.run(args, capture_output=True, timeout=300)
+    assert piped.returncode == 0 and piped.stderr == b""
