@@ -34,24 +34,24 @@ def _warner(quiet):
 
 @app.command(no_args_is_help=True)
 def sample(
-    mesh: str = typer.Argument(..., help="Mesh file (PLY, OBJ, STL, OFF, GLB/GLTF, ...); '-' reads standard input."),
-    count: Optional[int] = typer.Option(None, "-n", "--count", help="Number of points [default: 10000]."),
-    density: Optional[float] = typer.Option(None, "--density", help="Points per unit of surface area, instead of -n."),
-    output: Optional[str] = typer.Option(None, "-o", "--output", help="Output file; '-' or absent: standard output."),
-    fmt: Optional[str] = typer.Option(None, "-f", "--format", help="ply|csv|xyz|npy [default: from the suffix of -o; CSV on standard output]."),
+    mesh: str = typer.Argument(..., metavar="MESH", help="Mesh file (PLY, OBJ, STL, OFF, GLB/GLTF, ...); '-' reads standard input."),
+    count: Optional[int] = typer.Option(None, "-n", "--count", metavar="N", help="Number of points [default: 10000]."),
+    density: Optional[float] = typer.Option(None, "--density", metavar="D", help="Points per unit of surface area, instead of -n."),
+    output: Optional[str] = typer.Option(None, "-o", "--output", metavar="PATH", help="Output file; '-' or absent: standard output."),
+    fmt: Optional[str] = typer.Option(None, "-f", "--format", metavar="FORMAT", help="ply|csv|xyz|npy [default: from the suffix of -o; CSV on standard output]."),
     ascii: bool = typer.Option(False, "--ascii", help="ASCII PLY instead of binary little-endian."),
-    seed: int = typer.Option(0, "--seed", help="Random seed: same input, options and seed give the same bytes."),
-    attributes: Optional[str] = typer.Option(None, "-a", "--attributes", help="Comma list of extra columns: normal, smooth-normal, face, bary, color, uv, object."),
-    weight: Optional[str] = typer.Option(None, "--weight", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a."),
-    objects: Optional[List[str]] = typer.Option(None, "--object", help="Sample only this scene object (repeatable)."),
+    seed: int = typer.Option(0, "--seed", metavar="S", help="Random seed: same input, options and seed give the same bytes."),
+    attributes: Optional[str] = typer.Option(None, "-a", "--attributes", metavar="LIST", help="Comma list of extra columns: normal, smooth-normal, face, bary, color, uv, object."),
+    weight: Optional[str] = typer.Option(None, "--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a."),
+    objects: Optional[List[str]] = typer.Option(None, "--object", metavar="NAME", help="Sample only this scene object (repeatable)."),
     poisson: bool = typer.Option(False, "--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached."),
-    radius: Optional[float] = typer.Option(None, "--radius", help="Thin to a maximal Poisson-disk set with this minimum distance."),
-    method: str = typer.Option("random", "--method", help="random (i.i.d., square-root warp) | stratified | sobol."),
-    precision: str = typer.Option("auto", "--precision", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal."),
-    stats: Optional[str] = typer.Option(None, "--stats", help="Write a JSON summary to this file ('-': standard error)."),
+    radius: Optional[float] = typer.Option(None, "--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance."),
+    method: str = typer.Option("random", "--method", metavar="METHOD", help="random (i.i.d., square-root warp) | stratified | sobol."),
+    precision: str = typer.Option("auto", "--precision", metavar="PRECISION", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal."),
+    stats: Optional[str] = typer.Option(None, "--stats", metavar="PATH", help="Write a JSON summary to this file ('-': standard error)."),
     quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress and no warnings."),
-    chunk_size: Optional[int] = typer.Option(None, "--chunk-size", help="Points generated per chunk (memory/speed knob; never changes the output)."),
-    input_format: Optional[str] = typer.Option(None, "--input-format", help="Mesh format when reading standard input (ply, obj, stl, off, glb)."),
+    chunk_size: Optional[int] = typer.Option(None, "--chunk-size", metavar="K", help="Points generated per chunk (memory/speed knob; never changes the output)."),
+    input_format: Optional[str] = typer.Option(None, "--input-format", metavar="FORMAT", help="Mesh format when reading standard input (ply, obj, stl, off, glb)."),
 ):
     """Sample points on the surface of MESH.
 
@@ -103,9 +103,9 @@ def _write_stats(info, path):
 
 @app.command()
 def info(
-    mesh: str = typer.Argument(..., help="Mesh file; '-' reads standard input."),
+    mesh: str = typer.Argument(..., metavar="MESH", help="Mesh file; '-' reads standard input."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable JSON."),
-    input_format: Optional[str] = typer.Option(None, "--input-format", help="Mesh format when reading standard input."),
+    input_format: Optional[str] = typer.Option(None, "--input-format", metavar="FORMAT", help="Mesh format when reading standard input."),
 ):
     """Faces, vertices, area, bounding box, degenerate faces, attributes and objects of MESH."""
     from .info import describe, format_text
@@ -116,11 +116,11 @@ def info(
 
 @app.command()
 def check(
-    mesh: str = typer.Argument(..., help="Mesh file."),
-    count: int = typer.Option(100000, "-n", "--count", help="Points per sampler."),
-    seed: int = typer.Option(0, "--seed"),
+    mesh: str = typer.Argument(..., metavar="MESH", help="Mesh file."),
+    count: int = typer.Option(100000, "-n", "--count", metavar="N", help="Points per sampler."),
+    seed: int = typer.Option(0, "--seed", metavar="S", help="Random seed."),
     poisson: bool = typer.Option(False, "--poisson", help="Compare Poisson-disk sets of exactly N points."),
-    radius: Optional[float] = typer.Option(None, "--radius", help="Compare Poisson-disk sets of minimum distance R."),
+    radius: Optional[float] = typer.Option(None, "--radius", metavar="R", help="Compare Poisson-disk sets of minimum distance R."),
 ):
     """Compare this tool's samples of MESH with pymeshlab's against the exact distribution.
 
