@@ -1,0 +1,247 @@
+"""Poisson-disk thinning of a candidate point set, Euclidean distance in 3D.
+
+Candidates are points drawn uniformly on a surface.  A subset is kept so that
+kept points are at least ``radius`` apart.  Instead of random-order dart
+throwing, conflicts are resolved by parallel weighted elimination: in each
+round every point that is more crowded than all of its conflicting neighbours
+is dropped (crowding = sum of ``1 - d / (2 radius)`` over neighbours closer
+than ``radius``).  This packs about 10 % more points per radius than dart
+throwing, which is what lifts the relative radius above 0.75.
+
+Neighbour pairs come from a uniform grid: cells are hashed to uint64 keys,
+sorted with numpy, and looked up with ``searchsorted``.  Only numpy is used.
+Every loop below runs over rounds, never over points, and is bounded.
+"""
+
+import math
+
+import numpy as np
+
+_MUL_X = np.uint64((1 << 42) + 15)
+_MUL_Y = np.uint64((1 << 21) + 7)
+# Key arithmetic wraps modulo 2**64 on purpose: a collision between two far
+# cells only adds candidate pairs that the exact distance test rejects.
+_CELL_LIMIT = float(1 << 50)
+_OFFSETS_ALL = [(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)]
+_OFFSETS_HALF = [o for o in _OFFSETS_ALL if o > (0, 0, 0)]
+# At most this many candidates per cell of side radius / 2 take part in the
+# pair graph; the others are handled by a coverage query.  Bounds memory on
+# clustered or duplicated input (all points inside one radius -> no n**2).
+_CELL_CAP = 24
+
+
+def relative_radius(d_min, area, count):
+    """Lagae & Dutré (2008) relative radius rho = d_min / d_hex.
+
+    d_hex = sqrt(2 A / (sqrt(3) N)) is the spacing of a hexagonal packing of
+    N points on area A; rho near 0.75 to 0.85 is good Poisson-disk quality.
+    """
+    if count <= 0 or area <= 0:
+        raise ValueError("relative_radius needs count > 0 and area > 0")
+    return float(d_min) / _hex_spacing(area, count)
+
+
+def _hex_spacing(area, count):
+    return math.sqrt(2.0 * area / (math.sqrt(3.0) * count))
+
+
+def _as_points(points):
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must have shape (n, 3), got {pts.shape}")
+    if not np.isfinite(pts).all():
+        raise ValueError("points must be finite")
+    return pts
+
+
+def _cells(points, size):
+    """Integer cell coordinates (n, 3) int64 of ``points`` on a grid of ``size``."""
+    c = np.floor(points / size)
+    return np.clip(c, -_CELL_LIMIT, _CELL_LIMIT).astype(np.int64)
+
+
+def _keys(cells):
+    """(n, 3) int64 cell coordinates -> (n,) uint64 hashed keys."""
+    c = cells.astype(np.uint64)
+    return c[:, 0] * _MUL_X + c[:, 1] * _MUL_Y + c[:, 2]
+
+
+def _offset_key(offset):
+    return _keys(np.array([offset], dtype=np.int64))[0]
+
+
+class _Grid:
+    """Points bucketed by cell: ``order`` sorts points by key, cell ``c`` holds
+    ``order[start[c]:start[c] + count[c]]``; ``ukeys`` (cells,) sorted uint64."""
+
+    def __init__(self, points, size):
+        keys = _keys(_cells(points, size))
+        self.order = np.argsort(keys, kind="stable")
+        sk = keys[self.order]
+        first = np.ones(sk.size, dtype=bool)
+        first[1:] = sk[1:] != sk[:-1]
+        self.start = np.flatnonzero(first)
+        self.count = np.diff(np.append(self.start, sk.size))
+        self.ukeys = sk[self.start]
+        # cell index of each sorted point
+        self.cell_of_sorted = np.cumsum(first) - 1
+
+    def find(self, keys):
+        """Cell index (m,) int64 for each uint64 key, -1 where the cell is empty."""
+        pos = np.searchsorted(self.ukeys, keys)
+        pos = np.minimum(pos, max(self.ukeys.size - 1, 0))
+        if self.ukeys.size == 0:
+            return np.full(keys.shape, -1, dtype=np.int64)
+        return np.where(self.ukeys[pos] == keys, pos, -1)
+
+
+def _expand(rows, first, counts):
+    """For each r, emit (rows[r], first[r] + t) for t < counts[r]; returns two (m,) arrays."""
+    counts = np.maximum(counts, 0)
+    total = int(counts.sum())
+    a = np.repeat(rows, counts)
+    shift = np.repeat(first - (np.cumsum(counts) - counts), counts)
+    return a, np.arange(total, dtype=np.int64) + shift
+
+
+def _self_pairs(points, radius):
+    """All pairs closer than ``radius``: (i, j, d), i < j in input numbering.
+
+    i, j (m,) int64; d (m,) float64.  Cell side = radius, 14 of 27 offsets.
+    """
+    if points.shape[0] < 2:
+        empty = np.empty(0, dtype=np.int64)
+        return empty, empty, np.empty(0)
+    grid = _Grid(points, radius)
+    sp = points[grid.order]
+    cell = grid.cell_of_sorted
+    ii, jj, dd = [], [], []
+    for off in [(0, 0, 0)] + _OFFSETS_HALF:
+        target = grid.find(grid.ukeys + _offset_key(off))
+        if off == (0, 0, 0):
+            rows = np.arange(sp.shape[0])
+            first = rows + 1
+            cnt = grid.start[cell] + grid.count[cell] - first
+        else:
+            rows = np.flatnonzero(target[cell] >= 0)
+            tc = target[cell[rows]]
+            first, cnt = grid.start[tc], grid.count[tc]
+        a, b = _expand(rows, first, cnt)
+        diff = sp[a] - sp[b]
+        d2 = np.einsum("ij,ij->i", diff, diff)
+        keep = d2 < radius * radius
+        ii.append(a[keep])
+        jj.append(b[keep])
+        dd.append(np.sqrt(d2[keep]))
+    a = grid.order[np.concatenate(ii)]
+    b = grid.order[np.concatenate(jj)]
+    return np.minimum(a, b), np.maximum(a, b), np.concatenate(dd)
+
+
+def _cross_pairs(query, ref, radius):
+    """Pairs (q, r, d) with |query[q] - ref[r]| < radius; (m,) int64, int64, float64."""
+    empty = np.empty(0, dtype=np.int64)
+    if query.shape[0] == 0 or ref.shape[0] == 0:
+        return empty, empty, np.empty(0)
+    grid = _Grid(ref, radius)
+    qkeys = _keys(_cells(query, radius))
+    qq, rr, dd = [], [], []
+    for off in _OFFSETS_ALL:
+        target = grid.find(qkeys + _offset_key(off))
+        rows = np.flatnonzero(target >= 0)
+        tc = target[rows]
+        a, b = _expand(rows, grid.start[tc], grid.count[tc])
+        b = grid.order[b]
+        diff = query[a] - ref[b]
+        d2 = np.einsum("ij,ij->i", diff, diff)
+        keep = d2 < radius * radius
+        qq.append(a[keep])
+        rr.append(b[keep])
+        dd.append(np.sqrt(d2[keep]))
+    return np.concatenate(qq), np.concatenate(rr), np.concatenate(dd)
+
+
+def _capped(points, radius):
+    """Bool (n,) mask: the first ``_CELL_CAP`` points (input order) of each cell of side radius/2."""
+    grid = _Grid(points, radius / 2.0)
+    rank = np.arange(points.shape[0]) - grid.start[grid.cell_of_sorted]
+    mask = np.empty(points.shape[0], dtype=bool)
+    mask[grid.order] = rank < _CELL_CAP
+    return mask
+
+
+def _eliminate(in_play, i, j, d, radius):
+    """Drop crowded points until no edge joins two survivors.
+
+    in_play (n,) bool; edges i, j (m,) int64 with lengths d (m,) < radius.
+    Returns survivors (n,) bool, a subset of in_play.  Every connected
+    component keeps at least one point, and each round drops at least one.
+    """
+    n = in_play.size
+    alive = in_play.copy()
+    both = alive[i] & alive[j]
+    i, j, w_edge = i[both], j[both], 1.0 - d[both] / (2.0 * radius)
+    for _ in range(n + 1):
+        if i.size == 0:
+            break
+        crowd = np.bincount(i, w_edge, n) + np.bincount(j, w_edge, n)
+        ci, cj = crowd[i], crowd[j]
+        # ties broken by index: the larger index is treated as more crowded
+        i_worse = (ci > cj) | ((ci == cj) & (i > j))
+        spared = np.zeros(n, dtype=bool)
+        spared[np.where(i_worse, j, i)] = True
+        worst = np.zeros(n, dtype=bool)
+        worst[i] = True
+        worst[j] = True
+        worst &= ~spared
+        alive &= ~worst
+        both = alive[i] & alive[j]
+        i, j, w_edge = i[both], j[both], w_edge[both]
+    return alive
+
+
+def _maximal(in_play, i, j, d, radius):
+    """Survivors of elimination, refilled until every in-play point has a kept
+    point within radius (or is kept).  Returns kept (n,) bool."""
+    kept = np.zeros(in_play.size, dtype=bool)
+    open_ = in_play.copy()
+    for _ in range(in_play.size + 1):
+        if not open_.any():
+            break
+        kept |= _eliminate(open_, i, j, d, radius)
+        covered = kept.copy()
+        covered[i[kept[j]]] = True
+        covered[j[kept[i]]] = True
+        open_ &= ~covered
+    return kept
+
+
+def thin_by_radius(points, radius):
+    """Indices (m,) int64, ascending, of a maximal Poisson-disk subset.
+
+    points (n, 3) float64.  Every pair of kept points is >= radius apart
+    (Euclidean), and every candidate lies within radius of a kept point.
+    """
+    pts = _as_points(points)
+    radius = float(radius)
+    if not radius > 0 or not math.isfinite(radius):
+        raise ValueError(f"radius must be a positive finite number, got {radius}")
+    n = pts.shape[0]
+    kept = np.zeros(n, dtype=bool)
+    todo = np.arange(n)
+    for _ in range(n + 1):
+        if todo.size == 0:
+            break
+        sub = pts[todo]
+        active = _capped(sub, radius)
+        act = np.flatnonzero(active)
+        i, j, d = _self_pairs(sub[act], radius)
+        new = act[_maximal(np.ones(act.size, dtype=bool), i, j, d, radius)]
+        kept[todo[new]] = True
+        # capped-out points may be uncovered; only they need a geometric query
+        rest = np.flatnonzero(~active)
+        hit, _, _ = _cross_pairs(sub[rest], sub[new], radius)
+        uncovered = np.ones(rest.size, dtype=bool)
+        uncovered[hit] = False
+        todo = todo[rest[uncovered]]
+    return np.flatnonzero(kept).astype(np.int64)
