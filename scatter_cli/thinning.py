@@ -245,3 +245,159 @@ def thin_by_radius(points, radius):
         uncovered[hit] = False
         todo = todo[rest[uncovered]]
     return np.flatnonzero(kept).astype(np.int64)
+
+
+def _nearest(points, guess):
+    """Nearest-neighbour distance (n,) float64 of each point (inf if n < 2).
+
+    Starts with pairs closer than ``guess`` and doubles the radius only for
+    points still without a neighbour.  Meant for well-spread sets: dense
+    clusters make the first pair list long.
+    """
+    n = points.shape[0]
+    nn = np.full(n, np.inf)
+    if n < 2:
+        return nn
+    extent = float(np.ptp(points, axis=0).max())
+    radius = max(guess, extent * 1e-9, np.finfo(float).tiny)
+    i, j, d = _self_pairs(points, radius)
+    np.minimum.at(nn, i, d)
+    np.minimum.at(nn, j, d)
+    for _ in range(80):
+        todo = np.flatnonzero(~np.isfinite(nn))
+        if todo.size == 0:
+            break
+        radius *= 2.0
+        q, r, d = _cross_pairs(points[todo], points, radius)
+        other = todo[q] != r
+        np.minimum.at(nn, todo[q[other]], d[other])
+    return nn
+
+
+def spacing_stats(points, area):
+    """Spacing of a point set on a surface of area A.
+
+    points (n, 3) float64.  Returns {"count", "d_min", "mean_nn", "rho"}:
+    minimum and mean nearest-neighbour distance (Euclidean) and the relative
+    radius rho = d_min / d_hex.  With fewer than 2 points distances are inf
+    and rho is nan.
+    """
+    pts = _as_points(points)
+    n = pts.shape[0]
+    if n < 2:
+        return {"count": n, "d_min": math.inf, "mean_nn": math.inf, "rho": math.nan}
+    nn = _nearest(pts, _hex_spacing(area, n))
+    d_min = float(nn.min())
+    return {
+        "count": n,
+        "d_min": d_min,
+        "mean_nn": float(nn.mean()),
+        "rho": relative_radius(d_min, area, n),
+    }
+
+
+def _trim(kept, i, j, d, target):
+    """Remove points from ``kept`` (n,) bool until exactly ``target`` remain,
+    always taking a point of the currently closest pairs first.
+
+    Edges i, j, d (m,) sorted by d; edges with an end not kept are ignored.
+    """
+    kept = kept.copy()
+    n = kept.size
+    for _ in range(n + 1):
+        need = int(kept.sum()) - target
+        if need <= 0:
+            break
+        both = kept[i] & kept[j]
+        i, j, d = i[both], j[both], d[both]
+        if i.size == 0:
+            # everything is farther apart than the pair list reaches
+            kept[np.flatnonzero(kept)[-need:]] = False
+            break
+        nn = np.full(n, np.inf)
+        np.minimum.at(nn, i, d)
+        np.minimum.at(nn, j, d)
+        crowd = np.bincount(i, minlength=n) + np.bincount(j, minlength=n)
+        # badness rank: closest neighbour first, then most neighbours, then index
+        order = np.lexsort((-np.arange(n), -crowd, nn))
+        rank = np.empty(n, dtype=np.int64)
+        rank[order] = np.arange(n)
+        spared = np.zeros(n, dtype=bool)
+        spared[np.where(rank[i] < rank[j], j, i)] = True
+        worst = np.zeros(n, dtype=bool)
+        worst[i] = True
+        worst[j] = True
+        worst &= ~spared
+        cand = np.flatnonzero(worst)
+        cand = cand[np.argsort(rank[cand], kind="stable")][:need]
+        kept[cand] = False
+    return kept
+
+
+def thin_to_count(points, count, area):
+    """Exactly ``count`` points, spread as far apart as the candidates allow.
+
+    points (n, 3) float64 candidates, uniform on a surface of area ``area``.
+    Returns (indices (count,) int64 ascending, d_min float): d_min is the
+    minimum pairwise distance of the kept points (inf for count < 2).
+
+    The radius is searched (secant steps in log r, kept inside a bracket) so
+    that weighted elimination at that radius keeps slightly more than count;
+    the surplus is then removed from the closest pairs.
+    """
+    pts = _as_points(points)
+    n = pts.shape[0]
+    count = int(count)
+    if count < 0:
+        raise ValueError(f"count must be >= 0, got {count}")
+    if count > n:
+        raise ValueError(f"count={count} is more than the {n} candidate points; sample more candidates")
+    if count == n or count < 2:
+        idx = np.arange(count, dtype=np.int64)
+        return idx, float(_nearest(pts[idx], _hex_spacing(area, max(count, 1))).min(initial=np.inf))
+    if not area > 0:
+        raise ValueError(f"area must be positive, got {area}")
+
+    d_hex = _hex_spacing(area, count)
+    r_top = 0.95 * d_hex
+    for _ in range(40):
+        active = np.flatnonzero(_capped(pts, r_top))
+        if active.size < count:
+            active = np.arange(n)
+        i, j, d = _self_pairs(pts[active], r_top)
+        order = np.argsort(d, kind="stable")
+        i, j, d = i[order], j[order], d[order]
+        everyone = np.ones(active.size, dtype=bool)
+        top_kept = _maximal(everyone, i, j, d, r_top)
+        if top_kept.sum() < count:
+            break
+        r_top *= 1.3
+
+    def keep_at(radius):
+        m = int(np.searchsorted(d, radius))
+        return _maximal(everyone, i[:m], j[:m], d[:m], radius)
+
+    lo, lo_kept = 0.0, everyone
+    hi, hi_count = r_top, int(top_kept.sum())
+    lo_count = active.size
+    r = 0.75 * d_hex
+    slack = max(1, count // 500)
+    for _ in range(16):
+        if not lo < r < hi:
+            r = 0.5 * (lo + hi)
+        kept = keep_at(r)
+        c = int(kept.sum())
+        if c >= count:
+            lo, lo_kept, lo_count = r, kept, c
+            if c - count <= slack:
+                break
+        else:
+            hi, hi_count = r, c
+        # count ~ r**-2 locally
+        r = r * math.sqrt(c / count) if c > 0 else 0.5 * (lo + hi)
+
+    final = _trim(lo_kept, i, j, d, count)
+    idx = np.sort(active[np.flatnonzero(final)]).astype(np.int64)
+    both = final[i] & final[j]
+    d_min = float(d[both][0]) if both.any() else float(_nearest(pts[idx], r_top).min())
+    return idx, d_min
