@@ -2,11 +2,11 @@
 
 Candidates are points drawn uniformly on a surface.  A subset is kept so that
 kept points are at least ``radius`` apart.  Instead of random-order dart
-throwing, conflicts are resolved by parallel weighted elimination: in each
-round every point that is more crowded than all of its conflicting neighbours
-is dropped (crowding = sum of ``1 - d / (2 radius)`` over neighbours closer
-than ``radius``).  This packs about 10 % more points per radius than dart
-throwing, which is what lifts the relative radius above 0.75.
+throwing, candidates are taken greedily from the least crowded first
+(crowding = sum of ``1 - d / (2 radius)`` over neighbours closer than
+``radius``).  The greedy runs as parallel rounds over the pair graph and
+packs about 10 % more points per radius than random order, which is what
+lifts the relative radius above 0.75 at 10x oversampling.
 
 Neighbour pairs come from a uniform grid: cells are hashed to uint64 keys,
 sorted with numpy, and looked up with ``searchsorted``.  Only numpy is used.
@@ -170,50 +170,48 @@ def _capped(points, radius):
     return mask
 
 
-def _eliminate(in_play, i, j, d, radius):
-    """Drop crowded points until no edge joins two survivors.
+def _crowding(n, i, j, d, radius):
+    """Crowding (n,) float64: sum of 1 - d / (2 radius) over each point's edges."""
+    w = 1.0 - d / (2.0 * radius)
+    return np.bincount(i, w, n) + np.bincount(j, w, n)
 
-    in_play (n,) bool; edges i, j (m,) int64 with lengths d (m,) < radius.
-    Returns survivors (n,) bool, a subset of in_play.  Every connected
-    component keeps at least one point, and each round drops at least one.
+
+def _greedy(n, i, j, priority):
+    """Maximal independent set of the graph (i, j), taken greedily in
+    ascending ``priority`` (n,) with ties broken by index.
+
+    Computed in parallel rounds: a vertex joins when it precedes every
+    undecided neighbour, then its neighbours drop out.  The result equals the
+    sequential greedy; each round decides at least one vertex.
+    Returns kept (n,) bool.
     """
-    n = in_play.size
-    alive = in_play.copy()
-    both = alive[i] & alive[j]
-    i, j, w_edge = i[both], j[both], 1.0 - d[both] / (2.0 * radius)
+    rank = np.empty(n, dtype=np.int64)
+    rank[np.lexsort((np.arange(n), priority))] = np.arange(n)
+    undecided = np.ones(n, dtype=bool)
+    kept = np.zeros(n, dtype=bool)
     for _ in range(n + 1):
         if i.size == 0:
             break
-        crowd = np.bincount(i, w_edge, n) + np.bincount(j, w_edge, n)
-        ci, cj = crowd[i], crowd[j]
-        # ties broken by index: the larger index is treated as more crowded
-        i_worse = (ci > cj) | ((ci == cj) & (i > j))
-        spared = np.zeros(n, dtype=bool)
-        spared[np.where(i_worse, j, i)] = True
-        worst = np.zeros(n, dtype=bool)
-        worst[i] = True
-        worst[j] = True
-        worst &= ~spared
-        alive &= ~worst
-        both = alive[i] & alive[j]
-        i, j, w_edge = i[both], j[both], w_edge[both]
-    return alive
+        blocked = np.zeros(n, dtype=bool)
+        blocked[np.where(rank[i] < rank[j], j, i)] = True
+        join = undecided & ~blocked
+        kept |= join
+        undecided &= ~join
+        undecided[i[join[j]]] = False
+        undecided[j[join[i]]] = False
+        live = undecided[i] & undecided[j]
+        i, j = i[live], j[live]
+    return kept | undecided
 
 
-def _maximal(in_play, i, j, d, radius):
-    """Survivors of elimination, refilled until every in-play point has a kept
-    point within radius (or is kept).  Returns kept (n,) bool."""
-    kept = np.zeros(in_play.size, dtype=bool)
-    open_ = in_play.copy()
-    for _ in range(in_play.size + 1):
-        if not open_.any():
-            break
-        kept |= _eliminate(open_, i, j, d, radius)
-        covered = kept.copy()
-        covered[i[kept[j]]] = True
-        covered[j[kept[i]]] = True
-        open_ &= ~covered
-    return kept
+def _least_crowded_first(n, i, j, d, radius):
+    """Kept (n,) bool: greedy maximal Poisson-disk set over the pair graph
+    (edges shorter than radius), least crowded candidates first.
+
+    Taking sparse spots first packs about 10 % more points per radius than
+    random-order dart throwing, which is what lifts rho above 0.75.
+    """
+    return _greedy(n, i, j, _crowding(n, i, j, d, radius))
 
 
 def thin_by_radius(points, radius):
@@ -236,7 +234,7 @@ def thin_by_radius(points, radius):
         active = _capped(sub, radius)
         act = np.flatnonzero(active)
         i, j, d = _self_pairs(sub[act], radius)
-        new = act[_maximal(np.ones(act.size, dtype=bool), i, j, d, radius)]
+        new = act[_least_crowded_first(act.size, i, j, d, radius)]
         kept[todo[new]] = True
         # capped-out points may be uncovered; only they need a geometric query
         rest = np.flatnonzero(~active)
@@ -342,7 +340,7 @@ def thin_to_count(points, count, area):
     minimum pairwise distance of the kept points (inf for count < 2).
 
     The radius is searched (secant steps in log r, kept inside a bracket) so
-    that weighted elimination at that radius keeps slightly more than count;
+    that the least-crowded-first greedy keeps slightly more than count;
     the surplus is then removed from the closest pairs.
     """
     pts = _as_points(points)
@@ -359,7 +357,7 @@ def thin_to_count(points, count, area):
         raise ValueError(f"area must be positive, got {area}")
 
     d_hex = _hex_spacing(area, count)
-    r_top = 0.95 * d_hex
+    r_top = 0.85 * d_hex
     for _ in range(40):
         active = np.flatnonzero(_capped(pts, r_top))
         if active.size < count:
@@ -368,20 +366,20 @@ def thin_to_count(points, count, area):
         order = np.argsort(d, kind="stable")
         i, j, d = i[order], j[order], d[order]
         everyone = np.ones(active.size, dtype=bool)
-        top_kept = _maximal(everyone, i, j, d, r_top)
+        top_kept = _least_crowded_first(active.size, i, j, d, r_top)
         if top_kept.sum() < count:
             break
-        r_top *= 1.3
+        r_top *= 1.2
 
     def keep_at(radius):
         m = int(np.searchsorted(d, radius))
-        return _maximal(everyone, i[:m], j[:m], d[:m], radius)
+        return _least_crowded_first(active.size, i[:m], j[:m], d[:m], radius)
 
     lo, lo_kept = 0.0, everyone
     hi, hi_count = r_top, int(top_kept.sum())
     lo_count = active.size
     r = 0.75 * d_hex
-    slack = max(1, count // 500)
+    slack = max(1, count // 200)
     for _ in range(16):
         if not lo < r < hi:
             r = 0.5 * (lo + hi)
