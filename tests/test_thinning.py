@@ -125,6 +125,15 @@ def test_by_radius_degenerate():
         thin_by_radius(np.zeros((4, 2)), 0.1)
 
 
+def test_checker_can_fail():
+    p = sphere_points(3000, seed=8)
+    kept = thin_by_radius(p, 0.1)
+    with pytest.raises(AssertionError):  # not maximal: one kept point dropped
+        assert_poisson_disk(p, kept[1:], 0.1)
+    with pytest.raises(AssertionError):  # too close: spacing of a larger radius asked
+        assert_poisson_disk(p, kept, 0.2)
+
+
 # --- thin_to_count --------------------------------------------------------
 
 
@@ -143,6 +152,8 @@ def test_to_count_degenerate():
         thin_to_count(p, 51, SPHERE_AREA)
     with pytest.raises(ValueError):
         thin_to_count(p, -1, SPHERE_AREA)
+    with pytest.raises(ValueError):
+        thin_to_count(p, 10, 0.0)
     idx, d_min = thin_to_count(p, 50, SPHERE_AREA)
     assert np.array_equal(idx, np.arange(50))
     assert d_min == pytest.approx(brute_min_distance(p))
@@ -162,6 +173,9 @@ def test_to_count_rho_sphere(count):
     assert idx.size == count
     assert kd_min_distance(p[idx]) == pytest.approx(d_min)
     assert relative_radius(d_min, SPHERE_AREA, count) >= 0.75
+    # the same threshold rejects a plain random subset
+    random_subset = np.arange(count)
+    assert relative_radius(kd_min_distance(p[random_subset]), SPHERE_AREA, count) < 0.75
 
 
 def _shared_mesh():
