@@ -5,11 +5,12 @@ kept points are at least ``radius`` apart.  Instead of random-order dart
 throwing, candidates are taken greedily from the least crowded first
 (crowding = sum of ``1 - d / (2 radius)`` over neighbours closer than
 ``radius``).  The greedy runs as parallel rounds over the pair graph and
-packs about 10 % more points per radius than random order, which is what
-lifts the relative radius above 0.75 at 10x oversampling.
+packs about 20 % more points per radius than random order (rho 0.76 instead
+of 0.69 at 10x oversampling, 0.66 instead of 0.60 at 3x).
 
-Neighbour pairs come from a uniform grid: cells are hashed to uint64 keys,
-sorted with numpy, and looked up with ``searchsorted``.  Only numpy is used.
+Neighbour pairs come from a uniform grid: cell coordinates are packed into
+int64 keys, sorted with numpy, and looked up with ``searchsorted``.  Only
+numpy is used.
 Every loop below runs over rounds, never over points, and is bounded.
 """
 
@@ -238,7 +239,7 @@ def _least_crowded_first(n, i, j, d, radius):
     """Kept (n,) bool: greedy maximal Poisson-disk set over the pair graph
     (edges shorter than radius), least crowded candidates first.
 
-    Taking sparse spots first packs about 10 % more points per radius than
+    Taking sparse spots first packs about 20 % more points per radius than
     random-order dart throwing, which is what lifts rho above 0.75.
     """
     return _greedy(n, i, j, _crowding(n, i, j, d, radius))
