@@ -86,6 +86,8 @@ def sample(
     write_samples(with_progress(run.chunks(), run.count, show), output, out_format, run.layout, run.count, ascii)
     run.info["timings"]["sample_and_write"] = time.perf_counter() - t
     run.info["timings"]["total"] = time.perf_counter() - started
+    if stats and run.kept is not None:
+        run.info.update(run.spacing())
     if stats:
         _write_stats(run.info, stats)
 

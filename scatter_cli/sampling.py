@@ -56,6 +56,15 @@ class RawChunk:
     instance: np.ndarray
     bary: np.ndarray
 
+    def take(self, index):
+        """The rows ``index`` (k,) as a new chunk starting at 0."""
+        bary = None if self.bary is None else self.bary[index]
+        return RawChunk(0, self.points[index], self.face[index], self.instance[index], bary)
+
+    def slice(self, start, stop):
+        bary = None if self.bary is None else self.bary[start:stop]
+        return RawChunk(start, self.points[start:stop], self.face[start:stop], self.instance[start:stop], bary)
+
 
 class SamplePlan:
     """Everything needed to draw points from a surface, built once per run."""

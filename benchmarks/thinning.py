@@ -1,6 +1,6 @@
 """Time and quality of thin_to_count on a 1.3M-face icosphere.
 
-Usage: python bench/bench_thinning.py [count] [repeats]
+Usage: python benchmarks/thinning.py [count] [repeats]
 Prints, per oversampling factor k = candidates / count, the median wall time
 of thin_to_count (time.perf_counter), the median CPU time of this process
 (time.process_time; numpy runs single-threaded here, so on a busy shared
