@@ -27,9 +27,10 @@ class Run:
     order, so a writer can stream any count in flat memory.
     """
 
-    def __init__(self, surface, plan, count, seed, attributes, dtype, chunk_size, info):
+    def __init__(self, surface, plan, count, seed, attributes, dtype, chunk_size, info, sampler=None):
         self.surface = surface
         self.plan = plan
+        self.sampler = sampler or plan  # a weighting's sampler, or the plain plan
         self.count = count
         self.seed = seed
         self.dtype = np.dtype(dtype)
@@ -39,7 +40,7 @@ class Run:
         self.layout = column_layout({_key(a) for a in attributes}, self.dtype)
 
     def _job(self, start, stop):
-        raw = self.plan.draw(start, stop, self.seed, self.maker.needs_bary)
+        raw = self.sampler.draw(start, stop, self.seed, self.maker.needs_bary)
         attrs = self.maker.make(raw, self.dtype)
         return Samples(raw.points.astype(self.dtype, copy=False), attrs)
 
@@ -79,18 +80,25 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     _check_options(count, density, seed, method, precision, chunk_size, radius)
     surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects)
     t1 = time.perf_counter()
-    plan = SamplePlan(surface)
+    sampler = None
+    if weight:
+        from .weighting import weighted_plan
+
+        plan, sampler = weighted_plan(surface, weight)
+    else:
+        plan = SamplePlan(surface)
     if plan.non_finite and warn:
         warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
+    area = plan.area if sampler is None else SamplePlan(surface).area  # weighted CDF total != area
     if density is not None:
-        count = int(round(density * plan.area))
+        count = int(round(density * area))
     elif count is None:
         count = 10000
     dtype = choose_precision(plan, precision, warn)
     info = {
         "source": surface.source,
         "count": count,
-        "area": plan.area,
+        "area": area,
         "faces": surface.face_count,
         "faces_used": plan.faces_used,
         "seed": seed,
@@ -98,7 +106,9 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
         "precision": np.dtype(dtype).name,
         "timings": {"load": t1 - t0, "plan": time.perf_counter() - t1},
     }
-    return Run(surface, plan, count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info)
+    if sampler is not None:
+        info["weight"] = weight
+    return Run(surface, plan, count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info, sampler)
 
 
 def sample(mesh, count=10000, *, density=None, seed=0, method="random", attributes=(), poisson=False,
@@ -141,6 +151,8 @@ def sampled_bounds(plan: SamplePlan):
     """(2, 3) float64 min and max over the world-space vertices of the faces that get points."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for part in plan.parts:
+        if not part.count:  # an instance none of whose faces can get points
+            continue
         tri = part.tri if part.faces is None else part.tri[part.faces]
         if part.matrix is not None:
             tri = (tri.reshape(-1, 3) @ part.matrix[:3, :3].T + part.matrix[:3, 3]).reshape(-1, 9)
