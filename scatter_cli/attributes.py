@@ -28,7 +28,10 @@ class AttributeMaker:
         self._cof = {}
         for k, inst in enumerate(surface.instances):
             if inst.matrix is not None:
-                self._cof[k] = cofactor(inst.matrix[:3, :3])
+                # cof(A) = det(A) inv(A)^T: with sign(det) it is |det| inv(A)^T, the normal
+                # transform that keeps normals outward under mirrors (glTF flips winding then).
+                a = inst.matrix[:3, :3]
+                self._cof[k] = cofactor(a) * (-1.0 if np.linalg.det(a) < 0 else 1.0)
         for name in self.names:
             getattr(self, "_prepare_" + name.replace("-", "_"), lambda: None)()
 
