@@ -3,6 +3,15 @@
 Pillow is imported only by :meth:`Texture.pixels`, the first time a texel is needed, so
 a run that asks for no colour and no texture weight never decodes an image.
 
+Wrap modes: trimesh 5.2 does not keep the glTF sampler of a material's texture, so
+every texture is sampled with REPEAT (the glTF default). :func:`bilinear` implements
+CLAMP_TO_EDGE and MIRRORED_REPEAT too, for when the loader exposes the sampler (a
+material carrying ``_scatter_wrap = (wrap_s, wrap_t)`` is honoured by
+:func:`scatter_cli.visuals.color_source`).
+
+Colour: texture RGBA times the material's base colour factor, both taken as stored
+(sRGB-encoded bytes; no linearisation), rounded to uint8.
+
 Conventions: ``uv`` is as trimesh presents it (origin at the bottom-left of the image,
 v up). Texel ``(i, j)`` (column, row from the top) has its centre at
 ``u = (i + 0.5) / W``, ``v = 1 - (j + 0.5) / H``, as in OpenGL/glTF sampling.
