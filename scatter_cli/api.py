@@ -27,9 +27,10 @@ class Run:
     order, so a writer can stream any count in flat memory.
     """
 
-    def __init__(self, surface, plan, count, seed, attributes, dtype, chunk_size, info):
+    def __init__(self, surface, plan, count, seed, attributes, dtype, chunk_size, info, sampler=None):
         self.surface = surface
         self.plan = plan
+        self.sampler = sampler or plan  # a weighting's sampler, or the plain plan
         self.count = count
         self.seed = seed
         self.dtype = np.dtype(dtype)
@@ -44,34 +45,37 @@ class Run:
         if self.kept is not None:
             raw = self.kept.slice(start, stop)
         else:
-            raw = self.plan.draw(start, stop, self.seed, self.maker.needs_bary)
+            raw = self.sampler.draw(start, stop, self.seed, self.maker.needs_bary)
         attrs = self.maker.make(raw, self.dtype)
         return Samples(raw.points.astype(self.dtype, copy=False), attrs)
 
-    def thin(self, candidates, poisson, radius):
-        """Replace the run's points by a Poisson-disk subset of ``candidates`` random points."""
+    def thin(self, candidates, radius):
+        """Replace the run's points by a Poisson-disk subset of ``candidates`` random points.
+
+        ``radius`` None: exactly ``self.count`` points, spaced as far apart as reached.
+        """
         from . import thinning
 
         t = time.perf_counter()
-        raw = self.plan.draw(0, candidates, self.seed, True)
+        raw = self.sampler.draw(0, candidates, self.seed, True)
         t1 = time.perf_counter()
         if radius is not None:
             index = thinning.thin_by_radius(raw.points, radius)
             d_min = None
         else:
-            index, d_min = thinning.thin_to_count(raw.points, self.count, self.plan.area)
+            index, d_min = thinning.thin_to_count(raw.points, self.count, self.info["area"])
         self.kept = raw.take(index)
         self.count = len(index)
         self.info.update(count=self.count, candidates=candidates, radius=radius)
         if d_min is not None:
-            self.info.update(d_min=d_min, rho=thinning.relative_radius(d_min, self.plan.area, self.count))
+            self.info.update(d_min=d_min, rho=thinning.relative_radius(d_min, self.info["area"], self.count))
         self.info["timings"].update(candidates=t1 - t, thinning=time.perf_counter() - t1)
 
     def spacing(self):
         """d_min, mean nearest-neighbour distance and rho of the output (thinning runs)."""
         from .thinning import spacing_stats
 
-        return spacing_stats(self.kept.points, self.plan.area)
+        return spacing_stats(self.kept.points, self.info["area"])
 
     def chunks(self, threads=None):
         yield from run_chunks(self._job, chunk_ranges(self.count, self.chunk_size), threads)
@@ -109,11 +113,18 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     _check_options(count, density, seed, method, precision, chunk_size, radius)
     surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects)
     t1 = time.perf_counter()
-    plan = SamplePlan(surface)
+    sampler = None
+    if weight:
+        from .weighting import weighted_plan
+
+        plan, sampler = weighted_plan(surface, weight)
+    else:
+        plan = SamplePlan(surface)
     if plan.non_finite and warn:
         warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
+    area = plan.area if sampler is None else SamplePlan(surface).area  # weighted CDF total != area
     if density is not None:
-        count = int(round(density * plan.area))
+        count = int(round(density * area))
     elif count is None:
         count = 10000
     if poisson and radius is not None:
@@ -124,7 +135,7 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     info = {
         "source": surface.source,
         "count": count,
-        "area": plan.area,
+        "area": area,
         "faces": surface.face_count,
         "faces_used": plan.faces_used,
         "seed": seed,
@@ -132,9 +143,11 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
         "precision": np.dtype(dtype).name,
         "timings": {"load": t1 - t0, "plan": time.perf_counter() - t1},
     }
-    run = Run(surface, plan, count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info)
+    if sampler is not None:
+        info["weight"] = weight
+    run = Run(surface, plan, count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info, sampler)
     if poisson or radius is not None:
-        run.thin(candidate_count(plan.area, count, radius, surface.source), poisson, radius)
+        run.thin(candidate_count(area, count, radius, surface.source), radius)
     return run
 
 
@@ -204,6 +217,8 @@ def sampled_bounds(plan: SamplePlan):
     """(2, 3) float64 min and max over the world-space vertices of the faces that get points."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for part in plan.parts:
+        if not part.count:  # an instance none of whose faces can get points
+            continue
         tri = part.tri if part.faces is None else part.tri[part.faces]
         if part.matrix is not None:
             tri = (tri.reshape(-1, 3) @ part.matrix[:3, :3].T + part.matrix[:3, 3]).reshape(-1, 9)

@@ -1,8 +1,10 @@
 """Per-point attributes, computed only when asked for.
 
 An :class:`AttributeMaker` is built once per run from the surface and the requested
-names; it prepares only the per-face or per-vertex tables those names need, then turns
-each :class:`~scatter_cli.sampling.RawChunk` into the attribute arrays.
+names; it prepares only the per-geometry tables those names need (never one copy per
+instance), then turns each :class:`~scatter_cli.sampling.RawChunk` into the attribute
+arrays. Nothing else is touched: no normals without ``normal``/``smooth-normal``, no UV
+table without ``uv``/``color``, no image decoded without ``color``.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import numpy as np
 from .errors import ScatterError
 from .samples import ATTRIBUTES
 from .surface import Surface, cofactor
+from .visuals import color_source, interpolate, uv_table, vertex_normal_table
 
 
 class AttributeMaker:
@@ -19,62 +22,142 @@ class AttributeMaker:
         self.surface = surface
         self.names = tuple(names)
         self.needs_bary = any(n in ("bary", "smooth-normal", "uv", "color") for n in self.names)
-        self._face_normals = {}
+        self._tables = {}
+        # Geometries that receive points, in first-use order (instances share them).
+        self._used = list(dict.fromkeys(i.geometry for i in surface.instances))
+        self._cof = {}
+        for k, inst in enumerate(surface.instances):
+            if inst.matrix is not None:
+                # cof(A) = det(A) inv(A)^T: with sign(det) it is |det| inv(A)^T, the normal
+                # transform that keeps normals outward under mirrors (glTF flips winding then).
+                a = inst.matrix[:3, :3]
+                self._cof[k] = cofactor(a) * (-1.0 if np.linalg.det(a) < 0 else 1.0)
         for name in self.names:
             getattr(self, "_prepare_" + name.replace("-", "_"), lambda: None)()
 
     def make(self, raw, real_dtype):
         """dict key -> array for the requested names, from one raw chunk."""
         out = {}
+        groups = self._groups(raw) if len(self.surface.instances) > 1 else None
         for name in self.names:
             key = ATTRIBUTES[name][0]
-            out[key] = getattr(self, "_make_" + name.replace("-", "_"))(raw, real_dtype)
+            out[key] = getattr(self, "_make_" + name.replace("-", "_"))(raw, real_dtype, groups)
         return out
 
-    def _make_face(self, raw, real_dtype):
+    # -- plumbing ---------------------------------------------------------------------
+
+    def _groups(self, raw):
+        """[(instance k, rows (m,) int64)] for the instances present in the chunk."""
+        order = np.argsort(raw.instance, kind="stable")
+        bounds = np.searchsorted(raw.instance[order], np.arange(len(self.surface.instances) + 1))
+        return [(k, order[bounds[k] : bounds[k + 1]]) for k in range(len(bounds) - 1) if bounds[k + 1] > bounds[k]]
+
+    def _per_group(self, raw, groups, compute, width, dtype=np.float64):
+        """Run ``compute(k, face, bary) -> (m, width)`` per instance and scatter the rows."""
+        if groups is None:
+            return compute(0, raw.face, raw.bary)
+        out = np.empty((len(raw.face), width), dtype=dtype)
+        for k, rows in groups:
+            out[rows] = compute(k, raw.face[rows], None if raw.bary is None else raw.bary[rows])
+        return out
+
+    def _missing(self, name, what, geometry):
+        g = self.surface.geometries[geometry]
+        where = f"object '{g.name}' has" if self.surface.is_scene else "the mesh has"
+        hint = " (choose objects that have them with --object)" if self.surface.is_scene else ""
+        raise ScatterError(f"{self.surface.source}: cannot write attribute '{name}': {where} no {what}{hint}")
+
+    def _geometry_of(self, k):
+        return self.surface.instances[k].geometry
+
+    def _to_world(self, k, n):
+        """Directions ``n`` (m, 3) of instance k's frame -> unit world-space normals."""
+        cof = self._cof.get(k)
+        if cof is not None:
+            n = n @ cof.T
+        with np.errstate(invalid="ignore", divide="ignore"):
+            n /= np.sqrt(np.einsum("ij,ij->i", n, n))[:, None]
+        return n
+
+    # -- face, object, bary -----------------------------------------------------------
+
+    def _make_face(self, raw, real_dtype, groups):
         return raw.face.astype(np.int32)
 
-    def _make_object(self, raw, real_dtype):
+    def _make_object(self, raw, real_dtype, groups):
         return raw.instance.astype(np.int32)
 
-    def _make_bary(self, raw, real_dtype):
+    def _make_bary(self, raw, real_dtype, groups):
         return raw.bary.astype(real_dtype)
 
+    # -- normal: the geometric face normal --------------------------------------------
+
     def _prepare_normal(self):
-        for k, inst in enumerate(self.surface.instances):
-            g = self.surface.geometries[inst.geometry]
-            v = g.vertices
-            n = np.cross(v[g.faces[:, 1]] - v[g.faces[:, 0]], v[g.faces[:, 2]] - v[g.faces[:, 0]])
-            if inst.matrix is not None:
-                n = n @ cofactor(inst.matrix[:3, :3]).T
+        for gi in self._used:
+            g = self.surface.geometries[gi]
+            v, f = g.vertices, g.faces
+            n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
             with np.errstate(invalid="ignore", divide="ignore"):
                 n /= np.linalg.norm(n, axis=1, keepdims=True)
-            self._face_normals[k] = n
+            self._tables["normal", gi] = n
 
-    def _make_normal(self, raw, real_dtype):
-        return self._per_instance(raw, self._face_normals, lambda table, face: table[face]).astype(real_dtype)
+    def _make_normal(self, raw, real_dtype, groups):
+        def compute(k, face, bary):
+            n = self._tables["normal", self._geometry_of(k)][face]
+            return self._to_world(k, n) if k in self._cof else n
 
-    def _per_instance(self, raw, tables, gather):
-        if len(tables) == 1:
-            return gather(tables[0], raw.face)
-        out = None
-        for k, table in tables.items():
-            rows = np.flatnonzero(raw.instance == k)
-            if rows.size:
-                part = gather(table, raw.face[rows])
-                if out is None:
-                    out = np.empty((len(raw.face),) + part.shape[1:], dtype=part.dtype)
-                out[rows] = part
-        return out
+        return self._per_group(raw, groups, compute, 3).astype(real_dtype)
 
-    def _unsupported(self, name):
-        raise ScatterError(f"{self.surface.source}: attribute '{name}' is not supported yet")
+    # -- smooth-normal: vertex normals, interpolated and normalised -------------------
 
     def _prepare_smooth_normal(self):
-        self._unsupported("smooth-normal")
+        self._prepare_normal()  # the fallback where interpolated normals cancel out
+        for gi in self._used:
+            self._tables["vn", gi] = vertex_normal_table(self.surface.geometries[gi].mesh)
+
+    def _make_smooth_normal(self, raw, real_dtype, groups):
+        def compute(k, face, bary):
+            gi = self._geometry_of(k)
+            n = interpolate(self._tables["vn", gi], self.surface.geometries[gi].faces, face, bary)
+            n = self._to_world(k, n)
+            bad = ~np.isfinite(n[:, 0]) | (np.abs(n).max(axis=1) < 0.5)  # unit vectors have a component >= 1/sqrt(3)
+            if bad.any():
+                n[bad] = self._to_world(k, self._tables["normal", gi][face[bad]].copy())
+            return n
+
+        return self._per_group(raw, groups, compute, 3).astype(real_dtype)
+
+    # -- uv -----------------------------------------------------------------------------
 
     def _prepare_uv(self):
-        self._unsupported("uv")
+        for gi in self._used:
+            uv = uv_table(self.surface.geometries[gi].mesh)
+            if uv is None:
+                self._missing("uv", "texture coordinates", gi)
+            self._tables["uv", gi] = uv
+
+    def _make_uv(self, raw, real_dtype, groups):
+        def compute(k, face, bary):
+            gi = self._geometry_of(k)
+            return interpolate(self._tables["uv", gi], self.surface.geometries[gi].faces, face, bary)
+
+        return self._per_group(raw, groups, compute, 2).astype(real_dtype)
+
+    # -- color --------------------------------------------------------------------------
 
     def _prepare_color(self):
-        self._unsupported("color")
+        textures = self.surface._cache.setdefault("textures", {})
+        for gi in self._used:
+            g = self.surface.geometries[gi]
+            src = color_source(g.mesh, g.faces, self.surface.source, textures)
+            if src is None:
+                self._missing("color", "vertex colours, face colours, texture or material colour", gi)
+            src.prepare()
+            self._tables["color", gi] = src
+
+    def _make_color(self, raw, real_dtype, groups):
+        def compute(k, face, bary):
+            return self._tables["color", self._geometry_of(k)].colors(face, bary)
+
+        c = self._per_group(raw, groups, compute, 4)
+        return np.rint(np.clip(c, 0.0, 255.0)).astype(np.uint8)

@@ -49,3 +49,26 @@ def run_scatter(*args, input=None, check=False, env=None, timeout=120):
 @pytest.fixture
 def sample_mesh():
     return lambda name: SAMPLES / name
+
+
+def scaled_scene():
+    """A trimesh.Scene: one icosphere placed three times (identity, non-uniform scale with a
+    rotation, a mirror with translation) and a box once."""
+    import trimesh
+
+    rock = trimesh.creation.icosphere(subdivisions=1)
+    box = trimesh.creation.box(extents=[1, 2, 0.5])
+    rot = trimesh.transformations.rotation_matrix(0.7, [1, 1, 0])
+    stretch = rot @ np.diag([3.0, 1.0, 0.25, 1.0])
+    stretch[:3, 3] = [5, 0, 0]
+    mirror = np.diag([-1.0, 1.0, 1.0, 1.0])
+    mirror[:3, 3] = [0, 4, 0]
+    scene = trimesh.Scene()
+    scene.add_geometry(rock, geom_name="rock", node_name="rock_a")
+    # Instances: more graph nodes that place the same geometry (no copy of its vertices).
+    scene.graph.update(frame_to="rock_stretched", frame_from=scene.graph.base_frame, matrix=stretch, geometry="rock")
+    scene.graph.update(frame_to="rock_mirrored", frame_from=scene.graph.base_frame, matrix=mirror, geometry="rock")
+    box_at = np.eye(4)
+    box_at[:3, 3] = [0, -4, 1]
+    scene.add_geometry(box, geom_name="slab", node_name="slab", transform=box_at)
+    return scene

@@ -1,0 +1,135 @@
+"""What a geometry's file provides besides positions: UVs, colours, textures, normals.
+
+Only looks at what trimesh already holds (no image is decoded here); every table is
+built by the caller that needs it, once per geometry, never per instance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .texture import REPEAT, Texture
+
+
+def uv_table(mesh):
+    """(V, 2) float64 texture coordinates, or None when the geometry has none."""
+    visual = getattr(mesh, "visual", None)
+    uv = getattr(visual, "uv", None) if getattr(visual, "kind", None) == "texture" else None
+    if uv is None:
+        return None
+    uv = np.asarray(uv, dtype=np.float64)
+    return uv if uv.ndim == 2 and uv.shape[1] == 2 and len(uv) == len(mesh.vertices) else None
+
+
+def vertex_normal_table(mesh):
+    """(V, 3) float64 vertex normals: the file's when it has them, else trimesh's
+    (face normals summed around each vertex, weighted by corner angle)."""
+    return np.asarray(mesh.vertex_normals, dtype=np.float64)
+
+
+def _placeholder(image):
+    """trimesh's stand-in image for a material without a texture (a few pixels, made in memory)."""
+    return getattr(image, "format", "x") is None and getattr(image, "size", (99, 99))[0] <= 2
+
+
+class ColorSource:
+    """How one geometry's colour is found at a point: ``colors(face, bary) -> (n, 4) float64``.
+
+    kind: "vertex" (interpolated vertex colours), "face" (face colours), "texture"
+    (texture at the interpolated UV times the material's base colour factor) or
+    "constant" (a material colour without a texture). Values are in [0, 255].
+    """
+
+    def __init__(self, kind, faces, table=None, uv=None, texture=None, factor=None):
+        self.kind = kind
+        self.faces = faces
+        self.table = table
+        self.uv = uv
+        self.texture = texture
+        self.factor = None if factor is None else np.asarray(factor, dtype=np.float64).reshape(4)
+
+    def prepare(self):
+        """Decode what lookups need (call once, before any thread uses the source)."""
+        if self.texture is not None:
+            self.texture.pixels()
+
+    def colors(self, face, bary):
+        """face (n,) int64 local face index, bary (n, 3) -> (n, 4) float64 RGBA in [0, 255]."""
+        n = len(face)
+        if self.kind == "constant":
+            return np.broadcast_to(self.factor, (n, 4))
+        if self.kind == "face":
+            return self.table[face].astype(np.float64)
+        if self.kind == "vertex":
+            return interpolate(self.table, self.faces, face, bary)
+        c = self.texture.lookup(interpolate(self.uv, self.faces, face, bary))
+        if self.factor is not None and not np.all(self.factor == 255):
+            c *= self.factor / 255.0
+        return c
+
+
+def interpolate(table, faces, face, bary):
+    """Barycentric blend of a per-vertex ``table`` (V, C) over ``faces[face]`` -> (n, C) float64."""
+    corners = faces[face]
+    out = table[corners[:, 0]] * bary[:, :1]
+    out += table[corners[:, 1]] * bary[:, 1:2]
+    out += table[corners[:, 2]] * bary[:, 2:3]
+    return out
+
+
+def color_source(mesh, faces, source="<mesh>", textures=None):
+    """The :class:`ColorSource` of a trimesh geometry, or None when it has no colour."""
+    visual = getattr(mesh, "visual", None)
+    kind = getattr(visual, "kind", None)
+    if kind == "vertex":
+        return ColorSource("vertex", faces, table=np.asarray(visual.vertex_colors, dtype=np.float64))
+    if kind == "face":
+        return ColorSource("face", faces, table=np.asarray(visual.face_colors, dtype=np.uint8))
+    if kind != "texture":
+        return None
+    material = getattr(visual, "material", None)
+    factor = _factor(material)
+    image = getattr(material, "baseColorTexture", None) if hasattr(material, "baseColorTexture") else getattr(material, "image", None)
+    uv = uv_table(mesh)
+    if image is not None and not _placeholder(image) and uv is not None:
+        wrap_s, wrap_t = getattr(material, "_scatter_wrap", (REPEAT, REPEAT))
+        return ColorSource("texture", faces, uv=uv, texture=_shared_texture(textures, image, wrap_s, wrap_t, source), factor=factor)
+    if factor is not None:
+        return ColorSource("constant", faces, factor=factor)
+    return None
+
+
+def _shared_texture(textures, image, wrap_s, wrap_t, source):
+    """One :class:`Texture` per image in ``textures`` (a dict the surface keeps), so
+    geometries sharing an image decode it once."""
+    if textures is None:
+        return Texture(image, wrap_s, wrap_t, source)
+    key = (id(image), wrap_s, wrap_t)
+    tex = textures.get(key)
+    if tex is None or tex.image is not image:
+        tex = textures[key] = Texture(image, wrap_s, wrap_t, source)
+    return tex
+
+
+def _factor(material):
+    """(4,) float64 RGBA 0..255 material colour, or None when the material sets none."""
+    if material is None:
+        return None
+    if hasattr(material, "baseColorFactor"):
+        f = material.baseColorFactor
+        return None if f is None else _rgba(f)
+    # A SimpleMaterial (OBJ/MTL) without an image has its Kd colour; trimesh's stand-in
+    # material for "no material" carries a placeholder image and gives no colour.
+    diffuse = getattr(material, "diffuse", None)
+    if diffuse is not None and getattr(material, "image", None) is None:
+        return _rgba(diffuse)
+    return None
+
+
+def _rgba(color):
+    c = np.asarray(color, dtype=np.float64).ravel()
+    if c.size == 3:
+        c = np.append(c, 255.0)
+    if c.max() <= 1.0 and np.asarray(color).dtype.kind == "f":
+        c = c * 255.0
+    return c[:4]
