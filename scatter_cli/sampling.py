@@ -75,6 +75,8 @@ class SamplePlan:
         self.cdf = np.cumsum(doubled)
         self.cdf *= 0.5
         self.offsets = np.cumsum([0] + [p.count for p in self.parts])
+        if len(self.parts) > 1:
+            self._scene_tables()
         if not len(self.cdf) or not self.cdf[-1] > 0 or not math.isfinite(self.cdf[-1]):
             raise ScatterError(f"{surface.source}: the mesh has no faces with a non-zero, finite area")
         self.guide = _guide_table(self.cdf)
@@ -119,26 +121,47 @@ class SamplePlan:
         b = square_to_triangle(u[:, 1:3])
         return self.place(start, used, b, want_bary)
 
+    def _scene_tables(self):
+        """Gather tables for several instances: for every used face of every instance, its
+        row in the shared corner array and its face number (indices only: the corners of an
+        instanced geometry are stored once), and the (P, 3, 4) placement of each part."""
+        base = self.parts[0].tri.base
+        self._corners = base if base is not None else self.parts[0].tri
+        rows, faces = [], []
+        for p in self.parts:
+            first = (p.tri.__array_interface__["data"][0] - self._corners.__array_interface__["data"][0]) // (9 * 8)
+            local = np.arange(len(p.tri)) if p.faces is None else p.faces
+            rows.append(first + local)
+            faces.append(local)
+        self._rows = np.concatenate(rows) if rows else np.empty(0, np.int64)
+        self._faces = np.concatenate(faces) if faces else np.empty(0, np.int64)
+        self._instance = np.asarray([p.instance for p in self.parts], dtype=np.int64)
+        eye = np.eye(4)
+        self._matrix = np.stack([(eye if p.matrix is None else p.matrix)[:3] for p in self.parts])
+        self._moved = any(p.matrix is not None for p in self.parts)
+
     def place(self, start, used, b, want_bary=False) -> RawChunk:
         """Points at barycentric ``b`` (n, 2) on used faces ``used`` (n,)."""
         n = len(used)
         points = np.empty((n, 3))
-        face = np.empty(n, dtype=np.int64)
         if len(self.parts) == 1:
-            instance = np.zeros(n, dtype=np.int64)
+            face = np.empty(n, dtype=np.int64)
+            instance = np.full(n, self.parts[0].instance, dtype=np.int64)
             self._place_part(self.parts[0], used, b, points, face)
         else:
             part = np.searchsorted(self.offsets, used, side="right") - 1
-            instance = np.asarray([p.instance for p in self.parts], dtype=np.int64)[part]
-            order = np.argsort(part, kind="stable")
-            bounds = np.searchsorted(part[order], np.arange(len(self.parts) + 1))
-            for j, p in enumerate(self.parts):
-                rows = order[bounds[j] : bounds[j + 1]]
-                if rows.size:
-                    pts = np.empty((rows.size, 3))
-                    fc = np.empty(rows.size, dtype=np.int64)
-                    self._place_part(p, used[rows] - self.offsets[j], b[rows], pts, fc)
-                    points[rows], face[rows] = pts, fc
+            instance = self._instance[part]
+            face = self._faces[used]
+            _corner_points(self._corners, self._rows[used], b, points)
+            if self._moved:
+                m = self._matrix[part]
+                x, y, z = (points[:, c].copy() for c in range(3))
+                for c in range(3):
+                    col = m[:, c, 0] * x
+                    col += m[:, c, 1] * y
+                    col += m[:, c, 2] * z
+                    col += m[:, c, 3]
+                    points[:, c] = col
         bary = None
         if want_bary:
             bary = np.empty((n, 3))
@@ -153,18 +176,25 @@ class SamplePlan:
             face[:] = local
         else:
             np.take(part.faces, local, out=face)
-        t = np.take(part.tri, face, axis=0).T
-        b1, b2 = np.ascontiguousarray(b[:, 0]), np.ascontiguousarray(b[:, 1])
-        # Column by column on 1-D arrays: several times faster than (n, 3) broadcasting.
-        # v0 + (b1 e1 + b2 e2) keeps the rounding at the scale of the triangle, not of v0.
-        for c in range(3):
-            col = (t[3 + c] - t[c]) * b1
-            col += (t[6 + c] - t[c]) * b2
-            col += t[c]
-            points[:, c] = col
+        _corner_points(part.tri, face, b, points)
         if part.matrix is not None:
             m = part.matrix
             points[:] = points @ m[:3, :3].T + m[:3, 3]
+
+
+def _corner_points(tri, rows, b, points):
+    """points (n, 3) = v0 + b1 (v1 - v0) + b2 (v2 - v0) for corner rows ``tri[rows]``.
+
+    Column by column on 1-D arrays: several times faster than (n, 3) broadcasting.
+    Adding v0 last keeps the rounding at the scale of the triangle, not of v0.
+    """
+    t = np.take(tri, rows, axis=0).T
+    b1, b2 = np.ascontiguousarray(b[:, 0]), np.ascontiguousarray(b[:, 1])
+    for c in range(3):
+        col = (t[3 + c] - t[c]) * b1
+        col += (t[6 + c] - t[c]) * b2
+        col += t[c]
+        points[:, c] = col
 
 
 def uniforms(seed: int, start: int, stop: int):
@@ -177,12 +207,9 @@ def uniforms(seed: int, start: int, stop: int):
 def _parts(surface: Surface, weights):
     """Per-instance usable faces and twice their (world-space, weighted) areas."""
     parts, areas = [], []
-    tris = {}
+    tris = _geometry_corners(surface)
     skipped = 0
     for k, inst in enumerate(surface.instances):
-        g = surface.geometries[inst.geometry]
-        if inst.geometry not in tris:
-            tris[inst.geometry] = corners(g.vertices, g.faces)
         tri = tris[inst.geometry]
         with np.errstate(invalid="ignore", over="ignore"):
             a = doubled_areas(tri, inst.matrix)
@@ -199,6 +226,23 @@ def _parts(surface: Surface, weights):
             parts.append(Part(k, faces, tri, inst.matrix))
             areas.append(a[faces])
     return parts, (np.concatenate(areas) if areas else np.empty(0)), skipped
+
+
+def _geometry_corners(surface):
+    """{geometry: (F, 9) corners} for the geometries the instances use, as views of one array.
+
+    One array lets a chunk of a multi-object scene gather all its triangles at once.
+    """
+    used = sorted({inst.geometry for inst in surface.instances})
+    sizes = [len(surface.geometries[gi].faces) for gi in used]
+    whole = np.empty((sum(sizes), 9))
+    views, start = {}, 0
+    for gi, size in zip(used, sizes):
+        g = surface.geometries[gi]
+        whole[start : start + size] = corners(g.vertices, g.faces)
+        views[gi] = whole[start : start + size]
+        start += size
+    return views
 
 
 def _guide_table(cdf):
