@@ -61,6 +61,9 @@ class Run:
                     attributes[key] = np.empty((n,) + arr.shape[1:], dtype=arr.dtype)
                 attributes[key][pos : pos + k] = arr
             pos += k
+        for key, cols, dt in self.layout[1:]:  # count 0: no chunk, but every asked-for array
+            if key not in attributes:
+                attributes[key] = np.empty((n, len(cols)) if len(cols) > 1 else (n,), dtype=dt)
         return Samples(points, attributes, self.info)
 
 
