@@ -458,3 +458,17 @@ def test_random_meshes_invariants(mesh_arrays, count, seed, chunk, precision, in
         world = tri[a.face] @ matrix[:3, :3].T + matrix[:3, 3]
         # a rotation adds one rounding of the local coordinates, scaled by |R| = 1
         assert_on_faces(a.points, world, units=ON_FACE_UNITS + (8 if in_scene else 0))
+
+
+def test_rotated_scene_bytes_do_not_depend_on_chunk_size():
+    """Regression: the node matrix was applied with a BLAS product, whose rounding depends
+    on the number of rows, so --chunk-size changed the output bytes of rotated instances."""
+    rng = np.random.default_rng(14)
+    scene = trimesh.Scene()
+    m = np.eye(4)
+    m[:3, :3], _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    m[:3, 3] = [1e3, 2, 3]
+    scene.add_geometry(trimesh.Trimesh(rng.normal(size=(30, 3)), rng.integers(0, 30, (40, 3)), process=False), transform=m)
+    ref = scatter_cli.sample(scene, 5000, seed=3, precision="float64").points.tobytes()
+    for chunk in (1, 2, 3, 7, 16, 999):
+        assert scatter_cli.sample(scene, 5000, seed=3, precision="float64", chunk_size=chunk).points.tobytes() == ref
