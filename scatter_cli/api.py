@@ -95,6 +95,9 @@ class Run:
                     attributes[key] = np.empty((n,) + arr.shape[1:], dtype=arr.dtype)
                 attributes[key][pos : pos + k] = arr
             pos += k
+        for key, cols, dt in self.layout[1:]:  # count 0: no chunk, but every asked-for array
+            if key not in attributes:
+                attributes[key] = np.empty((n, len(cols)) if len(cols) > 1 else (n,), dtype=dt)
         return Samples(points, attributes, self.info)
 
 
@@ -232,17 +235,22 @@ def sampled_bounds(plan: SamplePlan):
 def float32_error_bound(bounds) -> float:
     """Largest distance rounding to float32 can move a point inside ``bounds`` (2, 3)."""
     biggest = np.abs(bounds).max(axis=0)
+    if not (biggest <= np.finfo(np.float32).max).all():  # would round to inf (spacing: NaN)
+        return math.inf
     half_ulp = np.spacing(biggest.astype(np.float32)).astype(np.float64) / 2
     return float(np.sqrt(np.sum(half_ulp**2)))
 
 
 def choose_precision(plan, precision, warn=None):
+    bounds = sampled_bounds(plan)
+    if precision == "float32" and math.isinf(float32_error_bound(bounds)):
+        raise ScatterUsageError(f"{plan.surface.source}: coordinates beyond the float32 range; use --precision float64 or auto")
     if precision != "auto":
         return np.dtype(precision)
-    bounds = sampled_bounds(plan)
-    diag = float(np.linalg.norm(bounds[1] - bounds[0]))
+    with np.errstate(over="ignore"):
+        diag = float(np.linalg.norm(bounds[1] - bounds[0]))
     err = float32_error_bound(bounds)
-    if err > AUTO_PRECISION_TOLERANCE * diag:
+    if math.isinf(err) or err > AUTO_PRECISION_TOLERANCE * diag:
         if warn:
             warn(f"writing float64 coordinates: float32 would move points by up to {err:.3g}, "
                  f"more than 1e-6 of the bounding-box diagonal ({diag:.6g})")

@@ -11,7 +11,7 @@ from typing import List, Optional
 
 import typer
 
-from .errors import ScatterError, ScatterUsageError
+from .errors import OutputClosed, ScatterError, ScatterUsageError
 
 app = typer.Typer(
     add_completion=False,
@@ -143,8 +143,16 @@ class _Terminated(BaseException):
     pass
 
 
+class _Interrupted(BaseException):
+    """SIGINT, raised instead of KeyboardInterrupt: typer turns that into a silent Exit(130)."""
+
+
 def _on_sigterm(signum, frame):
     raise _Terminated()
+
+
+def _on_sigint(signum, frame):
+    raise _Interrupted()
 
 
 def _click_error_types():
@@ -176,6 +184,8 @@ def main(argv=None):
     if argv and argv[0] in ("sample", "info"):
         _import_trimesh_lean()
     signal.signal(signal.SIGTERM, _on_sigterm)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when started ignoring it (`cmd &`)
+        signal.signal(signal.SIGINT, _on_sigint)
     usage_error, click_error = _click_error_types()
     command = typer.main.get_command(app)
     try:
@@ -188,12 +198,12 @@ def main(argv=None):
         code = _fail(str(exc), exc.exit_code)
     except click_error as exc:
         code = _fail(exc.format_message(), exc.exit_code)
-    except BrokenPipeError:
+    except (BrokenPipeError, OutputClosed):
         # The reader went away (`| head`): stop quietly, as Unix tools do.
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         code = 141
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, _Interrupted):
         code = _fail("interrupted", 130)
     except _Terminated:
         code = _fail("terminated", 143)

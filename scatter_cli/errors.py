@@ -7,6 +7,14 @@ class ScatterError(Exception):
     exit_code = 1
 
 
+class OutputClosed(Exception):
+    """The reader of standard output went away (``scatter sample ... | head``).
+
+    Not an OSError, so that click does not turn it into a silent exit 1: ``main`` exits
+    141 (128 + SIGPIPE) quietly, as a Unix tool killed by SIGPIPE would.
+    """
+
+
 class ScatterUsageError(ScatterError):
     """A bad option or value: printed as one ``error: ...`` line, exit 2."""
 

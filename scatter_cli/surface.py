@@ -130,8 +130,19 @@ def _check_readable(path):
 
 
 def _geometry(name, mesh, source) -> Geometry:
-    vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
-    faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+    try:  # trimesh builds some arrays lazily: a malformed file can fail only here
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+    except (ValueError, TypeError, IndexError, OverflowError) as exc:
+        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise ScatterError(f"{source}: malformed geometry '{name}' ({reason[:200]})") from None
+    if vertices.size == 0:
+        vertices = vertices.reshape(0, 3)
+    if faces.size == 0:
+        faces = faces.reshape(0, 3)
+    # Never reshape blindly: (V, 2) vertices read as (V * 2 / 3, 3) would be wrong points.
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
+        raise ScatterError(f"{source}: malformed geometry '{name}' (vertices {vertices.shape}, faces {faces.shape})")
     if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
         raise ScatterError(f"{source}: face indices out of range in geometry '{name}'")
     return Geometry(name, vertices, faces, mesh)

@@ -13,13 +13,17 @@ def square_to_triangle(u):
     """Square-root warp: b1 = 1 - sqrt(u1), b2 = (1 - b1) u2 = sqrt(u1) u2.
 
     Uniform over the triangle. ``u``: (n, 2) float64 -> (n, 2) float64.
-    Every output lies in the closed triangle for every input in [0, 1]^2:
-    both weights are >= 0 and b1 + b2 = 1 - s (1 - u2) <= 1 with s = sqrt(u1).
+    Every output lies in the closed triangle for every input in [0, 1]^2, in floating
+    point too: b2 is computed from the rounded b1 as (1 - b1) u2, and 1 - b1 is exact
+    for every b1 = fl(1 - s) in [0, 1] (Sterbenz when b1 >= 1/2; when b1 < 1/2, b1 was
+    itself exact and 1 - b1 = s). So b2 <= 1 - b1 holds exactly and b0 = (1 - b1) - b2
+    is >= 0 with no clamping. (b2 = s u2 instead can exceed 1 - fl(1 - s) for small s.)
     """
     u = np.asarray(u, dtype=np.float64)
     s = np.sqrt(u[:, 0])
     out = np.empty_like(u)
     np.subtract(1.0, s, out=out[:, 0])
+    np.subtract(1.0, out[:, 0], out=s)
     np.multiply(s, u[:, 1], out=out[:, 1])
     return out
 

@@ -14,7 +14,7 @@ import tempfile
 
 import numpy as np
 
-from .errors import ScatterError, ScatterUsageError
+from .errors import OutputClosed, ScatterError, ScatterUsageError
 
 FORMATS = ("ply", "csv", "xyz", "npy")
 PLY_TYPES = {"f4": "float", "f8": "double", "i4": "int", "u1": "uchar"}
@@ -161,8 +161,11 @@ def open_output(path):
     Devices and pipes (``/dev/null``, a FIFO) are written in place.
     """
     if path is None or str(path) == "-":
-        yield sys.stdout.buffer
-        sys.stdout.buffer.flush()
+        try:
+            yield sys.stdout.buffer
+            sys.stdout.buffer.flush()
+        except BrokenPipeError:
+            raise OutputClosed() from None
         return
     path = os.fspath(path)
     if os.path.exists(path) and not os.path.isfile(path):
@@ -205,6 +208,6 @@ def _reporting(path):
     try:
         yield
     except OSError as exc:
-        if isinstance(exc, BrokenPipeError):
-            raise
+        if isinstance(exc, BrokenPipeError):  # a FIFO or /dev/stdout whose reader left
+            raise OutputClosed() from None
         raise ScatterError(f"{path}: cannot write: {exc.strerror or exc}") from None

@@ -1,0 +1,134 @@
+"""Malformed mesh files for fuzzing the loaders: valid seeds and byte-level mutations.
+
+Shared by the CI fuzz test (hypothesis drives the choices) and the longer run in
+``benchmarks/fuzz_loaders.py`` (a seeded random loop). The property is the same in both:
+loading and planning any byte string either works or raises ScatterError; anything
+else would reach the user as an ``internal error`` (or, outside main(), a traceback).
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+TRI_V = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)]
+TRI_F = [(0, 1, 2), (0, 2, 3), (0, 3, 1), (1, 3, 2)]
+
+
+def _ply_ascii():
+    lines = ["ply", "format ascii 1.0", f"element vertex {len(TRI_V)}", "property float x", "property float y",
+             "property float z", f"element face {len(TRI_F)}", "property list uchar int vertex_indices", "end_header"]
+    lines += [" ".join(map(str, v)) for v in TRI_V] + [f"3 {a} {b} {c}" for a, b, c in TRI_F]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def _ply_binary():
+    head = ["ply", "format binary_little_endian 1.0", f"element vertex {len(TRI_V)}", "property float x",
+            "property float y", "property float z", f"element face {len(TRI_F)}",
+            "property list uchar int vertex_indices", "end_header"]
+    body = b"".join(struct.pack("<3f", *v) for v in TRI_V)
+    body += b"".join(struct.pack("<B3i", 3, *f) for f in TRI_F)
+    return ("\n".join(head) + "\n").encode() + body
+
+
+def _obj():
+    lines = [f"v {x} {y} {z}" for x, y, z in TRI_V] + ["vt 0 0", "vt 1 0", "vt 0 1", "vn 0 0 1"]
+    lines += [f"f {a + 1}/1/1 {b + 1}/2/1 {c + 1}/3/1" for a, b, c in TRI_F] + ["f 1 2 3 4"]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def _stl_ascii():
+    out = ["solid t"]
+    for f in TRI_F:
+        out += ["facet normal 0 0 0", "outer loop"] + [f"vertex {' '.join(map(str, TRI_V[i]))}" for i in f]
+        out += ["endloop", "endfacet"]
+    return ("\n".join(out + ["endsolid t"]) + "\n").encode()
+
+
+def _stl_binary():
+    body = b"".join(struct.pack("<12fH", 0, 0, 0, *sum((TRI_V[i] for i in f), ()), 0) for f in TRI_F)
+    return b"\0" * 80 + struct.pack("<I", len(TRI_F)) + body
+
+
+def _off():
+    lines = ["OFF", f"{len(TRI_V)} {len(TRI_F)} 0"] + [" ".join(map(str, v)) for v in TRI_V]
+    lines += [f"3 {a} {b} {c}" for a, b, c in TRI_F]
+    return ("\n".join(lines) + "\n").encode()
+
+
+SEEDS = {
+    "ply-ascii": ("ply", _ply_ascii()),
+    "ply-binary": ("ply", _ply_binary()),
+    "obj": ("obj", _obj()),
+    "stl-ascii": ("stl", _stl_ascii()),
+    "stl-binary": ("stl", _stl_binary()),
+    "off": ("off", _off()),
+}
+
+# Tokens that break parsers: special floats, huge and negative counts and indices, odd bytes.
+TOKENS = [b"nan", b"-nan", b"inf", b"-inf", b"1e308", b"1e-320", b"-1", b"0", b"4294967295", b"2147483648",
+          b"99999999999999999999", b"-2147483649", b"3.5", b"", b" ", b"\n", b"\r\n", b"\0", b"\xff\xfe",
+          b"end_header\n", b"element vertex 1000000000\n", b"property list uchar int vertex_indices\n",
+          b"property double w\n", b"format binary_big_endian 1.0\n", b"f 1 2\n", b"f -5 -6 -7\n",
+          b"f 1/2/3/4 5\n", b"v 1 2\n", b"solid\n", b"facet normal\n", b"OFF\n", b"3 0 0 0\n", b"255 1 2 3\n",
+          b"\xff\xff\xff\x7f", b"\xff\xff\xff\xff", b"\x00\x00\xc0\x7f", b"\x00\x00\x80\x7f"]
+
+# 32-bit patterns for binary bodies: NaN, inf, huge, denormal, negative and huge ints.
+WORDS = [0x7FC00000, 0x7F800000, 0xFF800000, 0x7F7FFFFF, 0x00000001, 0xFFFFFFFF, 0x7FFFFFFF, 0x80000000, 0]
+
+
+def mutate(data: bytes, ops) -> bytes:
+    """Apply mutation ops (tuples of small ints and chosen tokens) to ``data``."""
+    b = bytearray(data)
+    for op in ops:
+        kind, pos, arg = op
+        n = len(b)
+        p = pos % (n + 1) if n else 0
+        if kind == 0:  # flip a bit
+            if n:
+                b[p % n] ^= 1 << (arg % 8)
+        elif kind == 1:  # truncate
+            del b[p:]
+        elif kind == 2:  # insert a token
+            b[p:p] = TOKENS[arg % len(TOKENS)]
+        elif kind == 3:  # overwrite with a token
+            t = TOKENS[arg % len(TOKENS)]
+            b[p : p + len(t)] = t
+        elif kind == 4:  # overwrite 4 bytes with a special 32-bit word
+            b[p : p + 4] = struct.pack("<I", WORDS[arg % len(WORDS)])
+        elif kind == 5:  # delete a run
+            del b[p : p + 1 + arg % 16]
+        elif kind == 6:  # duplicate a run
+            b[p:p] = b[p : p + 1 + arg % 64]
+        elif kind == 7:  # replace a whole line-ish region with random-looking bytes
+            b[p : p + 1 + arg % 8] = bytes((arg * 37 + i * 101) % 256 for i in range(1 + arg % 8))
+    return bytes(b)
+
+
+def random_ops(rng: np.random.Generator, max_ops=4):
+    k = int(rng.integers(1, max_ops + 1))
+    return [(int(rng.integers(0, 8)), int(rng.integers(0, 1 << 16)), int(rng.integers(0, 1 << 16))) for _ in range(k)]
+
+
+def exercise(data: bytes, suffix: str, workdir) -> str:
+    """Load ``data`` as a ``suffix`` file and plan and draw a few points.
+
+    Returns 'ok' or 'error' (a ScatterError); any other exception propagates.
+    """
+    import os
+
+    from scatter_cli.api import prepare
+    from scatter_cli.errors import ScatterError
+
+    path = os.path.join(workdir, f"fuzz.{suffix}")
+    with open(path, "wb") as f:
+        f.write(data)
+    try:
+        run = prepare(path, 20, attributes=("face", "bary", "normal"), seed=1)
+        s = run.collect()
+        if not np.isfinite(s.points).all():
+            raise AssertionError("non-finite point from a loaded mesh")
+        return "ok"
+    except ScatterError:
+        return "error"

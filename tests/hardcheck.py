@@ -1,0 +1,126 @@
+"""Checks shared by the hard-case tests and benchmarks: exact on-face test, chi-square helpers."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+from scipy import stats
+
+EPS = np.finfo(np.float64).eps
+ALPHA = 1e-3  # significance level of every statistical test in the hard-case suite
+
+
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def exact_face_errors(points, tri, limit=400, seed=0, dtype=np.float64):
+    """Distance to the plane and barycentric overshoot of points, in exact arithmetic.
+
+    points: (n, 3) float64; tri: (n, 3, 3) float64, the world corners of each point's face.
+    Up to ``limit`` points (a fixed random subset) are checked with Fractions, so the check
+    itself adds no rounding. Returns (distance / unit, overshoot / bary_unit) arrays where
+    ``unit = spacing(largest coordinate) + eps * longest edge`` is one rounding of a point
+    on that face (in ``dtype``, the output precision) and ``bary_unit = unit * longest edge / (2 area)`` what such a rounding does
+    to a barycentric coordinate: "within k units" means "on the face up to k roundings".
+    """
+    points, tri = np.asarray(points, np.float64), np.asarray(tri, np.float64)
+    idx = np.arange(len(points))
+    if len(idx) > limit:
+        idx = np.random.default_rng(seed).choice(len(idx), limit, replace=False)
+    dist, over = [], []
+    for i in idx:
+        v = [tuple(Fraction(float(x)) for x in tri[i, k]) for k in range(3)]
+        p = tuple(Fraction(float(x)) for x in points[i])
+        e1 = tuple(a - b for a, b in zip(v[1], v[0]))
+        e2 = tuple(a - b for a, b in zip(v[2], v[0]))
+        d = tuple(a - b for a, b in zip(p, v[0]))
+        n = _cross(e1, e2)
+        nn = _dot(n, n)
+        assert nn > 0, "exact check on a zero-area face"
+        b1 = _dot(_cross(d, e2), n) / nn
+        b2 = _dot(_cross(e1, d), n) / nn
+        b0 = 1 - b1 - b2
+        h2 = _dot(d, n) ** 2 / nn
+        edges = tri[i] - np.roll(tri[i], 1, axis=0)
+        longest = float(np.sqrt((edges**2).sum(axis=1)).max())
+        scale = float(max(np.abs(tri[i]).max(), np.abs(points[i]).max()))
+        unit = float(np.spacing(np.asarray(scale, dtype))) + float(np.finfo(dtype).eps) * longest
+        bary_unit = unit * longest / float(np.sqrt(float(nn)))
+        dist.append(float(np.sqrt(float(h2))) / unit)
+        over.append(float(max(-min(b0, b1, b2), max(b0, b1, b2) - 1, 0)) / bary_unit)
+    return np.asarray(dist), np.asarray(over)
+
+
+def pooled_chi2_pvalue(observed, expected, min_expected=5.0):
+    """Pearson test of counts against expectations after pooling, smallest expectation first,
+    into groups that each expect at least ``min_expected``."""
+    observed, expected = np.asarray(observed, float), np.asarray(expected, float)
+    order = np.argsort(expected, kind="stable")
+    o, e = observed[order], expected[order]
+    groups_o, groups_e, acc_o, acc_e = [], [], 0.0, 0.0
+    for oi, ei in zip(o, e):
+        acc_o += oi
+        acc_e += ei
+        if acc_e >= min_expected:
+            groups_o.append(acc_o); groups_e.append(acc_e); acc_o = acc_e = 0.0
+    if acc_e > 0 or acc_o > 0:
+        if groups_e:
+            groups_o[-1] += acc_o; groups_e[-1] += acc_e
+        else:
+            groups_o.append(acc_o); groups_e.append(acc_e)
+    go, ge = np.asarray(groups_o), np.asarray(groups_e)
+    if len(ge) < 2:
+        return 1.0
+    # expectation mass of nowhere (e == 0) with observations there is an outright failure
+    stat = np.sum((go - ge) ** 2 / ge)
+    return float(stats.chi2.sf(stat, len(ge) - 1))
+
+
+def bary_bins(b1, b2, k=16):
+    """Index of the sub-triangle (of the k*k equal-area ones) holding (b1, b2); -1 outside."""
+    x, y = np.asarray(b1) * k, np.asarray(b2) * k
+    i = np.clip(np.floor(x).astype(int), 0, k - 1)
+    j = np.clip(np.floor(y).astype(int), 0, k - 1)
+    upper = (x - i) + (y - j) > 1
+    return (i * k + j) * 2 + upper
+
+
+def uniform_in_triangle_pvalue(b1, b2, k=16):
+    """Chi-square p-value that barycentric (b1, b2) are uniform over the triangle."""
+    idx = bary_bins(b1, b2, k)
+    counts = np.bincount(idx, minlength=2 * k * k)
+    valid = np.zeros(2 * k * k, bool)
+    for i in range(k):
+        for j in range(k - i):
+            valid[(i * k + j) * 2] = True
+            if i + j < k - 1:
+                valid[(i * k + j) * 2 + 1] = True
+    if counts[~valid].sum():
+        return 0.0
+    obs = counts[valid]
+    exp = np.full(len(obs), len(b1) / len(obs))
+    return float(stats.chi2.sf(np.sum((obs - exp) ** 2 / exp), len(obs) - 1))
+
+
+def recover_bary(points, tri):
+    """Float64 barycentric (b1, b2) of points on well-shaped faces (n, 3, 3), relative to v0."""
+    d = np.asarray(points, np.float64) - tri[:, 0]
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    g11, g12, g22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    r1, r2 = (d * e1).sum(1), (d * e2).sum(1)
+    det = g11 * g22 - g12 * g12
+    return (g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det
+
+
+def two_sum_le_one(x, y):
+    """Exact test of x + y <= 1 for float64 arrays (TwoSum error term, no rounding)."""
+    s = x + y
+    bb = s - x
+    err = (x - (s - bb)) + (y - bb)
+    return (s < 1) | ((s == 1) & (err <= 0))

@@ -1,0 +1,35 @@
+"""Fuzz the mesh loaders with malformed PLY/OBJ/STL/OFF bytes (hypothesis drives mutations).
+
+Property: any byte string loads and samples, or fails with a ScatterError (one-line error).
+The long run (tens of thousands of inputs) is benchmarks/fuzz_loaders.py.
+"""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from .fuzz_inputs import SEEDS, exercise, mutate
+
+ops = st.lists(st.tuples(st.integers(0, 7), st.integers(0, 1 << 16), st.integers(0, 1 << 16)), min_size=1, max_size=5)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(st.sampled_from(sorted(SEEDS)), ops)
+def test_malformed_mesh_bytes_never_crash(tmp_path, name, mutation):
+    suffix, seed = SEEDS[name]
+    assert exercise(mutate(seed, mutation), suffix, tmp_path) in ("ok", "error")
+
+
+@pytest.mark.parametrize("name", sorted(SEEDS))
+def test_seeds_are_valid_meshes(tmp_path, name):
+    suffix, data = SEEDS[name]
+    assert exercise(data, suffix, tmp_path) == "ok"
+
+
+@pytest.mark.parametrize("data,suffix", [
+    (b"v 0 0 0\nv 1 0 0\nv 0 1.8 0\nv 0 0\nf 1 2 3\nf 1 3 4\n", "obj"),  # a 2-coordinate vertex: was a ValueError
+    (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0.01e308 0 1\nf 1 2 3\nf 1 2 4\n", "obj"),  # was float32 inf output
+])
+def test_fuzz_findings_stay_fixed(tmp_path, data, suffix):
+    assert exercise(data, suffix, tmp_path) in ("ok", "error")
