@@ -13,7 +13,7 @@ import numpy as np
 
 from .errors import ScatterError
 from .samples import ATTRIBUTES
-from .surface import Surface, cofactor
+from .surface import Surface, apply_matrix, cofactor
 from .visuals import color_source, interpolate, uv_table, vertex_normal_table
 
 
@@ -74,7 +74,7 @@ class AttributeMaker:
         """Directions ``n`` (m, 3) of instance k's frame -> unit world-space normals."""
         cof = self._cof.get(k)
         if cof is not None:
-            n = n @ cof.T
+            n = apply_matrix(cof, n)
         with np.errstate(invalid="ignore", divide="ignore"):
             n /= np.sqrt(np.einsum("ij,ij->i", n, n))[:, None]
         return n

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import ScatterError
-from .surface import Surface, corners, doubled_areas
+from .surface import Surface, apply_matrix, corners, doubled_areas
 from .warps import square_to_triangle
 
 DRAWS_PER_POINT = 3
@@ -178,16 +178,7 @@ class SamplePlan:
             np.take(part.faces, local, out=face)
         _corner_points(part.tri, face, b, points)
         if part.matrix is not None:
-            # Element-wise, not `points @ m.T`: a BLAS product rounds differently for
-            # different row counts, which made the bytes depend on --chunk-size.
-            m = part.matrix
-            x, y, z = points[:, 0].copy(), points[:, 1].copy(), points[:, 2].copy()
-            for c in range(3):
-                col = m[c, 0] * x
-                col += m[c, 1] * y
-                col += m[c, 2] * z
-                col += m[c, 3]
-                points[:, c] = col
+            apply_matrix(part.matrix, points, out=points)
 
 
 def _corner_points(tri, rows, b, points):

@@ -209,6 +209,24 @@ def face_cross(tri):
     return n
 
 
+def apply_matrix(m, v, out=None):
+    """``v @ m[:3, :3].T (+ m[:3, 3])`` for rows v (n, 3), one element-wise column at a time.
+
+    m: (3, 3) or (3, 4) float64. Unlike a BLAS product, the rounding of a row does not
+    depend on how many rows come with it, so chunked output stays byte-identical.
+    """
+    out = np.empty(v.shape) if out is None else out
+    x, y, z = (v[:, c].copy() for c in range(3))
+    for c in range(3):
+        col = m[c, 0] * x
+        col += m[c, 1] * y
+        col += m[c, 2] * z
+        if m.shape[1] > 3:
+            col += m[c, 3]
+        out[:, c] = col
+    return out
+
+
 def cofactor(a):
     """Cofactor matrix of a (3, 3) matrix, defined for singular ones too."""
     return np.stack([np.cross(a[1], a[2]), np.cross(a[2], a[0]), np.cross(a[0], a[1])])

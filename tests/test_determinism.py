@@ -58,3 +58,16 @@ def test_command_output_bytes_identical_across_chunk_sizes_and_threads(sample_me
         run_scatter(*args, check=True, env={"SCATTER_THREADS": threads})
         digests.add(hashlib.sha256(out.read_bytes()).hexdigest())
     assert len(digests) == 1
+
+
+@pytest.mark.parametrize("attrs", [("normal",), ("smooth-normal", "bary", "object")])
+def test_transformed_instances_identical_across_chunk_sizes(sample_mesh, attrs):
+    """Rotated and instanced nodes: matrices are applied element-wise, so rounding does
+    not depend on how many rows a chunk holds."""
+    mesh = sample_mesh("cesiummilktruck.glb")
+    ref = scatter_cli.sample(mesh, 5000, attributes=attrs, seed=8, chunk_size=5000)
+    for chunk in (1, 333):
+        got = scatter_cli.sample(mesh, 5000, attributes=attrs, seed=8, chunk_size=chunk)
+        assert ref.points.tobytes() == got.points.tobytes()
+        for key in got.attributes:
+            assert ref.attributes[key].tobytes() == got.attributes[key].tobytes()
