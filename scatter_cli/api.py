@@ -10,6 +10,7 @@ import numpy as np
 from .attributes import AttributeMaker
 from .errors import ScatterError, ScatterUsageError
 from .samples import Samples, column_layout, parse_attributes
+from .methods import DRAWS, SOBOL_MAX_COUNT
 from .sampling import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
 from .surface import Surface, load_surface
 
@@ -27,8 +28,9 @@ class Run:
     order, so a writer can stream any count in flat memory.
     """
 
-    def __init__(self, surface, plan, count, seed, attributes, dtype, chunk_size, info):
+    def __init__(self, surface, plan, count, seed, attributes, dtype, chunk_size, info, method="random"):
         self.surface = surface
+        self.method = method
         self.plan = plan
         self.count = count
         self.seed = seed
@@ -39,7 +41,11 @@ class Run:
         self.layout = column_layout({_key(a) for a in attributes}, self.dtype)
 
     def _job(self, start, stop):
-        raw = self.plan.draw(start, stop, self.seed, self.maker.needs_bary)
+        if self.method == "random":
+            raw = self.plan.draw(start, stop, self.seed, self.maker.needs_bary)
+        else:
+            used, b = DRAWS[self.method](self.plan, self.count, start, stop, self.seed)
+            raw = self.plan.place(start, used, b, self.maker.needs_bary)
         attrs = self.maker.make(raw, self.dtype)
         return Samples(raw.points.astype(self.dtype, copy=False), attrs)
 
@@ -86,6 +92,8 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
         count = int(round(density * plan.area))
     elif count is None:
         count = 10000
+    if method == "sobol" and count > SOBOL_MAX_COUNT:
+        raise ScatterUsageError(f"--method sobol gives at most 2^32 = {SOBOL_MAX_COUNT:,} points per run, not {count:,}")
     dtype = choose_precision(plan, precision, warn)
     info = {
         "source": surface.source,
@@ -98,7 +106,7 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
         "precision": np.dtype(dtype).name,
         "timings": {"load": t1 - t0, "plan": time.perf_counter() - t1},
     }
-    return Run(surface, plan, count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info)
+    return Run(surface, plan, count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info, method)
 
 
 def sample(mesh, count=10000, *, density=None, seed=0, method="random", attributes=(), poisson=False,
