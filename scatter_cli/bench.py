@@ -356,14 +356,17 @@ def plot(results, path):
     meshes = list(dict.fromkeys(r.mesh for r in results))
     fig, axes = plt.subplots(2, len(meshes), figsize=(5.2 * len(meshes), 8.5), squeeze=False)
     styles = {"method": "-", "precision": ":", "warp": "--", "peer": "-."}
+    names = list(dict.fromkeys(r.variant for r in results))
+    colours = {v: plt.get_cmap("tab20")(i % 20) for i, v in enumerate(names)}
     for col, mesh in enumerate(meshes):
         for res in (r for r in results if r.mesh == mesh):
+            c = colours[res.variant]
             n = [row["n"] for row in res.rows]
             e = [row["error"] for row in res.rows]
             t = [row["time"] for row in res.rows]
             label = f"{res.variant} ({res.slope['error']:+.2f})"
-            axes[0, col].loglog(n, e, styles[res.kind], marker="o", ms=3, label=label)
-            axes[1, col].loglog(t, e, styles[res.kind], marker="o", ms=3, label=res.variant)
+            axes[0, col].loglog(n, e, styles[res.kind], color=c, marker="o", ms=3, label=label)
+            axes[1, col].loglog(t, e, styles[res.kind], color=c, marker="o", ms=3, label=res.variant)
         axes[0, col].set_title(mesh)
         axes[0, col].set_xlabel("points")
         axes[1, col].set_xlabel("time (s, median)")
