@@ -39,6 +39,7 @@ SMOOTH_ORDER = 8
 FULL_COUNTS = [int(round(10 ** (k / 2))) for k in range(4, 15)]  # 1e2 .. 1e7, half decades
 QUICK_COUNTS = [int(round(10 ** (k / 2))) for k in range(4, 9)]  # 1e2 .. 1e4
 ERRORS = ("centroid", "second", "smooth")
+POISSON_COUNTS, POISSON_COUNTS_QUICK = [10_000, 100_000], [1_000]
 
 
 # ---------------------------------------------------------------------------
@@ -414,7 +415,7 @@ def run_bench(meshes=None, out="bench-out", quick=False, counts=None, repeats=No
             results.append(res)
             log(f"  {v.name:24s} slope {res.slope['error']:+.2f}  error@{rows[-1]['n']:.0e} "
                 f"{rows[-1]['error']:.2e}  ({time.perf_counter() - t:.1f} s)")
-        for row in poisson_hook(surface, exact.area, counts[-2:], seed, mesh_notes):
+        for row in poisson_hook(surface, exact.area, POISSON_COUNTS_QUICK if quick else POISSON_COUNTS, seed, mesh_notes):
             poisson.append(dict(row, mesh=name))
         notes += [f"{name}: {n}" for n in dict.fromkeys(mesh_notes)]
     notes += [f"{r.variant}: {r.note}" for r in {r.variant: r for r in results if r.note}.values()]
