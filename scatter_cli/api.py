@@ -10,6 +10,7 @@ import numpy as np
 from .attributes import AttributeMaker
 from .errors import ScatterError, ScatterUsageError
 from .samples import Samples, column_layout, parse_attributes
+from .methods import DRAWS, SOBOL_MAX_COUNT
 from .sampling import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
 from .surface import Surface, load_surface
 
@@ -27,8 +28,10 @@ class Run:
     order, so a writer can stream any count in flat memory.
     """
 
-    def __init__(self, surface, plan, count, seed, attributes, dtype, chunk_size, info, sampler=None):
+    def __init__(self, surface, plan, count, seed, attributes, dtype, chunk_size, info, sampler=None,
+                 method="random"):
         self.surface = surface
+        self.method = method
         self.plan = plan
         self.sampler = sampler or plan  # a weighting's sampler, or the plain plan
         self.count = count
@@ -44,8 +47,11 @@ class Run:
     def _job(self, start, stop):
         if self.kept is not None:
             raw = self.kept.slice(start, stop)
-        else:
+        elif self.method == "random":
             raw = self.sampler.draw(start, stop, self.seed, self.maker.needs_bary)
+        else:
+            used, b = DRAWS[self.method](self.plan, self.count, start, stop, self.seed)
+            raw = self.plan.place(start, used, b, self.maker.needs_bary)
         attrs = self.maker.make(raw, self.dtype)
         return Samples(raw.points.astype(self.dtype, copy=False), attrs)
 
@@ -134,6 +140,11 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
         raise ScatterUsageError("give either --poisson (an exact count) or --radius, not both")
     if radius is not None and density is not None:
         raise ScatterUsageError("with --radius the count follows from R: drop --density")
+    if method != "random" and (poisson or radius is not None or sampler is not None):
+        raise ScatterUsageError(f"--method {method} does not combine with --poisson, --radius or --weight "
+                                "(they work on the random method)")
+    if method == "sobol" and count > SOBOL_MAX_COUNT:
+        raise ScatterUsageError(f"--method sobol gives at most 2^32 = {SOBOL_MAX_COUNT:,} points per run, not {count:,}")
     dtype = choose_precision(plan, precision, warn)
     info = {
         "source": surface.source,
@@ -148,7 +159,7 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     }
     if sampler is not None:
         info["weight"] = weight
-    run = Run(surface, plan, count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info, sampler)
+    run = Run(surface, plan, count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info, sampler, method)
     if poisson or radius is not None:
         run.thin(candidate_count(area, count, radius, surface.source), radius)
     return run

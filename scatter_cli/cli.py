@@ -134,6 +134,42 @@ def check(
     raise typer.Exit(run_check(mesh, count=count, seed=seed, poisson=poisson, radius=radius))
 
 
+@app.command()
+def bench(
+    meshes: Optional[List[str]] = typer.Argument(None, help="Mesh files [default: an icosphere, samples/skull.ply, the icosphere moved by 1e6]."),
+    out: str = typer.Option("bench-out", "--out", help="Directory for bench.md, bench.json and bench.png."),
+    quick: bool = typer.Option(False, "--quick", help="Counts 1e2..1e4, 3 seeds: a smoke run for CI (under a minute)."),
+    counts: Optional[str] = typer.Option(None, "--counts", help="Comma list of point counts [default: 1e2..1e7 in half decades]."),
+    repeats: Optional[int] = typer.Option(None, "--repeats", help="Seeds per count (errors: RMS; time: median) [default: 5, quick 3]."),
+    seed: int = typer.Option(0, "--seed", help="First seed; the same seed gives the same errors."),
+    no_plot: bool = typer.Option(False, "--no-plot", help="Skip the PNG (no matplotlib needed)."),
+):
+    """What accuracy costs in time: error of exact surface integrals against count and time.
+
+    For each method (random, stratified, sobol), warp (sqrt, fold, lowdist, naive),
+    arithmetic precision and installed peer (trimesh, pymeshlab), estimates the centroid,
+    the central second moments and a smooth function's mean from the points, compares
+    them with their exact values, fits the convergence slope and writes a Markdown
+    table, JSON and a PNG plot to --out. Needs matplotlib for the plot
+    (pip install 'scatter-cli[bench]').
+    """
+    from .bench import run_bench
+
+    parsed = None
+    if counts:
+        try:
+            parsed = [int(float(c)) for c in counts.split(",") if c.strip()]
+        except ValueError:
+            raise ScatterUsageError(f"--counts must be a comma list of integers, not {counts!r}") from None
+        if not parsed or min(parsed) < 2:
+            raise ScatterUsageError("--counts must be integers >= 2")
+    if repeats is not None and repeats < 1:
+        raise ScatterUsageError(f"--repeats must be a positive integer, not {repeats}")
+    report = run_bench(meshes or None, out=out, quick=quick, counts=parsed, repeats=repeats, seed=seed,
+                       want_plot=not no_plot)
+    print(report["markdown"])
+
+
 @app.callback()
 def _root(debug: bool = typer.Option(False, "--debug", help="Show tracebacks on errors.")):
     pass

@@ -79,7 +79,61 @@ def naive_triangle_to_square(b):
     return np.clip(np.column_stack([b[:, 0], u2]), 0.0, 1.0)
 
 
+def fold_square_to_triangle(u):
+    """Parallelogram fold (trimesh's ``sample_surface``): b = u, reflected when b1 + b2 > 1.
+
+    Uniform (PDF 2) and cheap, but two-to-one: the square's upper half is folded onto
+    the lower one, so a stratified pattern in the square lands twice on the triangle.
+    ``u``: (n, 2) float64 -> (n, 2) float64.
+    """
+    u = np.asarray(u, dtype=np.float64)
+    fold = (u[:, 0] + u[:, 1]) > 1.0
+    return np.where(fold[:, None], 1.0 - u, u)
+
+
+def fold_triangle_to_square(b):
+    """A right inverse of :func:`fold_square_to_triangle`: the preimage in the lower half.
+
+    The fold is two-to-one, so ``warp(inverse(b)) == b`` but ``inverse(warp(u)) == u``
+    only for ``u1 + u2 <= 1``; the other preimage is ``1 - u``.
+    """
+    return np.clip(np.asarray(b, dtype=np.float64), 0.0, 1.0)
+
+
+def lowdist_square_to_triangle(u):
+    """Low-distortion square-to-triangle map (Heitz 2019, "A Low-Distortion Map Between
+    Triangle and Square"; pbrt-v4's ``SampleUniformTriangle``).
+
+    The square is cut along its diagonal u1 = u2 and each half is sheared onto the
+    triangle: below the diagonal b2 = u2 / 2, b1 = u1 - b2; above it b1 = u1 / 2,
+    b2 = u2 - b1. Linear on each half (Jacobian 1/2, PDF 2) and one-to-one, so it keeps
+    the shape of strata better than the square-root warp. (n, 2) -> (n, 2) float64.
+    """
+    u = np.asarray(u, dtype=np.float64)
+    above = u[:, 1] > u[:, 0]
+    half = 0.5 * np.where(above, u[:, 0], u[:, 1])
+    out = np.empty_like(u)
+    out[:, 0] = np.where(above, half, u[:, 0] - half)
+    out[:, 1] = np.where(above, u[:, 1] - half, half)
+    return out
+
+
+def lowdist_triangle_to_square(b):
+    """Inverse of :func:`lowdist_square_to_triangle`: b2 > b1 came from above the diagonal."""
+    b = np.asarray(b, dtype=np.float64)
+    above = b[:, 1] > b[:, 0]
+    s = b[:, 0] + b[:, 1]
+    out = np.empty_like(b)
+    out[:, 0] = np.where(above, 2.0 * b[:, 0], s)
+    out[:, 1] = np.where(above, s, 2.0 * b[:, 1])
+    return np.clip(out, 0.0, 1.0)
+
+
 WARPS = {
     "sqrt": (square_to_triangle, square_to_triangle_pdf, triangle_to_square),
+    "fold": (fold_square_to_triangle, square_to_triangle_pdf, fold_triangle_to_square),
+    "lowdist": (lowdist_square_to_triangle, square_to_triangle_pdf, lowdist_triangle_to_square),
     "naive": (naive_square_to_triangle, naive_square_to_triangle_pdf, naive_triangle_to_square),
 }
+"""name -> (warp, pdf, inverse). Only ``sqrt`` is used by ``scatter sample``; the others
+are compared by ``scatter bench``. ``naive`` is biased on purpose."""

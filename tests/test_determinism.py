@@ -34,6 +34,32 @@ def test_api_identical_for_any_thread_count(sample_mesh, threads):
     assert ref == got
 
 
+@pytest.mark.parametrize("method", ["stratified", "sobol"])
+@pytest.mark.parametrize("chunk_size", [1, 7, 1000, 1 << 20])
+def test_methods_identical_for_any_chunk_size(sample_mesh, method, chunk_size):
+    mesh = sample_mesh("koala.obj")
+    ref = scatter_cli.sample(mesh, 2_000, method=method, attributes=("face", "bary"), seed=3)
+    got = scatter_cli.sample(mesh, 2_000, method=method, attributes=("face", "bary"), seed=3, chunk_size=chunk_size)
+    for key in ("points", "face", "bary"):
+        assert getattr(ref, key).tobytes() == getattr(got, key).tobytes()
+
+
+@pytest.mark.parametrize("method", ["stratified", "sobol"])
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_methods_identical_for_any_thread_count(sample_mesh, method, threads):
+    run = prepare(sample_mesh("cesiummilktruck.glb"), 30_000, method=method, attributes=("face", "object"), seed=5, chunk_size=997)
+    ref = b"".join(c.points.tobytes() + c.face.tobytes() + c.object.tobytes() for c in run.chunks(threads=1))
+    got = b"".join(c.points.tobytes() + c.face.tobytes() + c.object.tobytes() for c in run.chunks(threads=threads))
+    assert ref == got
+
+
+@pytest.mark.parametrize("method", ["stratified", "sobol"])
+def test_methods_depend_on_the_seed(sample_mesh, method):
+    a = scatter_cli.sample(sample_mesh("skull.ply"), 100, seed=1, method=method).points
+    b = scatter_cli.sample(sample_mesh("skull.ply"), 100, seed=2, method=method).points
+    assert not np.array_equal(a, b)
+
+
 def test_prefix_of_a_larger_run_is_the_smaller_run(sample_mesh):
     small = scatter_cli.sample(sample_mesh("skull.ply"), 1000, seed=11)
     large = scatter_cli.sample(sample_mesh("skull.ply"), 50_000, seed=11)
@@ -46,13 +72,14 @@ def test_seeds_give_different_points(sample_mesh):
     assert not np.array_equal(a, b)
 
 
-@pytest.mark.parametrize("fmt", ["ply", "csv", "npy"])
-def test_command_output_bytes_identical_across_chunk_sizes_and_threads(sample_mesh, tmp_path, fmt):
+@pytest.mark.parametrize("fmt,method", [("ply", "random"), ("csv", "random"), ("npy", "random"),
+                                        ("ply", "stratified"), ("ply", "sobol")])
+def test_command_output_bytes_identical_across_chunk_sizes_and_threads(sample_mesh, tmp_path, fmt, method):
     mesh = sample_mesh("spot_triangulated.obj")
     digests = set()
     for chunk, threads in [(None, "1"), ("999", "2"), ("65536", "2"), ("1", "1")]:
         out = tmp_path / f"out-{chunk}-{threads}.{fmt}"
-        args = [ "sample", mesh, "-n", "3000", "-a", "face,bary", "--seed", "9", "-o", out]
+        args = ["sample", mesh, "-n", "3000", "-a", "face,bary", "--seed", "9", "--method", method, "-o", out]
         if chunk:
             args += ["--chunk-size", chunk]
         run_scatter(*args, check=True, env={"SCATTER_THREADS": threads})

@@ -83,9 +83,15 @@ def test_bin_integrals_sum_to_one():
     assert np.allclose(nonzero, 1 / K**2)
 
 
+UNIFORM_WARPS = ["sqrt", "fold", "lowdist"]
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_square_root_warp_is_uniform(seed):
-    assert warp_pvalue(warps.square_to_triangle, uniform_pdf, seed) > ALPHA
+@pytest.mark.parametrize("name", UNIFORM_WARPS)
+def test_uniform_warps_pass(name, seed):
+    warp, pdf, _ = warps.WARPS[name]
+    assert warp_pvalue(warp, pdf, seed) > ALPHA
+    assert warp_pvalue(warp, uniform_pdf, seed) > ALPHA
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -98,19 +104,20 @@ def test_naive_warp_matches_its_own_pdf():
     assert warp_pvalue(warps.naive_square_to_triangle, warps.naive_square_to_triangle_pdf, 4) > ALPHA
 
 
-@pytest.mark.parametrize("name", ["sqrt", "naive"])
+@pytest.mark.parametrize("name", list(warps.WARPS))
 def test_pdf_is_inverse_jacobian(name):
-    """pdf(W(u)) |det dW/du| = 1: the PDF beside each warp is its true density."""
+    """pdf(W(u)) |det dW/du| = number of preimages (1; 2 for the two-to-one fold):
+    the PDF beside each warp is its true density."""
     warp, pdf, _ = warps.WARPS[name]
     u = np.random.default_rng(5).uniform(0.01, 0.99, (1000, 2))
     h = 1e-6
     d1 = (warp(u + [h, 0]) - warp(u - [h, 0])) / (2 * h)
     d2 = (warp(u + [0, h]) - warp(u - [0, h])) / (2 * h)
     det = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
-    np.testing.assert_allclose(pdf(warp(u)) * det, 1.0, rtol=1e-5)
+    np.testing.assert_allclose(pdf(warp(u)) * det, 2.0 if name == "fold" else 1.0, rtol=1e-5)
 
 
-@pytest.mark.parametrize("name", ["sqrt", "naive"])
+@pytest.mark.parametrize("name", ["sqrt", "lowdist", "naive"])
 def test_inverse_round_trips(name):
     warp, _, inverse = warps.WARPS[name]
     u = np.random.default_rng(6).random((100_000, 2))
@@ -119,10 +126,23 @@ def test_inverse_round_trips(name):
     np.testing.assert_allclose(warp(inverse(b)), b, atol=1e-12)
 
 
-def test_warp_stays_in_triangle_at_the_ends_of_its_domain():
+def test_fold_inverse_is_a_right_inverse():
+    """The fold is two-to-one: inverse(warp(u)) is u or its mirror 1 - u."""
+    warp, _, inverse = warps.WARPS["fold"]
+    u = np.random.default_rng(7).random((100_000, 2))
+    b = warp(u)
+    np.testing.assert_allclose(warp(inverse(b)), b, atol=1e-12)
+    back = inverse(b)
+    mirrored = u.sum(1) > 1
+    np.testing.assert_allclose(back[~mirrored], u[~mirrored], atol=1e-12)
+    np.testing.assert_allclose(back[mirrored], 1 - u[mirrored], atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["sqrt", "fold", "lowdist"])
+def test_warp_stays_in_triangle_at_the_ends_of_its_domain(name):
     edge = np.array([0.0, 1e-300, 2.0**-53, 0.5, np.nextafter(1.0, 0), float(np.nextafter(np.float32(1), np.float32(0)))])
     u = np.stack(np.meshgrid(edge, edge), -1).reshape(-1, 2)
-    b = warps.square_to_triangle(u)
+    b = warps.WARPS[name][0](u)
     assert np.isfinite(b).all()
     assert (b >= 0).all() and (b.sum(1) <= 1).all()
     b0 = 1 - b.sum(1)
