@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 
@@ -12,7 +13,7 @@ from .errors import ScatterError, ScatterUsageError
 from .samples import Samples, column_layout, parse_attributes
 from .methods import DRAWS, SOBOL_MAX_COUNT
 from .sampling import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
-from .surface import Surface, load_surface
+from .surface import Surface, apply_matrix, load_surface
 
 METHODS = ("random", "stratified", "sobol")
 PRECISIONS = ("auto", "float32", "float64")
@@ -44,7 +45,7 @@ class Run:
 
     kept = None  # RawChunk of the thinned set, when thinning
 
-    def _job(self, start, stop):
+    def _job(self, start, stop, as_float64=False):
         if self.kept is not None:
             raw = self.kept.slice(start, stop)
         elif self.method == "random":
@@ -53,7 +54,7 @@ class Run:
             used, b = DRAWS[self.method](self.plan, self.count, start, stop, self.seed)
             raw = self.plan.place(start, used, b, self.maker.needs_bary)
         attrs = self.maker.make(raw, self.dtype)
-        return Samples(raw.points.astype(self.dtype, copy=False), attrs)
+        return Samples(raw.points if as_float64 else raw.points.astype(self.dtype, copy=False), attrs)
 
     def thin(self, candidates, radius):
         """Replace the run's points by a Poisson-disk subset of ``candidates`` random points.
@@ -83,8 +84,10 @@ class Run:
 
         return spacing_stats(self.kept.points, self.info["area"])
 
-    def chunks(self, threads=None):
-        yield from run_chunks(self._job, chunk_ranges(self.count, self.chunk_size), threads)
+    def chunks(self, threads=None, as_float64=False):
+        """Samples chunks in output order; ``as_float64`` leaves the points unrounded."""
+        job = functools.partial(self._job, as_float64=as_float64)
+        yield from run_chunks(job, chunk_ranges(self.count, self.chunk_size), threads)
 
     def collect(self) -> Samples:
         """All points in one :class:`Samples` (memory grows with the count)."""
@@ -93,9 +96,9 @@ class Run:
         attributes = {}
         # Fill preallocated arrays chunk by chunk: no concatenation copy at the end.
         pos = 0
-        for chunk in self.chunks():
+        for chunk in self.chunks(as_float64=True):
             k = len(chunk)
-            points[pos : pos + k] = chunk.points
+            points[pos : pos + k] = chunk.points  # rounds to the output type in the copy
             for key, arr in chunk.attributes.items():
                 if key not in attributes:
                     attributes[key] = np.empty((n,) + arr.shape[1:], dtype=arr.dtype)
@@ -233,13 +236,15 @@ def sampled_bounds(plan: SamplePlan):
     for part in plan.parts:
         if not part.count:  # an instance none of whose faces can get points
             continue
-        tri = part.tri if part.faces is None else part.tri[part.faces]
+        g = plan.surface.geometries[plan.surface.instances[part.instance].geometry]
+        faces = g.faces if part.faces is None else g.faces[part.faces]
+        referenced = np.zeros(len(g.vertices), dtype=bool)
+        referenced[faces.ravel()] = True
+        v = g.vertices[referenced]
         if part.matrix is not None:
-            tri = (tri.reshape(-1, 3) @ part.matrix[:3, :3].T + part.matrix[:3, 3]).reshape(-1, 9)
-        # One strided pass per column: much faster than min(axis=0) over an (n, 3) array.
-        cols = tri.T
-        lo = np.minimum(lo, [min(cols[c].min(), cols[c + 3].min(), cols[c + 6].min()) for c in range(3)])
-        hi = np.maximum(hi, [max(cols[c].max(), cols[c + 3].max(), cols[c + 6].max()) for c in range(3)])
+            v = apply_matrix(part.matrix, v)
+        lo = np.minimum(lo, [v[:, c].min() for c in range(3)])
+        hi = np.maximum(hi, [v[:, c].max() for c in range(3)])
     return np.stack([lo, hi])
 
 

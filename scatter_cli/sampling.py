@@ -211,7 +211,7 @@ def _parts(surface: Surface, weights):
     for k, inst in enumerate(surface.instances):
         tri = tris[inst.geometry]
         with np.errstate(invalid="ignore", over="ignore"):
-            a = doubled_areas(tri, inst.matrix)
+            a = np.concatenate(in_blocks(lambda i, j: doubled_areas(tri[i:j], inst.matrix), len(tri)))
         if weights is not None:
             a = a * weights(k, inst)
         finite = np.isfinite(a)
@@ -237,9 +237,13 @@ def _geometry_corners(surface):
     whole = np.empty((sum(sizes), 9))
     views, start = {}, 0
     for gi, size in zip(used, sizes):
-        g = surface.geometries[gi]
-        whole[start : start + size] = corners(g.vertices, g.faces)
-        views[gi] = whole[start : start + size]
+        g, view = surface.geometries[gi], whole[start : start + size]
+
+        def fill(i, j, g=g, view=view):
+            view[i:j] = corners(g.vertices, g.faces[i:j])
+
+        in_blocks(fill, size)
+        views[gi] = view
         start += size
     return views
 
@@ -255,10 +259,29 @@ def _guide_table(cdf):
     """
     last = len(cdf) - 1
     m = 1 << max(4, min(26, int(len(cdf) - 1).bit_length() + 1))
-    lower = (np.arange(m + 1, dtype=np.float64) / m) * cdf[-1]
-    first = np.minimum(np.searchsorted(cdf, lower, side="right"), last)
-    first = first.astype(np.int32 if len(cdf) < 2**31 - 1 else np.int64)
+    itype = np.int32 if len(cdf) < 2**31 - 1 else np.int64
+    first = np.empty(m + 1, dtype=itype)
+
+    def fill(i, j):
+        lower = (np.arange(i, j, dtype=np.float64) / m) * cdf[-1]
+        first[i:j] = np.minimum(np.searchsorted(cdf, lower, side="right"), last)
+
+    in_blocks(fill, m + 1)
     return np.where(first[1:] == first[:-1], first[:-1], -1 - first[:-1])
+
+
+def in_blocks(fn, n, min_block=1 << 18):
+    """[fn(i, j)] over consecutive blocks covering range(n), run on the worker threads.
+
+    For element-wise work only: the blocks depend on n and the thread count, so the
+    result must not depend on where the cuts fall.
+    """
+    threads = worker_count()
+    if threads == 1 or n < 2 * min_block:
+        return [fn(0, n)]
+    cuts = np.linspace(0, n, threads + 1).astype(np.int64)
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        return list(pool.map(fn, cuts[:-1], cuts[1:]))
 
 
 def chunk_ranges(count: int, chunk_size: int):

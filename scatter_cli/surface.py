@@ -193,7 +193,7 @@ def doubled_areas(tri, matrix=None):
     """
     n = face_cross(tri)
     if matrix is not None:
-        n = n @ cofactor(matrix[:3, :3]).T
+        n = apply_matrix(cofactor(matrix[:3, :3]), n, out=n)
     return np.sqrt(np.einsum("ij,ij->i", n, n))
 
 
