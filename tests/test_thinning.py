@@ -47,8 +47,12 @@ def assert_poisson_disk(points, kept, radius):
     if kept.size > 1:
         dmin = brute_min_distance(q) if kept.size <= 2000 else kd_min_distance(q)
         assert dmin >= radius
-    dist, _ = cKDTree(q).query(points, 1)
-    assert dist.max() < radius
+    _, nearest = cKDTree(q).query(points, 1)
+    # the thinning's own criterion, squared and summed in the same order: a candidate
+    # exactly at sqrt-rounded distance R must still be strictly inside
+    diff = points - q[nearest]
+    d2 = diff[:, 0] ** 2 + diff[:, 1] ** 2 + diff[:, 2] ** 2
+    assert d2.max() < radius * radius
 
 
 # --- thin_by_radius -------------------------------------------------------
