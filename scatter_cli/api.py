@@ -118,8 +118,12 @@ def _key(name):
 
 def prepare(mesh, count=None, *, density=None, seed=0, method="random", attributes=(), poisson=False,
             radius=None, weight=None, objects=None, precision="auto", chunk_size=None, input_format=None,
-            warn=None) -> Run:
-    """Load (if needed) and plan a sampling job; see :func:`sample` for the arguments."""
+            warn=None, oversampling=None) -> Run:
+    """Load (if needed) and plan a sampling job; see :func:`sample` for the arguments.
+
+    ``oversampling``: candidates per output point for Poisson thinning (default: 10, or
+    15 for sets of up to 20,000 points); more buys a larger rho for more time.
+    """
     t0 = time.perf_counter()
     names = parse_attributes(attributes)
     _check_options(count, density, seed, method, precision, chunk_size, radius)
@@ -164,7 +168,7 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
         info["weight"] = weight
     run = Run(surface, plan, count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info, sampler, method)
     if poisson or radius is not None:
-        run.thin(candidate_count(area, count, radius, surface.source), radius)
+        run.thin(candidate_count(area, count, radius, surface.source, oversampling), radius)
     return run
 
 
@@ -177,17 +181,17 @@ SMALL_SET, SMALL_SET_OVERSAMPLING = 20_000, 15
 MAX_CANDIDATES = 50_000_000
 
 
-def candidate_count(area, count, radius, source):
+def candidate_count(area, count, radius, source, oversampling=None):
     """How many uniform candidates to draw before thinning."""
     if radius is not None:
         # no R-spaced set holds more than the hexagonal packing of spacing R
         bound = area / (math.sqrt(3) / 2 * radius * radius)
         if bound < 1:
             return OVERSAMPLING
-        need = OVERSAMPLING * bound
+        need = (oversampling or OVERSAMPLING) * bound
         what = f"--radius {radius:g} is too small for {source} (area {area:.6g})"
     else:
-        need = (SMALL_SET_OVERSAMPLING if count <= SMALL_SET else OVERSAMPLING) * count
+        need = (oversampling or (SMALL_SET_OVERSAMPLING if count <= SMALL_SET else OVERSAMPLING)) * count
         what = f"--poisson -n {count:,} is too many points"
     if need > MAX_CANDIDATES:
         raise ScatterUsageError(f"{what}: thinning would need {need:,.0f} candidates, more than {MAX_CANDIDATES:,}")

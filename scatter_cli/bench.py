@@ -288,34 +288,22 @@ def fit_slope(rows, key="error"):
     return float(np.polyfit(x, y, 1)[0])
 
 
+POISSON_OVERSAMPLING = (3, 5, 10, 15)
+
+
 def poisson_hook(surface, area, counts, seed, notes):
-    """Rho (min distance over the best packing's) and time of Poisson thinning, once
-    ``sample(..., poisson=True)`` exists; [] with a note when it does not."""
-    from .api import sample
+    """Relative radius rho and time of exact-count Poisson thinning against the
+    oversampling factor (candidates per output point): the spacing that time buys."""
+    from .api import prepare
 
     rows = []
     for count in counts:
-        try:
-            base = sample(surface, count, seed=seed, precision="float64").points
+        for k in POISSON_OVERSAMPLING:
             t = time.perf_counter()
-            pts = sample(surface, count, seed=seed, poisson=True, precision="float64").points
+            run = prepare(surface, count, seed=seed, poisson=True, precision="float64", oversampling=k)
             elapsed = time.perf_counter() - t
-        except Exception as exc:  # the Poisson branch is not merged yet, or failed
-            notes.append(f"poisson: skipped, sample(poisson=True) raised {type(exc).__name__}: {exc}")
-            return []
-        if len(pts) == len(base) and np.array_equal(pts, base):
-            notes.append("poisson: skipped, sample(poisson=True) returns the uniform points (not implemented yet)")
-            return []
-        r_max = math.sqrt(area / (2 * math.sqrt(3) * max(len(pts), 1)))
-        rows.append({"count": count, "n": len(pts), "time": elapsed, "rho": min_distance(pts) / (2 * r_max)})
+            rows.append({"count": count, "n": run.count, "oversampling": k, "time": elapsed, "rho": run.info["rho"]})
     return rows
-
-
-def min_distance(points):
-    from scipy.spatial import cKDTree
-
-    d, _ = cKDTree(points).query(points, k=2)
-    return float(d[:, 1].min())
 
 
 # ---------------------------------------------------------------------------
@@ -340,8 +328,10 @@ def markdown(results, counts, notes, poisson):
             lines.append("| " + " | ".join(cells) + " |")
         lines.append("")
     if poisson:
-        lines += ["## Poisson thinning", "", "| mesh | points | rho | ms |", "|---|---|---|---|"]
-        lines += [f"| {p['mesh']} | {p['n']} | {p['rho']:.3f} | {1e3 * p['time']:.3g} |" for p in poisson]
+        lines += ["## Poisson thinning (exact count)", "", "| mesh | points | candidates per point | rho | ms |",
+                  "|---|---|---|---|---|"]
+        lines += [f"| {p['mesh']} | {p['n']} | {p['oversampling']} | {p['rho']:.3f} | {1e3 * p['time']:.3g} |"
+                  for p in poisson]
         lines.append("")
     if notes:
         lines += ["Notes:", ""] + [f"- {n}" for n in notes] + [""]

@@ -138,6 +138,9 @@ def test_quick_bench_command_writes_all_three_outputs(tmp_path):
     text = (out / "bench.md").read_text()
     assert "| variant | slope |" in text
     assert "poisson" in text.lower()
+    for mesh in {p["mesh"] for p in report["poisson"]}:
+        rho = {p["oversampling"]: p["rho"] for p in report["poisson"] if p["mesh"] == mesh}
+        assert rho[15] > rho[3]  # more candidates buy a larger spacing
     assert "stratified/sqrt/64" in proc.stdout.decode()
 
 
