@@ -10,8 +10,8 @@ import numpy as np
 
 from .attributes import AttributeMaker
 from .errors import ScatterError, ScatterUsageError
-from .samples import Samples, column_layout, parse_attributes
 from .methods import DRAWS, SOBOL_MAX_COUNT
+from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
 from .sampling import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
 from .surface import Surface, apply_matrix, load_surface
 
@@ -41,9 +41,8 @@ class Run:
         self.maker = AttributeMaker(surface, attributes)
         self.chunk_size = chunk_size
         self.info = info
-        self.layout = column_layout({_key(a) for a in attributes}, self.dtype)
-
-    kept = None  # RawChunk of the thinned set, when thinning
+        self.layout = column_layout({ATTRIBUTES[a][0] for a in attributes}, self.dtype)
+        self.kept = None  # RawChunk of the thinned set, when thinning
 
     def _job(self, start, stop, as_float64=False):
         if self.kept is not None:
@@ -108,12 +107,6 @@ class Run:
             if key not in attributes:
                 attributes[key] = np.empty((n, len(cols)) if len(cols) > 1 else (n,), dtype=dt)
         return Samples(points, attributes, self.info)
-
-
-def _key(name):
-    from .samples import ATTRIBUTES
-
-    return ATTRIBUTES[name][0]
 
 
 def prepare(mesh, count=None, *, density=None, seed=0, method="random", attributes=(), poisson=False,
