@@ -166,8 +166,7 @@ class SamplePlan:
         if want_bary:
             bary = np.empty((n, 3))
             bary[:, 1:] = b
-            bary[:, 0] = 1.0 - b[:, 0] - b[:, 1]
-            np.maximum(bary[:, 0], 0.0, out=bary[:, 0])
+            bary[:, 0] = 1.0 - b[:, 0] - b[:, 1]  # >= 0 exactly: the warp keeps b1 + b2 <= 1
         return RawChunk(start, points, face, instance, bary)
 
     @staticmethod
