@@ -86,15 +86,3 @@ class Samples:
             for j, c in enumerate(cols):
                 out[c] = data[:, j]
         return out
-
-    def take(self, index):
-        """A new Samples with rows ``index`` of every array."""
-        return Samples(self.points[index], {k: v[index] for k, v in self.attributes.items()}, self.info)
-
-    @staticmethod
-    def concatenate(parts, info=None):
-        if not parts:
-            raise ValueError("nothing to concatenate")
-        points = np.concatenate([p.points for p in parts])
-        attributes = {k: np.concatenate([p.attributes[k] for p in parts]) for k in parts[0].attributes}
-        return Samples(points, attributes, info if info is not None else parts[0].info)
