@@ -12,7 +12,7 @@ from .attributes import AttributeMaker
 from .errors import ScatterError, ScatterUsageError
 from .methods import DRAWS, SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
-from .sampling import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
+from .sampling import DEFAULT_CHUNK, RawChunk, SamplePlan, chunk_ranges, in_blocks, run_chunks
 from .surface import Surface, apply_matrix, load_surface
 
 METHODS = ("random", "stratified", "sobol")
@@ -63,14 +63,15 @@ class Run:
         from . import thinning
 
         t = time.perf_counter()
-        raw = self.sampler.draw(0, candidates, self.seed, True)
+        blocks = in_blocks(lambda i, j: self.sampler.draw(i, j, self.seed, True), candidates)
+        points = np.concatenate([b.points for b in blocks]) if len(blocks) > 1 else blocks[0].points
         t1 = time.perf_counter()
         if radius is not None:
-            index = thinning.thin_by_radius(raw.points, radius)
+            index = thinning.thin_by_radius(points, radius)
             d_min = None
         else:
-            index, d_min = thinning.thin_to_count(raw.points, self.count, self.info["area"])
-        self.kept = raw.take(index)
+            index, d_min = thinning.thin_to_count(points, self.count, self.info["area"])
+        self.kept = _take(blocks, index)
         self.count = len(index)
         self.info.update(count=self.count, candidates=candidates, radius=radius)
         if d_min is not None:
@@ -163,6 +164,14 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     if poisson or radius is not None:
         run.thin(candidate_count(area, count, radius, surface.source, oversampling), radius)
     return run
+
+
+def _take(blocks, index):
+    """Rows ``index`` (k,) ascending of the chunks ``blocks`` end to end, as one chunk."""
+    ends = np.cumsum([len(b.points) for b in blocks])
+    cuts = np.searchsorted(index, ends)
+    return RawChunk.join([b.take(part - (end - len(b.points)))
+                          for b, part, end in zip(blocks, np.split(index, cuts[:-1]), ends)])
 
 
 # Candidates per output point for thinning: the relative radius reached grows with it

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ScatterError
+from .surface import corners
 
 INSTALL_HINT = "the bench plot needs matplotlib: pip install 'scatter-cli[bench]' (or: pip install matplotlib)"
 SAMPLES_DIR = Path(__file__).resolve().parent.parent / "samples"
@@ -138,7 +139,8 @@ def _place_float32(plan, used, b):
     part = plan.parts[0]
     tri32 = plan.__dict__.get("_tri32")
     if tri32 is None:
-        tri32 = plan._tri32 = part.tri.astype(np.float32)
+        tri = part.tri if part.tri is not None else corners(part.geometry.vertices, part.geometry.faces)
+        tri32 = plan._tri32 = tri.astype(np.float32)
     face = used if part.faces is None else part.faces[used]
     t = np.take(tri32, face, axis=0).T
     b1, b2 = b[:, 0].astype(np.float32), b[:, 1].astype(np.float32)

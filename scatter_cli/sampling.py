@@ -9,18 +9,19 @@ so chunks can be made in any size, order or thread and the output is the same by
 from __future__ import annotations
 
 import math
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
+from . import native
 from .errors import ScatterError
-from .surface import Surface, apply_matrix, corners, doubled_areas
+from .surface import Surface, apply_matrix, cofactor, corners, doubled_areas
 from .warps import square_to_triangle
 
 DRAWS_PER_POINT = 3
 DEFAULT_CHUNK = 1 << 17
+_kernel = native.kernel("_csampling")
 
 
 @dataclass
@@ -29,17 +30,18 @@ class Part:
 
     faces: (k,) int64 face indices into its geometry, None when every face is used;
     tri: (F, 9) float64 local corners of the whole geometry (shared between instances
-    of one geometry).
+    of one geometry), or None when the compiled kernel reads them from ``geometry``.
     """
 
     instance: int
     faces: np.ndarray | None
-    tri: np.ndarray
+    tri: np.ndarray | None
     matrix: np.ndarray | None
+    geometry: object
 
     @property
     def count(self) -> int:
-        return len(self.tri) if self.faces is None else len(self.faces)
+        return len(self.geometry.faces) if self.faces is None else len(self.faces)
 
 
 @dataclass
@@ -60,6 +62,15 @@ class RawChunk:
         """The rows ``index`` (k,) as a new chunk starting at 0."""
         bary = None if self.bary is None else self.bary[index]
         return RawChunk(0, self.points[index], self.face[index], self.instance[index], bary)
+
+    @staticmethod
+    def join(chunks):
+        """One chunk, starting at 0, of ``chunks`` end to end."""
+        if len(chunks) == 1:
+            return chunks[0]
+        bary = None if chunks[0].bary is None else np.concatenate([c.bary for c in chunks])
+        return RawChunk(0, *(np.concatenate([getattr(c, f) for c in chunks]) for f in ("points", "face", "instance")),
+                        bary)
 
     def slice(self, start, stop):
         bary = None if self.bary is None else self.bary[start:stop]
@@ -98,6 +109,10 @@ class SamplePlan:
         face whose CDF step is zero is never chosen. The guide table answers most draws
         outright; the others start their search at the right face and end in a step or two.
         """
+        if _kernel is not None:
+            face = np.empty(len(u), dtype=np.int64)
+            _kernel.select(self.cdf, self.guide, np.ascontiguousarray(u, dtype=np.float64), 1, 0, face)
+            return face
         cdf, last = self.cdf, len(self.cdf) - 1
         face = self.guide[(u * len(self.guide)).astype(np.int64)]
         todo = np.flatnonzero(face < 0)
@@ -117,9 +132,13 @@ class SamplePlan:
     def draw(self, start: int, stop: int, seed: int, want_bary: bool = False) -> RawChunk:
         """Points ``start`` to ``stop`` of the random sequence for ``seed``."""
         u = uniforms(seed, start, stop)
-        used = self.select(u[:, 0])
-        b = square_to_triangle(u[:, 1:3])
-        return self.place(start, used, b, want_bary)
+        if _kernel is None or type(self).select is not SamplePlan.select:  # (a subclass's own selection)
+            return self.place(start, self.select(u[:, 0]), square_to_triangle(u[:, 1:3]), want_bary)
+        n = stop - start
+        used, points = np.empty(n, dtype=np.int64), np.empty((n, 3))
+        b = np.empty((n, 2)) if want_bary else None
+        _kernel.draw(self.cdf, self.guide, u, *self._corner_table(), used, points, b)
+        return self._finish(start, used, b, points, want_bary)
 
     def _scene_tables(self):
         """Gather tables for several instances: for every used face of every instance, its
@@ -140,19 +159,42 @@ class SamplePlan:
         self._matrix = np.stack([(eye if p.matrix is None else p.matrix)[:3] for p in self.parts])
         self._moved = any(p.matrix is not None for p in self.parts)
 
+    def _corner_table(self):
+        """(coords, faces, rows) for the kernels: used face k has corners
+        ``coords[rows[k]]`` of a (R, 9) corner table when faces is None, else the vertices
+        ``coords[faces[rows[k]]]``; rows None means k itself."""
+        if len(self.parts) == 1:
+            part = self.parts[0]
+            if part.tri is None:
+                return part.geometry.vertices, part.geometry.faces, part.faces
+            return part.tri, None, part.faces
+        return self._corners, None, self._rows
+
     def place(self, start, used, b, want_bary=False) -> RawChunk:
         """Points at barycentric ``b`` (n, 2) on used faces ``used`` (n,)."""
+        points = np.empty((len(used), 3))
+        tri, faces, rows = self._corner_table()
+        if _kernel is not None:
+            used = used.astype(np.int64, copy=False)
+            _kernel.place(tri, faces, rows, used, np.ascontiguousarray(b, dtype=np.float64), points)
+        else:
+            _corner_points(tri, used if rows is None else rows[used], b, points)
+        return self._finish(start, used, b, points, want_bary)
+
+    def _finish(self, start, used, b, points, want_bary):
+        """The chunk for local corner points (n, 3) of used faces (n,): face and instance
+        numbers, instance matrices applied in place, barycentrics if wanted."""
         n = len(used)
-        points = np.empty((n, 3))
         if len(self.parts) == 1:
-            face = np.empty(n, dtype=np.int64)
-            instance = np.full(n, self.parts[0].instance, dtype=np.int64)
-            self._place_part(self.parts[0], used, b, points, face)
+            part = self.parts[0]
+            face = used.astype(np.int64) if part.faces is None else np.take(part.faces, used)
+            instance = np.full(n, part.instance, dtype=np.int64)
+            if part.matrix is not None:
+                apply_matrix(part.matrix, points, out=points)
         else:
             part = np.searchsorted(self.offsets, used, side="right") - 1
             instance = self._instance[part]
             face = self._faces[used]
-            _corner_points(self._corners, self._rows[used], b, points)
             if self._moved:
                 m = self._matrix[part]
                 x, y, z = (points[:, c].copy() for c in range(3))
@@ -168,16 +210,6 @@ class SamplePlan:
             bary[:, 1:] = b
             bary[:, 0] = 1.0 - b[:, 0] - b[:, 1]  # >= 0 exactly: the warp keeps b1 + b2 <= 1
         return RawChunk(start, points, face, instance, bary)
-
-    @staticmethod
-    def _place_part(part, local, b, points, face):
-        if part.faces is None:
-            face[:] = local
-        else:
-            np.take(part.faces, local, out=face)
-        _corner_points(part.tri, face, b, points)
-        if part.matrix is not None:
-            apply_matrix(part.matrix, points, out=points)
 
 
 def _corner_points(tri, rows, b, points):
@@ -198,32 +230,41 @@ def _corner_points(tri, rows, b, points):
 def uniforms(seed: int, start: int, stop: int):
     """Draws for points ``start .. stop - 1``: (n, 3) float64 in [0, 1)."""
     bits = np.random.PCG64DXSM(seed)
-    bits.advance(DRAWS_PER_POINT * start)
+    bits.advance(DRAWS_PER_POINT * int(start))
     return np.random.Generator(bits).random((stop - start, DRAWS_PER_POINT))
 
 
 def _parts(surface: Surface, weights):
     """Per-instance usable faces and twice their (world-space, weighted) areas."""
     parts, areas = [], []
-    tris = _geometry_corners(surface)
+    # One mesh and the kernel: areas and points straight from vertices and faces, with no
+    # (F, 9) corner table (72 bytes a face to build and to keep).
+    tris = None if _kernel is not None and len(surface.instances) == 1 else _geometry_corners(surface)
     skipped = 0
     for k, inst in enumerate(surface.instances):
-        tri = tris[inst.geometry]
-        with np.errstate(invalid="ignore", over="ignore"):
-            a = np.concatenate(in_blocks(lambda i, j: doubled_areas(tri[i:j], inst.matrix), len(tri)))
+        g = surface.geometries[inst.geometry]
+        a = _doubled_areas(g, None if tris is None else tris[inst.geometry], inst.matrix)
         if weights is not None:
             a = a * weights(k, inst)
         finite = np.isfinite(a)
         skipped += int(len(a) - np.count_nonzero(finite))
         ok = finite & (a > 0)
-        if ok.all():
-            parts.append(Part(k, None, tri, inst.matrix))
-            areas.append(a)
-        else:
-            faces = np.flatnonzero(ok)
-            parts.append(Part(k, faces, tri, inst.matrix))
-            areas.append(a[faces])
+        faces = None if ok.all() else np.flatnonzero(ok)
+        parts.append(Part(k, faces, None if tris is None else tris[inst.geometry], inst.matrix, g))
+        areas.append(a if faces is None else a[faces])
     return parts, (np.concatenate(areas) if areas else np.empty(0)), skipped
+
+
+def _doubled_areas(g, tri, matrix):
+    """(F,) float64 twice the world-space face areas of geometry ``g``, from its corner
+    table ``tri`` (F, 9), or by the kernel from its vertices and faces when tri is None."""
+    if tri is None:
+        out = np.empty(len(g.faces))
+        cof = None if matrix is None else np.ascontiguousarray(cofactor(matrix[:3, :3]))
+        in_blocks(lambda i, j: _kernel.areas(g.vertices, g.faces[i:j], cof, out[i:j]), len(out))
+        return out
+    with np.errstate(invalid="ignore", over="ignore"):
+        return np.concatenate(in_blocks(lambda i, j: doubled_areas(tri[i:j], matrix), len(tri)))
 
 
 def _geometry_corners(surface):
@@ -259,6 +300,10 @@ def _guide_table(cdf):
     last = len(cdf) - 1
     m = 1 << max(4, min(26, int(len(cdf) - 1).bit_length() + 1))
     itype = np.int32 if len(cdf) < 2**31 - 1 else np.int64
+    if _kernel is not None:
+        table = np.empty(m, dtype=itype)
+        _kernel.guide(cdf, table)
+        return table
     first = np.empty(m + 1, dtype=itype)
 
     def fill(i, j):
@@ -275,7 +320,7 @@ def in_blocks(fn, n, min_block=1 << 18):
     For element-wise work only: the blocks depend on n and the thread count, so the
     result must not depend on where the cuts fall.
     """
-    threads = worker_count()
+    threads = native.worker_count()
     if threads == 1 or n < 2 * min_block:
         return [fn(0, n)]
     cuts = np.linspace(0, n, threads + 1).astype(np.int64)
@@ -288,19 +333,12 @@ def chunk_ranges(count: int, chunk_size: int):
     return [(s, min(s + chunk_size, count)) for s in range(0, count, chunk_size)]
 
 
-def worker_count() -> int:
-    env = os.environ.get("SCATTER_THREADS")
-    if env:
-        return max(1, int(env))
-    return max(1, min(4, os.cpu_count() or 1))
-
-
 def run_chunks(job, ranges, threads=None):
     """Yield ``job(start, stop)`` for each range, in order, computed by a small pool.
 
     At most two results per thread wait at a time, so memory stays flat whatever N.
     """
-    threads = threads or worker_count()
+    threads = threads or native.worker_count()
     if threads == 1 or len(ranges) <= 1:
         for r in ranges:
             yield job(*r)

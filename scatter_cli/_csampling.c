@@ -1,0 +1,336 @@
+/* Compiled face selection and placement: the same numbers as sampling.py's NumPy path.
+ *
+ * Every function does, point by point, the float64 operations the NumPy code does on
+ * whole arrays, in the same order (built with -ffp-contract=off: no fused multiply-add),
+ * so the two paths give byte-identical output. The GIL is released while they run, so
+ * the chunk threads of sampling.run_chunks work in parallel.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
+#include <numpy/arrayobject.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+/* An array argument checked for dtype, C order and size. */
+static int get(PyObject *obj, int type, npy_intp size, PyArrayObject **out, const char *name)
+{
+    if (!PyArray_Check(obj) || PyArray_TYPE((PyArrayObject *)obj) != type ||
+        !PyArray_IS_C_CONTIGUOUS((PyArrayObject *)obj) ||
+        (size >= 0 && PyArray_SIZE((PyArrayObject *)obj) != size)) {
+        PyErr_Format(PyExc_TypeError, "%s: wrong dtype, order or size", name);
+        return 0;
+    }
+    *out = (PyArrayObject *)obj;
+    return 1;
+}
+
+/* The guide entry as int64 whatever the table's integer width. */
+static inline int64_t guide_at(const void *guide, int wide, int64_t k)
+{
+    return wide ? ((const int64_t *)guide)[k] : ((const int32_t *)guide)[k];
+}
+
+#define BLOCK 256
+/* Faces for u[k * width] (k < n) into out: searchsorted(cdf, u * total, 'right') clipped
+ * to the last face, started from the guide. Done in passes over a block, so the cache
+ * misses of a pass are independent of each other and overlap: all the guide entries
+ * first, then one CDF step for the draws whose bucket straddles a face boundary, then
+ * the rare longer searches. */
+static void select_block(const double *cdf, int64_t last, const void *guide, int wide, int64_t m,
+                         const double *u, int width, int64_t n, int64_t *out)
+{
+    double total = cdf[last];
+    int64_t open[BLOCK], nopen = 0;
+    for (int64_t k = 0; k < n; k++) {
+        int64_t g = guide_at(guide, wide, (int64_t)(u[k * width] * (double)m));
+        out[k] = g >= 0 ? g : -1 - g;
+        open[nopen] = k;
+        nopen += g < 0;
+    }
+    for (int64_t t = 0; t < nopen; t++) {
+        int64_t k = open[t], i = out[k];
+        double x = u[k * width] * total;
+        while (i < last && cdf[i] <= x)
+            i++;
+        out[k] = i;
+    }
+}
+
+/* Where a face's corners come from: rows of a (R, 9) corner table, or three rows of a
+ * (V, 3) vertex array picked by a (F, 3) int64 face array. ``rows`` (optional) maps a
+ * used-face number to its row or face. */
+typedef struct {
+    const double *coords;
+    const int64_t *faces, *rows;
+} Corners;
+
+static inline void corners_of(const Corners *c, int64_t used, double t[9])
+{
+    int64_t r = c->rows ? c->rows[used] : used;
+    if (!c->faces) {
+        memcpy(t, c->coords + 9 * r, 9 * sizeof(double));
+        return;
+    }
+    for (int k = 0; k < 3; k++)
+        memcpy(t + 3 * k, c->coords + 3 * c->faces[3 * r + k], 3 * sizeof(double));
+}
+
+/* Parse (coords, faces, rows): faces and rows may be None. */
+static int get_corners(PyObject *ocoords, PyObject *ofaces, PyObject *orows, Corners *c)
+{
+    PyArrayObject *coords_a, *faces_a = NULL, *rows_a = NULL;
+    if (!get(ocoords, NPY_FLOAT64, -1, &coords_a, "corners") ||
+        (ofaces != Py_None && !get(ofaces, NPY_INT64, -1, &faces_a, "faces")) ||
+        (orows != Py_None && !get(orows, NPY_INT64, -1, &rows_a, "rows")))
+        return 0;
+    c->coords = PyArray_DATA(coords_a);
+    c->faces = faces_a ? PyArray_DATA(faces_a) : NULL;
+    c->rows = rows_a ? PyArray_DATA(rows_a) : NULL;
+    return 1;
+}
+
+/* points = (t1 - t0) b1 + (t2 - t0) b2 + t0, column by column as _corner_points does. */
+static inline void place_one(const double *t, double b1, double b2, double *p)
+{
+    for (int c = 0; c < 3; c++) {
+        double col = (t[3 + c] - t[c]) * b1;
+        col += (t[6 + c] - t[c]) * b2;
+        col += t[c];
+        p[c] = col;
+    }
+}
+
+PyDoc_STRVAR(areas_doc,
+"areas(vertices, faces, cof, out)\n\n"
+"Twice the area of each face (F, 3) int64 of vertices (V, 3) float64 into out (F,)\n"
+"float64, under the cofactor matrix cof (3, 3) float64 or None: surface.doubled_areas\n"
+"of the corners, operation for operation. Raises ValueError for a vertex index out of\n"
+"range (the other kernels trust the faces this one has read).");
+
+static PyObject *areas(PyObject *self, PyObject *args)
+{
+    PyObject *overts, *ofaces, *ocof, *oout;
+    PyArrayObject *verts_a, *faces_a, *cof_a = NULL, *out_a;
+    if (!PyArg_ParseTuple(args, "OOOO", &overts, &ofaces, &ocof, &oout) ||
+        !get(overts, NPY_FLOAT64, -1, &verts_a, "vertices") || !get(oout, NPY_FLOAT64, -1, &out_a, "out") ||
+        (ocof != Py_None && !get(ocof, NPY_FLOAT64, 9, &cof_a, "cof")))
+        return NULL;
+    npy_intp n = PyArray_SIZE(out_a);
+    if (!get(ofaces, NPY_INT64, 3 * n, &faces_a, "faces"))
+        return NULL;
+    Corners c = {PyArray_DATA(verts_a), PyArray_DATA(faces_a), NULL};
+    const double *m = cof_a ? PyArray_DATA(cof_a) : NULL;
+    double *out = PyArray_DATA(out_a);
+    uint64_t nv = (uint64_t)(PyArray_SIZE(verts_a) / 3), bad = 0;
+    for (npy_intp k = 0; k < 3 * n; k++)
+        bad |= (uint64_t)c.faces[k] >= nv;
+    if (bad)
+        return PyErr_Format(PyExc_ValueError, "face indices out of range");
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp f = 0; f < n; f++) {
+        double t[9], e1[3], e2[3], x[3];
+        corners_of(&c, f, t);
+        for (int k = 0; k < 3; k++) {
+            e1[k] = t[3 + k] - t[k];
+            e2[k] = t[6 + k] - t[k];
+        }
+        for (int k = 0; k < 3; k++) { /* surface.face_cross */
+            int a = (k + 1) % 3, b = (k + 2) % 3;
+            x[k] = e1[a] * e2[b] - e1[b] * e2[a];
+        }
+        if (m) { /* surface.apply_matrix */
+            double y[3];
+            for (int k = 0; k < 3; k++) {
+                double col = m[3 * k] * x[0];
+                col += m[3 * k + 1] * x[1];
+                col += m[3 * k + 2] * x[2];
+                y[k] = col;
+            }
+            memcpy(x, y, sizeof(y));
+        }
+        double s = x[0] * x[0] + x[1] * x[1];
+        s += x[2] * x[2];
+        out[f] = sqrt(s);
+    }
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(guide_doc,
+"guide(cdf, out)\n\n"
+"Fill the guide table out (m,) int32 or int64 for cdf (F,) float64, as\n"
+"sampling._guide_table: entry k is the first face whose CDF exceeds k / m * total,\n"
+"stored as is when bucket k + 1 starts on the same face, else as -1 - face.");
+
+static PyObject *guide(PyObject *self, PyObject *args)
+{
+    PyObject *ocdf, *oout;
+    PyArrayObject *cdf_a, *out_a;
+    if (!PyArg_ParseTuple(args, "OO", &ocdf, &oout) || !get(ocdf, NPY_FLOAT64, -1, &cdf_a, "cdf"))
+        return NULL;
+    int wide = PyArray_Check(oout) && PyArray_TYPE((PyArrayObject *)oout) == NPY_INT64;
+    if (!get(oout, wide ? NPY_INT64 : NPY_INT32, -1, &out_a, "out"))
+        return NULL;
+    const double *cdf = PyArray_DATA(cdf_a);
+    int64_t n = PyArray_SIZE(cdf_a), m = PyArray_SIZE(out_a), last = n - 1;
+    void *out = PyArray_DATA(out_a);
+    if (n < 1)
+        return PyErr_Format(PyExc_ValueError, "empty cdf");
+    Py_BEGIN_ALLOW_THREADS
+    double total = cdf[last];
+    int64_t i = 0, prev = 0;
+    for (int64_t k = 0; k <= m; k++) {
+        double lower = ((double)k / (double)m) * total;
+        while (i < n && cdf[i] <= lower)
+            i++;
+        int64_t first = i < last ? i : last;
+        if (k > 0) {
+            int64_t v = first == prev ? prev : -1 - prev;
+            if (wide)
+                ((int64_t *)out)[k - 1] = v;
+            else
+                ((int32_t *)out)[k - 1] = (int32_t)v;
+        }
+        prev = first;
+    }
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(select_doc,
+"select(cdf, guide, u, width, column, out)\n\n"
+"out (n,) int64 = the face of u[:, column] for u (n, width) float64: SamplePlan.select.");
+
+static PyObject *select_faces(PyObject *self, PyObject *args)
+{
+    PyObject *ocdf, *oguide, *ou, *oout;
+    PyArrayObject *cdf_a, *guide_a, *u_a, *out_a;
+    int width, column;
+    if (!PyArg_ParseTuple(args, "OOOiiO", &ocdf, &oguide, &ou, &width, &column, &oout))
+        return NULL;
+    int wide = PyArray_Check(oguide) && PyArray_TYPE((PyArrayObject *)oguide) == NPY_INT64;
+    if (!get(ocdf, NPY_FLOAT64, -1, &cdf_a, "cdf") || !get(oguide, wide ? NPY_INT64 : NPY_INT32, -1, &guide_a, "guide") ||
+        !get(oout, NPY_INT64, -1, &out_a, "out"))
+        return NULL;
+    npy_intp n = PyArray_SIZE(out_a);
+    if (width < 1 || column < 0 || column >= width || !get(ou, NPY_FLOAT64, n * width, &u_a, "u"))
+        return NULL;
+    const double *cdf = PyArray_DATA(cdf_a), *u = PyArray_DATA(u_a);
+    const void *g = PyArray_DATA(guide_a);
+    int64_t last = PyArray_SIZE(cdf_a) - 1, m = PyArray_SIZE(guide_a);
+    int64_t *out = PyArray_DATA(out_a);
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp k = 0; k < n; k += BLOCK)
+        select_block(cdf, last, g, wide, m, u + k * width + column, width, n - k < BLOCK ? n - k : BLOCK, out + k);
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(place_doc,
+"place(coords, faces, rows, used, b, points)\n\n"
+"points (n, 3) float64 at barycentric b (n, 2) float64 on the used faces used (n,)\n"
+"int64. Corners: coords (R, 9) float64 rows when faces is None, else vertices coords\n"
+"(V, 3) float64 of faces (F, 3) int64; rows (optional, int64) maps used faces to those.");
+
+static PyObject *place(PyObject *self, PyObject *args)
+{
+    PyObject *ocoords, *ofaces, *orows, *oused, *ob, *opts;
+    PyArrayObject *used_a, *b_a, *pts_a;
+    Corners c;
+    if (!PyArg_ParseTuple(args, "OOOOOO", &ocoords, &ofaces, &orows, &oused, &ob, &opts) ||
+        !get_corners(ocoords, ofaces, orows, &c) || !get(oused, NPY_INT64, -1, &used_a, "used"))
+        return NULL;
+    npy_intp n = PyArray_SIZE(used_a);
+    if (!get(ob, NPY_FLOAT64, 2 * n, &b_a, "b") || !get(opts, NPY_FLOAT64, 3 * n, &pts_a, "points"))
+        return NULL;
+    const double *b = PyArray_DATA(b_a);
+    const int64_t *used = PyArray_DATA(used_a);
+    double *pts = PyArray_DATA(pts_a);
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp k = 0; k < n; k++) {
+        double t[9];
+        corners_of(&c, used[k], t);
+        place_one(t, b[2 * k], b[2 * k + 1], pts + 3 * k);
+    }
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
+PyDoc_STRVAR(draw_doc,
+"draw(cdf, guide, u, coords, faces, rows, used, points, b)\n\n"
+"The random method in one pass over u (n, 3) float64: face choice from u[:, 0] into\n"
+"used (n,) int64, square-root warp of u[:, 1:] into b (n, 2) float64 (or None when the\n"
+"weights are not wanted), and the point on the face into points (n, 3) float64;\n"
+"corners as for place().");
+
+static PyObject *draw(PyObject *self, PyObject *args)
+{
+    PyObject *ocdf, *oguide, *ou, *ocoords, *ofaces, *orows, *oused, *opts, *ob;
+    PyArrayObject *cdf_a, *guide_a, *u_a, *used_a, *pts_a, *b_a = NULL;
+    Corners c;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOO", &ocdf, &oguide, &ou, &ocoords, &ofaces, &orows, &oused, &opts, &ob))
+        return NULL;
+    int wide = PyArray_Check(oguide) && PyArray_TYPE((PyArrayObject *)oguide) == NPY_INT64;
+    if (!get(ocdf, NPY_FLOAT64, -1, &cdf_a, "cdf") || !get(oguide, wide ? NPY_INT64 : NPY_INT32, -1, &guide_a, "guide") ||
+        !get_corners(ocoords, ofaces, orows, &c) || !get(oused, NPY_INT64, -1, &used_a, "used"))
+        return NULL;
+    npy_intp n = PyArray_SIZE(used_a);
+    if (!get(ou, NPY_FLOAT64, 3 * n, &u_a, "u") || !get(opts, NPY_FLOAT64, 3 * n, &pts_a, "points") ||
+        (ob != Py_None && !get(ob, NPY_FLOAT64, 2 * n, &b_a, "b")))
+        return NULL;
+    const double *cdf = PyArray_DATA(cdf_a), *u = PyArray_DATA(u_a);
+    const void *g = PyArray_DATA(guide_a);
+    int64_t last = PyArray_SIZE(cdf_a) - 1, m = PyArray_SIZE(guide_a);
+    int64_t *used = PyArray_DATA(used_a);
+    double *pts = PyArray_DATA(pts_a), *b = b_a ? PyArray_DATA(b_a) : NULL;
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp k0 = 0; k0 < n; k0 += BLOCK) {
+        npy_intp k1 = n - k0 < BLOCK ? n : k0 + BLOCK;
+        select_block(cdf, last, g, wide, m, u + 3 * k0, 3, k1 - k0, used + k0);
+        /* the face rows of the whole block first: their cache misses overlap, and so do
+           the vertex rows' below, instead of each point waiting on its face row */
+        int64_t vi[3 * BLOCK];
+        if (c.faces)
+            for (npy_intp k = k0; k < k1; k++)
+                memcpy(vi + 3 * (k - k0), c.faces + 3 * (c.rows ? c.rows[used[k]] : used[k]), 3 * sizeof(int64_t));
+        for (npy_intp k = k0; k < k1; k++) {
+            double b1 = 1.0 - sqrt(u[3 * k + 1]); /* warps.square_to_triangle */
+            double b2 = (1.0 - b1) * u[3 * k + 2];
+            if (b) {
+                b[2 * k] = b1;
+                b[2 * k + 1] = b2;
+            }
+            double t[9];
+            if (c.faces)
+                for (int j = 0; j < 3; j++)
+                    memcpy(t + 3 * j, c.coords + 3 * vi[3 * (k - k0) + j], 3 * sizeof(double));
+            else
+                corners_of(&c, used[k], t);
+            place_one(t, b1, b2, pts + 3 * k);
+        }
+    }
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef methods[] = {
+    {"areas", areas, METH_VARARGS, areas_doc},
+    {"guide", guide, METH_VARARGS, guide_doc},
+    {"select", select_faces, METH_VARARGS, select_doc},
+    {"place", place, METH_VARARGS, place_doc},
+    {"draw", draw, METH_VARARGS, draw_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, "_csampling",
+    "Compiled face selection and placement, byte-identical to sampling.py's NumPy path.", -1, methods,
+};
+
+PyMODINIT_FUNC PyInit__csampling(void)
+{
+    import_array();
+    return PyModule_Create(&module);
+}
