@@ -185,6 +185,11 @@ def load_ours(path):
     return load_trimesh(path)  # ours gets a preloaded trimesh.Trimesh
 
 
+def load_ours_numpy(path):
+    os.environ["SCATTER_NUMPY"] = "1"  # read when scatter_cli is imported: its NumPy path only
+    return load_ours(path)
+
+
 def sample_ours(mesh, n, **kw):
     import scatter_cli
 
@@ -204,6 +209,7 @@ def sample_floor(rng, n):
 # name -> (load, sample, reset, label of what is called)
 UNIFORM_METHODS = {
     "ours": (load_ours, sample_ours, None, "scatter_cli.sample(mesh, count=N)"),
+    "ours-numpy": (load_ours_numpy, sample_ours, None, "the same, SCATTER_NUMPY=1 (no compiled kernels)"),
     "trimesh": (load_trimesh, sample_trimesh, None, "trimesh.sample.sample_surface"),
     "pymeshlab": (load_pymeshlab, sample_pymeshlab, reset_pymeshlab,
                   "pymeshlab generate_sampling_montecarlo(samplenum=N)"),
@@ -215,6 +221,7 @@ UNIFORM_METHODS = {
 
 POISSON_METHODS = {
     "ours": (load_ours, sample_ours, None, "scatter_cli.sample(mesh, count=N, poisson=True)"),
+    "ours-numpy": (load_ours_numpy, sample_ours, None, "the same, SCATTER_NUMPY=1 (no compiled kernels)"),
     "pymeshlab": (load_pymeshlab, sample_pymeshlab_poisson, reset_pymeshlab,
                   "pymeshlab generate_sampling_poisson_disk(samplenum=N)"),
     "open3d": (load_open3d, sample_open3d_poisson, None, "open3d sample_points_poisson_disk"),
@@ -448,6 +455,11 @@ def detect_tools():
     _, where = probe_python("import scatter_cli as m; print(m.__file__)")
     tools["ours"] = {"ok": error is None, "note": error, "version": dist_version("ours"),
                      "path": where}
+    _, kernels = probe_python("from scatter_cli import sampling, thinning; "
+                              "print(sampling._kernel is not None and thinning._kernel is not None)")
+    if error is None and kernels.strip() != "True":
+        tools["ours"]["note"] = "compiled kernels NOT built: NumPy path only"
+    tools["ours-numpy"] = dict(tools["ours"], note="SCATTER_NUMPY=1")
 
     scatter = find_scatter()
     cli_error = probe_ours_module("scatter_cli.cli")
@@ -617,7 +629,7 @@ def section_poisson(cfg, ico, real, tools, tmp):
     for mesh, counts in [(ico, cfg["poisson_ico_counts"]), (real, cfg["poisson_real_counts"])]:
         for n in counts:
             rows += measure_in_children("poisson", POISSON_METHODS, tools, mesh, n, cfg,
-                                        kw_by_method={"ours": {"poisson": True}})
+                                        kw_by_method={"ours": {"poisson": True}, "ours-numpy": {"poisson": True}})
     step = cfg["cc_poisson_step"]
     rows.append(ours_radius_row(cfg, ico, step, tools))
     rows.append(cloudcompare_poisson_row(cfg, ico, step, tools, tmp))

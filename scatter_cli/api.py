@@ -250,7 +250,7 @@ def sampled_bounds(plan: SamplePlan):
         faces = g.faces if part.faces is None else g.faces[part.faces]
         referenced = np.zeros(len(g.vertices), dtype=bool)
         referenced[faces.ravel()] = True
-        v = g.vertices[referenced]
+        v = g.vertices if referenced.all() else g.vertices[referenced]
         if part.matrix is not None:
             v = apply_matrix(part.matrix, v)
         lo = np.minimum(lo, [v[:, c].min() for c in range(3)])

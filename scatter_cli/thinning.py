@@ -329,7 +329,7 @@ def thin_by_radius(points, radius):
     for _ in range(n + 1):
         if todo.size == 0:
             break
-        sub = pts[todo]
+        sub = pts if todo.size == n else pts[todo]
         graph = _PairGraph(sub, radius)
         new = graph.active[graph.kept(radius)]
         kept[todo[new]] = True
