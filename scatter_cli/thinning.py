@@ -82,6 +82,13 @@ def _offset_key(dx, dy, dz):
     return (dx << (2 * _BITS)) + (dy << _BITS) + dz
 
 
+def _cell(reach, parts):
+    """The side of grid cells for finding pairs closer than ``reach`` within ``parts``
+    cells: a hair over reach / parts, so that rounding in the cell coordinates (at most
+    2**-30 of a cell) cannot put such a pair ``parts + 1`` cells apart."""
+    return reach / parts * (1.0 + 1e-7)
+
+
 def _frame(size, *arrays):
     pts = [a for a in arrays if a.shape[0]]
     if not pts:
@@ -139,7 +146,7 @@ def _self_pairs(points, radius, grid=None):
     """All pairs closer than ``radius``: (i, j, d), i < j in input numbering.
 
     i, j (m,) int32 (int64 beyond 2**31 points); d (m,) float64.  ``grid``
-    may pass in ``_Grid(points, _frame(radius / 2, points))`` if already built.
+    may pass in ``_Grid(points, _frame(_cell(radius, 2), points))`` if already built.
     """
     n = points.shape[0]
     itype = _index_dtype(n)
@@ -147,7 +154,7 @@ def _self_pairs(points, radius, grid=None):
         empty = np.empty(0, dtype=itype)
         return empty, empty, np.empty(0)
     if grid is None:
-        grid = _Grid(points, _frame(radius / 2.0, points))
+        grid = _Grid(points, _frame(_cell(radius, 2), points))
     # one contiguous array per axis: 1-D gathers are much cheaper than row gathers
     x, y, z = (np.ascontiguousarray(points[grid.order, k]) for k in range(3))
     cell = grid.cell_of_sorted
@@ -183,7 +190,7 @@ def _cross_pairs(query, ref, radius):
     empty = np.empty(0, dtype=np.int64)
     if query.shape[0] == 0 or ref.shape[0] == 0:
         return empty, empty, np.empty(0)
-    frame = _frame(radius, query, ref)
+    frame = _frame(_cell(radius, 1), query, ref)
     grid = _Grid(ref, frame)
     qkeys = frame.keys(query)
     qq, rr, dd = [], [], []
@@ -205,7 +212,7 @@ def _cross_pairs(query, ref, radius):
 def _capped(points, radius, grid=None):
     """Bool (n,) mask: the first ``_CELL_CAP`` points (input order) of each cell of side radius/2."""
     if grid is None:
-        grid = _Grid(points, _frame(radius / 2.0, points))
+        grid = _Grid(points, _frame(_cell(radius, 2), points))
     rank = np.arange(points.shape[0]) - grid.start[grid.cell_of_sorted]
     mask = np.empty(points.shape[0], dtype=bool)
     mask[grid.order] = rank < _CELL_CAP
@@ -273,7 +280,7 @@ class _PairGraph:
 
     def __init__(self, points, reach, capped=True):
         self.reach = reach
-        frame = _frame(reach / 2.0, points)
+        frame = _frame(_cell(reach, 2), points)
         if _kernel is not None:
             out = _kernel.grid(points, frame.lo.astype(np.float64), float(frame.size), _CELL_CAP if capped else 0)
             self.active, self._grid = out[0], out[1:]
