@@ -16,6 +16,7 @@ from .sampling import DEFAULT_CHUNK, RawChunk, SamplePlan, chunk_ranges, in_bloc
 from .surface import Surface, apply_matrix, load_surface
 
 METHODS = ("random", "stratified", "sobol")
+PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object"}
 PRECISIONS = ("auto", "float32", "float64")
 # --precision auto keeps float32 while its rounding moves no point by more than this
 # fraction of the bounding-box diagonal.
@@ -94,7 +95,9 @@ class Run:
         n = self.count
         points = np.empty((n, 3), dtype=self.dtype)
         attributes = {}
-        # Fill preallocated arrays chunk by chunk: no concatenation copy at the end.
+        # Fill preallocated arrays chunk by chunk: no concatenation copy at the end. (Copying
+        # on the worker threads instead measured slower: 0.37 s against 0.23 s for 10^7
+        # points on the skull.)
         pos = 0
         for chunk in self.chunks(as_float64=True):
             k = len(chunk)
@@ -121,7 +124,11 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     t0 = time.perf_counter()
     names = parse_attributes(attributes)
     _check_options(count, density, seed, method, precision, chunk_size, radius)
-    surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects)
+    # vertices and faces are all a job needs unless an attribute or weight reads the file's
+    # colours, UVs or normals
+    plain = not weight and set(names) <= PLAIN_ATTRIBUTES
+    surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects,
+                                                                  plain=plain)
     t1 = time.perf_counter()
     sampler = None
     if weight:

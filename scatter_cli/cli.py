@@ -218,7 +218,9 @@ def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
     if argv and argv[0] in ("sample", "info"):
-        _import_trimesh_lean()
+        from . import surface
+
+        surface.import_trimesh = _import_trimesh_lean  # when a mesh needs it, not before
     signal.signal(signal.SIGTERM, _on_sigterm)
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when started ignoring it (`cmd &`)
         signal.signal(signal.SIGINT, _on_sigint)

@@ -18,6 +18,9 @@ import numpy as np
 from .errors import ScatterError, ScatterUsageError
 
 MESH_FORMATS = ("ply", "obj", "stl", "off", "glb", "gltf")
+# Called before trimesh is first imported, when set: the command line imports it with
+# SciPy hidden (see cli.py). Nothing imports trimesh before a mesh needs it.
+import_trimesh = None
 
 
 @dataclass
@@ -70,8 +73,18 @@ class Surface:
         return v @ m[:3, :3].T + m[:3, 3]
 
 
-def load_surface(source, *, input_format: str | None = None, objects=None) -> Surface:
-    """Load ``source`` (path, ``'-'`` for standard input, trimesh.Trimesh or trimesh.Scene)."""
+def load_surface(source, *, input_format: str | None = None, objects=None, plain=False) -> Surface:
+    """Load ``source`` (path, ``'-'`` for standard input, trimesh.Trimesh or trimesh.Scene).
+
+    ``plain``: only vertices and faces are wanted (no colours, UVs or normals from the
+    file), so a binary PLY triangle mesh is read without importing trimesh.
+    """
+    if plain and not objects and isinstance(source, (str, os.PathLike)) and str(source) != "-":
+        fast = _read_plain_ply(os.fspath(source), input_format)
+        if fast is not None:
+            return fast
+    if import_trimesh is not None and "trimesh" not in sys.modules:
+        import_trimesh()
     import trimesh
 
     logging.getLogger("trimesh").setLevel(logging.ERROR)
@@ -91,6 +104,22 @@ def load_surface(source, *, input_format: str | None = None, objects=None) -> Su
         surface = select_objects(surface, objects)
     if surface.face_count == 0:
         raise ScatterError(f"{name}: the mesh has no faces")
+    return surface
+
+
+def _read_plain_ply(path, input_format):
+    """The Surface of a binary PLY triangle mesh read by plyread, or None (use trimesh)."""
+    from .plyread import read_triangles
+
+    if (input_format or os.path.splitext(path)[1].lstrip(".")).lower() != "ply":
+        return None
+    _check_readable(path)
+    arrays = read_triangles(path)
+    if arrays is None:
+        return None
+    surface = Surface([_checked_geometry(path, *arrays, path)], [Instance(os.path.basename(path), 0)], path)
+    if surface.face_count == 0:
+        raise ScatterError(f"{path}: the mesh has no faces")
     return surface
 
 
@@ -141,6 +170,10 @@ def _geometry(name, mesh, source) -> Geometry:
     except (ValueError, TypeError, IndexError, OverflowError) as exc:
         reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise ScatterError(f"{source}: malformed geometry '{name}' ({reason[:200]})") from None
+    return _checked_geometry(name, vertices, faces, source, mesh)
+
+
+def _checked_geometry(name, vertices, faces, source, mesh=None) -> Geometry:
     if vertices.size == 0:
         vertices = vertices.reshape(0, 3)
     if faces.size == 0:

@@ -1,0 +1,131 @@
+"""The trimesh-free binary PLY reader: the arrays trimesh gives, or None to hand over."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+
+import scatter_cli
+from scatter_cli.plyread import read_triangles
+from scatter_cli.surface import load_surface
+
+from .conftest import SAMPLES
+
+
+def trimesh_arrays(path):
+    mesh = trimesh.load(path, process=False)
+    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def write_ply(path, vertices, faces, order="<", vertex_type="f4", index_type="i4", count_type="u1",
+              extra_vertex=(), extra_face="", fmt=None):
+    names = {"f4": "float", "f8": "double", "i4": "int", "u4": "uint", "u1": "uchar", "i2": "short"}
+    fmt = fmt or {"<": "binary_little_endian", ">": "binary_big_endian"}[order]
+    vprops = [("x", vertex_type), ("y", vertex_type), ("z", vertex_type)] + list(extra_vertex)
+    header = [f"ply", f"format {fmt} 1.0", "comment made by test_plyread", f"element vertex {len(vertices)}"]
+    header += [f"property {names[t]} {n}" for n, t in vprops]
+    header += [f"element face {len(faces)}", f"property list {names[count_type]} {names[index_type]} vertex_indices"]
+    if extra_face:
+        header.append(extra_face)
+    header.append("end_header")
+    vrec = np.zeros(len(vertices), dtype=[(n, order + t) for n, t in vprops])
+    for k, axis in enumerate("xyz"):
+        vrec[axis] = vertices[:, k]
+    frec = np.zeros(len(faces), dtype=[("n", order + count_type), ("i", order + index_type, 3)])
+    frec["n"] = 3
+    frec["i"] = faces
+    with open(path, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode())
+        f.write(vrec.tobytes())
+        f.write(frec.tobytes())
+    return path
+
+
+@pytest.fixture
+def ball():
+    m = trimesh.creation.icosphere(subdivisions=3)
+    v = np.asarray(m.vertices) * [1.0, 2.0, 3.0] + [1e3, -5.0, 0.25]
+    return v, np.asarray(m.faces)
+
+
+@pytest.mark.parametrize("name", ["skull.ply", "moebius-160-10.ply"])
+def test_sample_plys_read_as_trimesh_reads_them(name):
+    got = read_triangles(SAMPLES / name)
+    assert got is not None
+    want = trimesh_arrays(SAMPLES / name)
+    for a, b in zip(got, want):
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+
+
+@pytest.mark.parametrize("options", [
+    dict(),
+    dict(order=">"),
+    dict(vertex_type="f8", index_type="u4", count_type="i4"),
+    dict(extra_vertex=[("red", "u1"), ("confidence", "f4")]),
+])
+def test_written_variants_read_as_trimesh_reads_them(options, ball, tmp_path):
+    path = write_ply(tmp_path / "m.ply", *ball, **options)
+    got = read_triangles(path)
+    assert got is not None
+    for a, b in zip(got, trimesh_arrays(path)):
+        assert a.tobytes() == b.tobytes()
+
+
+@pytest.mark.parametrize("case", ["ascii", "quads", "face colours", "texcoords", "truncated", "not a ply"])
+def test_anything_else_is_handed_to_trimesh(case, ball, tmp_path):
+    v, f = ball
+    path = tmp_path / "m.ply"
+    if case == "ascii":
+        trimesh.Trimesh(v, f, process=False).export(path, encoding="ascii")
+    elif case == "quads":
+        trimesh.Trimesh(v, f, process=False).export(path)
+        data = path.read_bytes()
+        at = data.index(b"end_header\n") + len(b"end_header\n") + 12 * len(v)
+        path.write_bytes(data[:at] + b"\x04" + data[at + 1:])  # the first face claims four corners
+    elif case == "face colours":
+        write_ply(path, v, f, extra_face="property uchar red")
+    elif case == "texcoords":
+        write_ply(path, v, f, extra_face="property list uchar float texcoord")
+    elif case == "truncated":
+        write_ply(path, v, f)
+        path.write_bytes(path.read_bytes()[:-7])
+    else:
+        path.write_bytes(b"solid x\nendsolid x\n")
+    assert read_triangles(path) is None
+
+
+def test_plain_jobs_give_the_same_bytes_either_way(ball, tmp_path):
+    path = write_ply(tmp_path / "m.ply", *ball, order=">")
+    fast = scatter_cli.sample(path, count=5000, seed=2, attributes="face,normal")
+    slow = scatter_cli.sample(load_surface(path), count=5000, seed=2, attributes="face,normal")
+    assert fast.points.tobytes() == slow.points.tobytes()
+    assert fast.attributes["face"].tobytes() == slow.attributes["face"].tobytes()
+    assert fast.attributes["normal"].tobytes() == slow.attributes["normal"].tobytes()
+
+
+def test_bad_indices_still_get_the_one_line_error(ball, tmp_path):
+    v, f = ball
+    f = f.copy()
+    f[5, 1] = len(v) + 3
+    path = write_ply(tmp_path / "m.ply", v, f)
+    proc = subprocess.run([sys.executable, "-m", "scatter_cli", "sample", str(path), "-n", "10", "-o", "-"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 1
+    assert proc.stderr.strip().splitlines() == [f"error: {path}: face indices out of range in geometry '{path}'"]
+
+
+def test_a_plain_ply_job_never_imports_trimesh(tmp_path):
+    args = ["sample", str(SAMPLES / "skull.ply"), "-n", "100", "-a", "face,normal", "-o", str(tmp_path / "o.ply")]
+    code = (f"import sys\nfrom scatter_cli import cli\ntry:\n    cli.main({args!r})\nexcept SystemExit as e:\n"
+            "    assert e.code == 0\nprint('trimesh' in sys.modules)")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert proc.stdout.strip() == "False", proc.stderr
+
+
+def test_counts_larger_than_the_file_are_not_read(ball, tmp_path):
+    path = write_ply(tmp_path / "m.ply", *ball)
+    data = path.read_bytes().replace(b"element vertex 642", b"element vertex 999999999999", 1)
+    path.write_bytes(data)
+    assert read_triangles(path) is None
