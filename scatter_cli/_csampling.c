@@ -258,29 +258,52 @@ static PyObject *place(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* NumPy's PCG64DXSM: a 128-bit LCG with the cheap 64-bit multiplier, DXSM output taken
+ * from the state before the step; Generator.random() is (next >> 11) * 2^-53. The kernel
+ * draws the same doubles as sampling.uniforms, without writing them to memory. */
+#define PCG_MULT 0xda942042e4dd58b5ULL
+
+typedef struct {
+    __uint128_t state, inc;
+} Pcg;
+
+static inline double pcg_double(Pcg *r)
+{
+    uint64_t hi = (uint64_t)(r->state >> 64), lo = (uint64_t)r->state | 1;
+    hi ^= hi >> 32;
+    hi *= PCG_MULT;
+    hi ^= hi >> 48;
+    hi *= lo;
+    r->state = r->state * PCG_MULT + r->inc;
+    return (double)(hi >> 11) * (1.0 / 9007199254740992.0);
+}
+
 PyDoc_STRVAR(draw_doc,
-"draw(cdf, guide, u, coords, faces, rows, used, points, b)\n\n"
-"The random method in one pass over u (n, 3) float64: face choice from u[:, 0] into\n"
-"used (n,) int64, square-root warp of u[:, 1:] into b (n, 2) float64 (or None when the\n"
-"weights are not wanted), and the point on the face into points (n, 3) float64;\n"
-"corners as for place().");
+"draw(cdf, guide, state, coords, faces, rows, used, points, b)\n\n"
+"The random method for n points: draws 3 k .. 3 k + 2 of the PCG64DXSM generator whose\n"
+"state is (state_high, state_low, inc_high, inc_low) (four uint64) give point k's face\n"
+"(into used (n,) int64) and its square-root warp (into b (n, 2) float64, or None when\n"
+"the weights are not wanted); the point on the face goes into points (n, 3) float64.\n"
+"Corners as for place(). The same bytes as SamplePlan.place(select(...), warp(...)).");
 
 static PyObject *draw(PyObject *self, PyObject *args)
 {
-    PyObject *ocdf, *oguide, *ou, *ocoords, *ofaces, *orows, *oused, *opts, *ob;
-    PyArrayObject *cdf_a, *guide_a, *u_a, *used_a, *pts_a, *b_a = NULL;
+    PyObject *ocdf, *oguide, *ocoords, *ofaces, *orows, *oused, *opts, *ob;
+    PyArrayObject *cdf_a, *guide_a, *used_a, *pts_a, *b_a = NULL;
+    unsigned long long st_hi, st_lo, inc_hi, inc_lo;
     Corners c;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOO", &ocdf, &oguide, &ou, &ocoords, &ofaces, &orows, &oused, &opts, &ob))
+    if (!PyArg_ParseTuple(args, "OO(KKKK)OOOOOO", &ocdf, &oguide, &st_hi, &st_lo, &inc_hi, &inc_lo, &ocoords, &ofaces,
+                          &orows, &oused, &opts, &ob))
         return NULL;
     int wide = PyArray_Check(oguide) && PyArray_TYPE((PyArrayObject *)oguide) == NPY_INT64;
     if (!get(ocdf, NPY_FLOAT64, -1, &cdf_a, "cdf") || !get(oguide, wide ? NPY_INT64 : NPY_INT32, -1, &guide_a, "guide") ||
         !get_corners(ocoords, ofaces, orows, &c) || !get(oused, NPY_INT64, -1, &used_a, "used"))
         return NULL;
     npy_intp n = PyArray_SIZE(used_a);
-    if (!get(ou, NPY_FLOAT64, 3 * n, &u_a, "u") || !get(opts, NPY_FLOAT64, 3 * n, &pts_a, "points") ||
-        (ob != Py_None && !get(ob, NPY_FLOAT64, 2 * n, &b_a, "b")))
+    if (!get(opts, NPY_FLOAT64, 3 * n, &pts_a, "points") || (ob != Py_None && !get(ob, NPY_FLOAT64, 2 * n, &b_a, "b")))
         return NULL;
-    const double *cdf = PyArray_DATA(cdf_a), *u = PyArray_DATA(u_a);
+    Pcg rng = {((__uint128_t)st_hi << 64) | st_lo, ((__uint128_t)inc_hi << 64) | inc_lo};
+    const double *cdf = PyArray_DATA(cdf_a);
     const void *g = PyArray_DATA(guide_a);
     int64_t last = PyArray_SIZE(cdf_a) - 1, m = PyArray_SIZE(guide_a);
     int64_t *used = PyArray_DATA(used_a);
@@ -288,7 +311,10 @@ static PyObject *draw(PyObject *self, PyObject *args)
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp k0 = 0; k0 < n; k0 += BLOCK) {
         npy_intp k1 = n - k0 < BLOCK ? n : k0 + BLOCK;
-        select_block(cdf, last, g, wide, m, u + 3 * k0, 3, k1 - k0, used + k0);
+        double ub[3 * BLOCK]; /* the draws of points k0 .. k1 - 1 */
+        for (npy_intp j = 0; j < 3 * (k1 - k0); j++)
+            ub[j] = pcg_double(&rng);
+        select_block(cdf, last, g, wide, m, ub, 3, k1 - k0, used + k0);
         /* the face rows of the whole block first: their cache misses overlap, and so do
            the vertex rows' below, instead of each point waiting on its face row */
         int64_t vi[3 * BLOCK];
@@ -296,8 +322,8 @@ static PyObject *draw(PyObject *self, PyObject *args)
             for (npy_intp k = k0; k < k1; k++)
                 memcpy(vi + 3 * (k - k0), c.faces + 3 * (c.rows ? c.rows[used[k]] : used[k]), 3 * sizeof(int64_t));
         for (npy_intp k = k0; k < k1; k++) {
-            double b1 = 1.0 - sqrt(u[3 * k + 1]); /* warps.square_to_triangle */
-            double b2 = (1.0 - b1) * u[3 * k + 2];
+            double b1 = 1.0 - sqrt(ub[3 * (k - k0) + 1]); /* warps.square_to_triangle */
+            double b2 = (1.0 - b1) * ub[3 * (k - k0) + 2];
             if (b) {
                 b[2 * k] = b1;
                 b[2 * k + 1] = b2;

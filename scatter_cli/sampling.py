@@ -131,13 +131,13 @@ class SamplePlan:
 
     def draw(self, start: int, stop: int, seed: int, want_bary: bool = False) -> RawChunk:
         """Points ``start`` to ``stop`` of the random sequence for ``seed``."""
-        u = uniforms(seed, start, stop)
         if _kernel is None or type(self).select is not SamplePlan.select:  # (a subclass's own selection)
+            u = uniforms(seed, start, stop)
             return self.place(start, self.select(u[:, 0]), square_to_triangle(u[:, 1:3]), want_bary)
         n = stop - start
         used, points = np.empty(n, dtype=np.int64), np.empty((n, 3))
         b = np.empty((n, 2)) if want_bary else None
-        _kernel.draw(self.cdf, self.guide, u, *self._corner_table(), used, points, b)
+        _kernel.draw(self.cdf, self.guide, generator_state(seed, start), *self._corner_table(), used, points, b)
         return self._finish(start, used, b, points, want_bary)
 
     def _scene_tables(self):
@@ -229,9 +229,21 @@ def _corner_points(tri, rows, b, points):
 
 def uniforms(seed: int, start: int, stop: int):
     """Draws for points ``start .. stop - 1``: (n, 3) float64 in [0, 1)."""
+    return np.random.Generator(_stream(seed, start)).random((stop - start, DRAWS_PER_POINT))
+
+
+def generator_state(seed: int, start: int):
+    """(state high, state low, inc high, inc low): the 128-bit PCG64DXSM state, as four
+    uint64, from which the kernel draws point ``start`` onwards."""
+    state = _stream(seed, start).state["state"]
+    mask = (1 << 64) - 1
+    return state["state"] >> 64, state["state"] & mask, state["inc"] >> 64, state["inc"] & mask
+
+
+def _stream(seed, start):
     bits = np.random.PCG64DXSM(seed)
     bits.advance(DRAWS_PER_POINT * int(start))
-    return np.random.Generator(bits).random((stop - start, DRAWS_PER_POINT))
+    return bits
 
 
 def _parts(surface: Surface, weights):

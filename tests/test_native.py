@@ -171,3 +171,13 @@ def test_kernels_refuse_bad_arrays_instead_of_crashing():
         k.areas(np.zeros((3, 3), dtype=np.float32), np.array([[0, 1, 2]]), None, out)
     with pytest.raises(TypeError):
         thinning._kernel.grid(np.zeros((4, 2)), np.zeros(3), 1.0, 0)
+
+
+@pytest.mark.parametrize("seed,start", [(0, 0), (7, 3), (2**63 + 5, 10**12), (123456789, 2**40 + 1)])
+def test_the_kernels_generator_is_numpys_stream(seed, start, sample_mesh, numpy_only):
+    # The kernel draws PCG64DXSM itself: any start, far into the stream, must match NumPy.
+    surface = load_surface(sample_mesh("koala.obj"))
+    a = sampling.SamplePlan(surface).draw(start, start + 1000, seed, want_bary=True)
+    b = numpy_only(lambda: sampling.SamplePlan(surface).draw(start, start + 1000, seed, want_bary=True))
+    for field in ("points", "face", "bary"):
+        assert getattr(a, field).tobytes() == getattr(b, field).tobytes(), field
