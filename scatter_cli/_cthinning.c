@@ -59,10 +59,10 @@ static PyObject *owned_array(int type, npy_intp n, void *data)
 
 /* Sort (key, idx) pairs by key, stably: LSD radix, a byte at a time, skipping the bytes
  * all keys share. */
-static int radix_sort(uint64_t *key, int64_t *idx, int64_t n)
+static int radix_sort(uint64_t *key, int32_t *idx, int64_t n)
 {
     uint64_t *k2 = malloc((n ? n : 1) * sizeof(uint64_t));
-    int64_t *i2 = malloc((n ? n : 1) * sizeof(int64_t));
+    int32_t *i2 = malloc((n ? n : 1) * sizeof(int32_t));
     if (!k2 || !i2) {
         free(k2);
         free(i2);
@@ -85,7 +85,7 @@ static int radix_sort(uint64_t *key, int64_t *idx, int64_t n)
             i2[to] = idx[i];
         }
         memcpy(key, k2, n * sizeof(uint64_t));
-        memcpy(idx, i2, n * sizeof(int64_t));
+        memcpy(idx, i2, n * sizeof(int32_t));
     }
     free(k2);
     free(i2);
@@ -312,7 +312,8 @@ static PyObject *grid(PyObject *self, PyObject *args)
     int ok = 0;
     int64_t a = 0, cells = 0;
     uint64_t *key = malloc(m * sizeof(uint64_t)), *ukey = malloc(m * sizeof(uint64_t));
-    int64_t *perm = malloc(m * sizeof(int64_t)), *number = malloc(m * sizeof(int64_t));
+    int32_t *perm = malloc(m * sizeof(int32_t)); /* n < 2^31 */
+    int64_t *number = malloc(m * sizeof(int64_t));
     int64_t *cell_start = malloc((m + 1) * sizeof(int64_t)), *active = malloc(m * sizeof(int64_t));
     int64_t *order = malloc(m * sizeof(int64_t));
     unsigned char *sub = malloc(m);
@@ -339,7 +340,7 @@ static PyObject *grid(PyObject *self, PyObject *args)
         key[i] = (uint64_t)((((f[0] >> 1) + 1 - cmin[0]) * ny + ((f[1] >> 1) + 1 - cmin[1])) * nz +
                             ((f[2] >> 1) + 1 - cmin[2]));
         sub[i] = (unsigned char)(((f[0] & 1) << 2) | ((f[1] & 1) << 1) | (f[2] & 1));
-        perm[i] = i;
+        perm[i] = (int32_t)i;
     }
     if (!radix_sort(key, perm, n))
         goto unlock;
@@ -588,7 +589,8 @@ static PyObject *greedy(PyObject *self, PyObject *args)
     int32_t *ranges = malloc((18 * g.cells + 1) * sizeof(int32_t));
     int64_t *mask_at = malloc((g.cells + 1) * sizeof(int64_t));
     uint64_t *mask = NULL, *crowd = malloc(m * sizeof(uint64_t));
-    int64_t *rank = malloc(m * sizeof(int64_t)), *where = malloc(m * sizeof(int64_t));
+    int32_t *rank = malloc(m * sizeof(int32_t)); /* a < 2^31 */
+    int64_t *where = malloc(m * sizeof(int64_t));
     int32_t *cell_of = malloc(m * sizeof(int32_t));
     char *blocked = calloc(m, 1);
     int ok = ranges && mask_at && crowd && rank && where && cell_of && blocked;
@@ -608,7 +610,7 @@ static PyObject *greedy(PyObject *self, PyObject *args)
     }
     if (ok) {
         for (int64_t p = 0; p < a; p++)
-            rank[p] = p;
+            rank[p] = (int32_t)p;
         ok = radix_sort(crowd, rank, a); /* stable: ties stay in active-number order */
     }
     if (ok) {
