@@ -11,7 +11,7 @@ from .attributes import AttributeMaker
 from .errors import ScatterError, ScatterUsageError
 from .methods import DRAWS, SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
-from .sampling import DEFAULT_CHUNK, RawChunk, SamplePlan, chunk_ranges, in_blocks, run_chunks
+from .sampling import RawChunk, SamplePlan, chunk_ranges, in_blocks, run_chunks
 from .surface import Surface, apply_matrix, load_surface
 
 METHODS = ("random", "stratified", "sobol")
@@ -165,7 +165,7 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     }
     if sampler is not None:
         info["weight"] = weight
-    run = Run(surface, plan, count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info, sampler, method)
+    run = Run(surface, plan, count, seed, names, dtype, chunk_size or plan.default_chunk, info, sampler, method)
     if poisson or radius is not None:
         run.thin(candidate_count(area, count, radius, surface.source, oversampling), radius)
     return run

@@ -8,6 +8,8 @@ the file with trimesh, which also reports what is wrong with a malformed file. W
 answers, it gives the arrays trimesh gives with ``process=False``.
 """
 
+import contextlib
+import mmap
 import os
 
 import numpy as np
@@ -38,17 +40,28 @@ def read_triangles(path):
             sizes = (vertex.itemsize * n_vertex, face.itemsize * n_face)
             if body_at + sum(sizes) > os.fstat(f.fileno()).st_size:
                 return None  # truncated, or counts that do not fit: trimesh says which
-            f.seek(body_at)
-            v = np.frombuffer(f.read(sizes[0]), dtype=vertex, count=n_vertex)
-            t = np.frombuffer(f.read(sizes[1]), dtype=face, count=n_face)
+            data = _contents(f)
     except (OSError, ValueError, UnicodeDecodeError, TypeError):
         return None
+    v = np.frombuffer(data, dtype=vertex, count=n_vertex, offset=body_at)
+    t = np.frombuffer(data, dtype=face, count=n_face, offset=body_at + sizes[0])
     if n_face and not (t["n"] == 3).all():
         return None  # polygons: trimesh triangulates them
     vertices = np.empty((n_vertex, 3))
     for k, axis in enumerate("xyz"):
         vertices[:, k] = v[axis]
     return vertices, t["i"].astype(np.int64)
+
+
+def _contents(f):
+    """The bytes of file ``f``: mapped read-only where possible (reading a large file into
+    fresh memory costs more than converting it), else read. A mapping stays open only as
+    long as arrays view it."""
+    try:
+        return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+    except (OSError, ValueError):  # a file system that cannot map
+        f.seek(0)
+        return f.read()
 
 
 def _layout(lines):

@@ -107,6 +107,30 @@ def test_sampling_is_byte_identical_without_the_kernel(name, options, sample_mes
     same_samples(scatter_cli.sample(surface, **kw), numpy_only(lambda: scatter_cli.sample(surface, **kw)))
 
 
+@pytest.mark.parametrize("name", ["skull", "degenerate", "instances", "moved"])
+def test_face_order_gives_the_same_bytes(name, sample_mesh, numpy_only):
+    # On large meshes the kernel computes a chunk's points in face order (the plan's
+    # in_face_order); forced on here, it must not change a byte, whatever the chunk size.
+    mesh = mesh_for(name, sample_mesh)
+    surface = mesh if isinstance(mesh, Surface) else load_surface(mesh)
+    plan = sampling.SamplePlan(surface)
+    plan.in_face_order = True
+    whole = plan.draw(0, 30_011, 3, want_bary=True)
+    parts = [plan.draw(a, min(a + 7_000, 30_011), 3, want_bary=True) for a in range(0, 30_011, 7_000)]
+    reference = numpy_only(lambda: sampling.SamplePlan(surface).draw(0, 30_011, 3, want_bary=True))
+    for field in ("points", "face", "bary", "instance"):
+        expected = getattr(reference, field).tobytes()
+        assert getattr(whole, field).tobytes() == expected, field
+        assert np.concatenate([getattr(p, field) for p in parts]).tobytes() == expected, field
+
+
+def test_large_meshes_go_in_face_order_and_larger_chunks():
+    small = sampling.SamplePlan(load_surface(trimesh.creation.icosphere(subdivisions=3)))
+    large = sampling.SamplePlan(load_surface(trimesh.creation.icosphere(subdivisions=7)))  # 327,680 faces
+    assert not small.in_face_order and small.default_chunk == sampling.DEFAULT_CHUNK
+    assert large.in_face_order and large.default_chunk == sampling.LARGE_MESH_CHUNK
+
+
 @pytest.mark.parametrize("options", [dict(poisson=True, count=3000), dict(radius=0.02)])
 def test_thinning_is_byte_identical_without_the_kernel(options, sample_mesh, numpy_only):
     surface = load_surface(sample_mesh("koala.obj"))

@@ -2,7 +2,6 @@
 coarse uniformity and determinism.  All random inputs use fixed seeds."""
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +11,8 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from scatter_cli.thinning import relative_radius, spacing_stats, thin_by_radius, thin_to_count
+
+from .conftest import SAMPLES
 
 SPHERE_AREA = 4.0 * math.pi
 # chi-square critical values at alpha = 0.001
@@ -182,11 +183,8 @@ def test_to_count_rho_sphere(count):
     assert relative_radius(kd_min_distance(p[random_subset]), SPHERE_AREA, count) < 0.75
 
 
-def _shared_mesh():
-    path = Path("/work/shared/meshes/skull.ply")
-    if not path.exists():
-        pytest.skip("shared test mesh not available")
-    return trimesh.load(path, force="mesh")
+def _skull():
+    return trimesh.load(SAMPLES / "skull.ply", force="mesh")
 
 
 @pytest.mark.parametrize(
@@ -194,7 +192,7 @@ def _shared_mesh():
     [
         lambda: trimesh.creation.torus(major_radius=1.0, minor_radius=0.3),
         lambda: trimesh.creation.capsule(height=1.0, radius=0.4),
-        _shared_mesh,
+        _skull,
     ],
     ids=["torus", "capsule", "skull"],
 )
