@@ -325,14 +325,20 @@ static PyObject *grid(PyObject *self, PyObject *args)
     /* A cell is two fine cells a side (side >= reach); ``sub`` says which of its eight.
        Cells are sorted by a compact key, in the order of their packed keys (x, then y,
        then z), so the radix sort has few bytes to go through. */
-    int64_t cmin[3] = {INT64_MAX, INT64_MAX, INT64_MAX}, cmax[3] = {0, 0, 0}, f[3];
-    for (int64_t i = 0; i < n; i++) {
-        fine_cell(pts + 3 * i, lo, size, f);
+    /* cells are monotone in the coordinates: the extreme cells are those of the extremes */
+    double pmin[3] = {0, 0, 0}, pmax[3] = {0, 0, 0};
+    for (int64_t i = 0; i < n; i++)
         for (int k = 0; k < 3; k++) {
-            int64_t c = (f[k] >> 1) + 1;
-            cmin[k] = c < cmin[k] ? c : cmin[k];
-            cmax[k] = c > cmax[k] ? c : cmax[k];
+            double v = pts[3 * i + k];
+            pmin[k] = i == 0 || v < pmin[k] ? v : pmin[k];
+            pmax[k] = i == 0 || v > pmax[k] ? v : pmax[k];
         }
+    int64_t cmin[3], cmax[3], f[3];
+    fine_cell(pmin, lo, size, cmin);
+    fine_cell(pmax, lo, size, cmax);
+    for (int k = 0; k < 3; k++) {
+        cmin[k] = (cmin[k] >> 1) + 1;
+        cmax[k] = (cmax[k] >> 1) + 1;
     }
     int64_t ny = n ? cmax[1] - cmin[1] + 1 : 1, nz = n ? cmax[2] - cmin[2] + 1 : 1;
     for (int64_t i = 0; i < n; i++) {
@@ -344,26 +350,41 @@ static PyObject *grid(PyObject *self, PyObject *args)
     }
     if (!radix_sort(key, perm, n))
         goto unlock;
-    /* the cap: rank in input order within each fine cell (the sort is stable) */
+    /* the cap: rank in input order within each fine cell (the sort is stable). Most
+       point sets have no fine cell over the cap: then every point is active under its
+       own number, and ``number`` is not needed. */
+    int over = 0;
     int64_t seen[8] = {0};
-    for (int64_t s = 0; s < n; s++) {
+    for (int64_t s = 0; cap > 0 && s < n; s++) {
         if (s > 0 && key[s] != key[s - 1])
             memset(seen, 0, sizeof(seen));
-        number[perm[s]] = cap <= 0 || seen[sub[perm[s]]]++ < cap;
+        over |= seen[sub[perm[s]]]++ >= cap;
     }
-    for (int64_t i = 0; i < n; i++) {
-        if (number[i]) {
-            active[a] = i;
-            number[i] = a++;
-        } else {
-            number[i] = -1;
+    if (over) {
+        memset(seen, 0, sizeof(seen));
+        for (int64_t s = 0; s < n; s++) {
+            if (s > 0 && key[s] != key[s - 1])
+                memset(seen, 0, sizeof(seen));
+            number[perm[s]] = seen[sub[perm[s]]]++ < cap;
         }
+        for (int64_t i = 0; i < n; i++) {
+            if (number[i]) {
+                active[a] = i;
+                number[i] = a++;
+            } else {
+                number[i] = -1;
+            }
+        }
+    } else {
+        for (int64_t i = 0; i < n; i++)
+            active[i] = i;
+        a = n;
     }
     int64_t k = 0;
     uint64_t last = 0;
     for (int64_t s = 0; s < n; s++) {
         int64_t i = perm[s];
-        if (number[i] < 0)
+        if (over && number[i] < 0)
             continue;
         if (k == 0 || key[s] != last) {
             last = key[s];
@@ -373,7 +394,7 @@ static PyObject *grid(PyObject *self, PyObject *args)
             cell_start[cells++] = k;
         }
         memcpy(xyz + 3 * k, pts + 3 * i, 3 * sizeof(double));
-        order[k++] = number[i];
+        order[k++] = over ? number[i] : i;
     }
     cell_start[cells] = a;
     ok = 1;
@@ -473,6 +494,45 @@ static int64_t words(int64_t bits)
     return (bits + 63) / 64;
 }
 
+/* The crowding of point p (3,) against the points of near: the sum of
+ * floor((1 - d * scale) * CROWD_SCALE) over those at distance d < radius, d from squared
+ * distances below r2 (the grid's reach squared), near index ``self`` (p itself) left out.
+ * Those points' bits are set in mask (words(near->size) words), the others cleared. A
+ * first pass marks the points within reach word by word with no branches; only they go
+ * on to the square root. */
+static uint64_t crowding_of(const double *p, int64_t self, Near *near, double r2, double radius, double scale,
+                            uint64_t *mask)
+{
+    const double *restrict x = near->x, *restrict y = near->y, *restrict z = near->z;
+    double *restrict d2 = near->d2;
+    int64_t n = near->size;
+    for (int64_t l = 0; l < n; l++) {
+        double dx = p[0] - x[l], dy = p[1] - y[l], dz = p[2] - z[l];
+        double e = dx * dx + dy * dy; /* thinning._self_pairs' order of operations */
+        d2[l] = e + dz * dz;
+    }
+    uint64_t sum = 0;
+    for (int64_t word = 0; 64 * word < n; word++) {
+        int64_t end = n - 64 * word < 64 ? n - 64 * word : 64;
+        const double *dw = d2 + 64 * word;
+        uint64_t bits = 0;
+        for (int64_t b = 0; b < end; b++)
+            bits |= (uint64_t)(dw[b] < r2) << b;
+        if (self >= 64 * word && self < 64 * word + 64)
+            bits &= ~((uint64_t)1 << (self - 64 * word));
+        for (uint64_t left = bits; left; left &= left - 1) {
+            int b = __builtin_ctzll(left);
+            double d = sqrt(dw[b]);
+            if (d < radius) /* makes the weight positive, so truncation is floor */
+                sum += (uint64_t)(int64_t)((1.0 - d * scale) * CROWD_SCALE);
+            else
+                bits &= ~((uint64_t)1 << b);
+        }
+        mask[word] = bits;
+    }
+    return sum;
+}
+
 typedef struct {
     const Greedy *w;
     int64_t c0, c1;
@@ -485,32 +545,24 @@ static void *crowd_job(void *arg)
     CrowdJob *job = arg;
     const Greedy *w = job->w;
     const Grid *g = w->g;
-    Near near = {0}, hits = {0};
+    Near near = {0};
     double scale = 1.0 / (2.0 * w->radius);
     job->ok = 1;
     for (int64_t c = job->c0; job->ok && c < job->c1; c++) {
-        job->ok = gather(g, w->ranges + 18 * c, &near);
-        int64_t nw = words(near.size);
-        for (int64_t s = g->cell_start[c]; job->ok && s < g->cell_start[c + 1]; s++) {
-            job->ok = close_to(g, s, &near, w->r2, &hits);
+        const int32_t *r = w->ranges + 18 * c;
+        job->ok = gather(g, r, &near);
+        int64_t nw = words(near.size), self = 0; /* near index of the cell's first point */
+        for (int k = 0; k < 4; k++)
+            self += r[2 * k + 1] - r[2 * k];
+        self += g->cell_start[c] - r[8];
+        for (int64_t s = g->cell_start[c]; job->ok && s < g->cell_start[c + 1]; s++, self++) {
             uint64_t *mask = w->mask + w->mask_at[c] + (s - g->cell_start[c]) * nw;
-            memset(mask, 0, nw * sizeof(uint64_t));
-            uint64_t sum = 0;
-            for (int64_t t = 0; t < hits.size; t++) {
-                double d = sqrt(hits.d2[t]);
-                if (d < w->radius) {
-                    /* d < radius makes the weight positive, and truncation floor */
-                    sum += (uint64_t)((1.0 - d * scale) * CROWD_SCALE);
-                    mask[hits.at[t] / 64] |= (uint64_t)1 << (hits.at[t] % 64);
-                }
-            }
-            w->crowd[g->order[s]] = sum;
+            w->crowd[g->order[s]] = crowding_of(g->xyz + 3 * s, self, &near, w->r2, w->radius, scale, mask);
             w->where[g->order[s]] = s;
             w->cell_of[s] = (int32_t)c;
         }
     }
     near_free(&near);
-    near_free(&hits);
     return NULL;
 }
 
@@ -616,6 +668,13 @@ static PyObject *greedy(PyObject *self, PyObject *args)
     if (ok) {
         memset(kept, 0, (size_t)a);
         for (int64_t k = 0; k < a; k++) {
+            if (k + 16 < a) /* the walk jumps about at random: ask for the rows early */
+                __builtin_prefetch(where + rank[k + 16]);
+            if (k + 8 < a) {
+                int64_t ahead = where[rank[k + 8]];
+                __builtin_prefetch(blocked + ahead);
+                __builtin_prefetch(w.cell_of + ahead);
+            }
             int64_t s = where[rank[k]];
             if (blocked[s])
                 continue;
