@@ -26,6 +26,7 @@ DEFAULT_CHUNK = 1 << 17
 # (per 10^7 points on one thread, on the 1.31M-face icosphere: 0.80 s in draw order; in
 # face order 0.68 s at 2^17 points a chunk, 0.59 s at 2^18, 0.51 s at 2^19 and 2^20), so
 # large meshes get larger chunks. Small meshes sit in the caches: order changes nothing.
+# The NumPy path keeps 2^17: its temporaries outgrow the caches in larger chunks.
 SORT_FACES, LARGE_MESH_CHUNK = 1 << 18, 1 << 19
 _kernel = native.kernel("_csampling")
 
@@ -97,7 +98,8 @@ class SamplePlan:
         if not len(self.cdf) or not self.cdf[-1] > 0 or not math.isfinite(self.cdf[-1]):
             raise ScatterError(f"{surface.source}: the mesh has no faces with a non-zero, finite area")
         self.guide = _guide_table(self.cdf)
-        self.in_face_order = self.faces_used >= SORT_FACES  # how the kernel goes: same output
+        # how the kernel goes (the output is the same); the NumPy path has no such order
+        self.in_face_order = _kernel is not None and self.faces_used >= SORT_FACES
 
     @property
     def area(self) -> float:
