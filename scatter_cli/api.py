@@ -63,7 +63,8 @@ class Run:
         from . import thinning
 
         t = time.perf_counter()
-        blocks = in_blocks(lambda i, j: self.sampler.draw(i, j, self.seed, True), candidates)
+        want_bary = self.maker.needs_bary  # for the attributes of the points kept, if any
+        blocks = in_blocks(lambda i, j: self.sampler.draw(i, j, self.seed, want_bary), candidates)
         points = np.concatenate([b.points for b in blocks]) if len(blocks) > 1 else blocks[0].points
         t1 = time.perf_counter()
         if radius is not None:

@@ -75,6 +75,16 @@ def test_thinning_with_attributes_and_scene(sample_mesh):
     np.testing.assert_allclose(np.linalg.norm(s.normal, axis=1), 1, atol=1e-6)
 
 
+def test_thinned_points_keep_their_face_and_weights(sample_mesh):
+    # Candidates are drawn without barycentric weights unless an attribute needs them.
+    surface = load_surface(sample_mesh("skull.ply"))
+    s = scatter_cli.sample(surface, 2000, poisson=True, attributes=("face", "bary"), precision="float64")
+    g = surface.geometries[0]
+    rebuilt = np.einsum("ij,ijk->ik", s.bary, g.vertices[g.faces[s.face]])
+    extent = np.ptp(g.vertices, axis=0).max()
+    np.testing.assert_allclose(rebuilt, s.points, rtol=0, atol=1e-9 * extent)
+
+
 @pytest.mark.parametrize("args", [["--poisson", "-n", "700"], ["--radius", "0.5"]])
 def test_command_is_deterministic_across_chunk_sizes(sample_mesh, tmp_path, args):
     outs = []
