@@ -23,8 +23,9 @@ DRAWS_PER_POINT = 3
 DEFAULT_CHUNK = 1 << 17
 # The kernel takes a chunk's points in face order on meshes of at least SORT_FACES faces
 # (_csampling.c): the more points a chunk holds, the closer their faces and the faster
-# (per 10^7 points on one thread, on the 1.31M-face icosphere: 0.80 s in draw order; in
-# face order 0.68 s at 2^17 points a chunk, 0.59 s at 2^18, 0.51 s at 2^19 and 2^20), so
+# (per 10^7 points on one thread, on the 1.31M-face icosphere: 0.73 to 0.84 s in draw
+# order; in face order 0.71 to 0.83 s at 2^17 points a chunk, 0.59 s at 2^18, 0.51 to
+# 0.57 s at 2^19, 0.51 s at 2^20; benchmarks/draw_time.py), so
 # large meshes get larger chunks. Small meshes sit in the caches: order changes nothing.
 # The NumPy path keeps 2^17: its temporaries outgrow the caches in larger chunks.
 SORT_FACES, LARGE_MESH_CHUNK = 1 << 18, 1 << 19
