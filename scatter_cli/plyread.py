@@ -8,7 +8,6 @@ the file with trimesh, which also reports what is wrong with a malformed file. W
 answers, it gives the arrays trimesh gives with ``process=False``.
 """
 
-import contextlib
 import mmap
 import os
 

@@ -282,7 +282,7 @@ def _parts(surface: Surface, weights):
             faces = None if ok.all() else np.flatnonzero(ok)
         parts.append(Part(k, faces, None if tris is None else tris[inst.geometry], inst.matrix, g))
         areas.append(a if faces is None else a[faces])
-    return parts, (np.concatenate(areas) if areas else np.empty(0)), skipped
+    return parts, (areas[0] if len(areas) == 1 else np.concatenate(areas) if areas else np.empty(0)), skipped
 
 
 def _doubled_areas(g, tri, matrix):
