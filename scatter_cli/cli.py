@@ -52,7 +52,7 @@ def sample(
     stats: Optional[str] = typer.Option(None, "--stats", metavar="PATH", help="Write a JSON summary to this file ('-': standard error)."),
     quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress and no warnings."),
     chunk_size: Optional[int] = typer.Option(None, "--chunk-size", metavar="K", help="Points generated per chunk (memory/speed knob; never changes the output)."),
-    input_format: Optional[str] = typer.Option(None, "--input-format", metavar="FORMAT", help="Mesh format when reading standard input (ply, obj, stl, off, glb)."),
+    input_format: Optional[str] = typer.Option(None, "--input-format", metavar="FORMAT", help="Mesh format when reading standard input or a pipe (ply, obj, stl, off, glb)."),
 ):
     """Sample points on the surface of MESH.
 
@@ -108,7 +108,7 @@ def _write_stats(info, path):
 def info(
     mesh: str = typer.Argument(..., metavar="MESH", help="Mesh file; '-' reads standard input."),
     as_json: bool = typer.Option(False, "--json", help="Machine-readable JSON."),
-    input_format: Optional[str] = typer.Option(None, "--input-format", metavar="FORMAT", help="Mesh format when reading standard input."),
+    input_format: Optional[str] = typer.Option(None, "--input-format", metavar="FORMAT", help="Mesh format when reading standard input or a pipe."),
 ):
     """Faces, vertices, area, bounding box, degenerate faces, attributes and objects of MESH."""
     from .info import describe, format_text

@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import logging
 import os
+import stat
 import sys
 from dataclasses import dataclass, field
 
@@ -79,7 +80,7 @@ def load_surface(source, *, input_format: str | None = None, objects=None, plain
     ``plain``: only vertices and faces are wanted (no colours, UVs or normals from the
     file), so a binary PLY triangle mesh is read without importing trimesh.
     """
-    if plain and not objects and isinstance(source, (str, os.PathLike)) and str(source) != "-":
+    if plain and not objects and isinstance(source, (str, os.PathLike)) and not _is_stream(os.fspath(source)):
         fast = _read_plain_ply(os.fspath(source), input_format)
         if fast is not None:
             return fast
@@ -134,6 +135,16 @@ def _read_file(source, input_format):
         if not data:
             raise ScatterError("<stdin>: no data on standard input")
         file_obj, file_type = io.BytesIO(data), input_format.lower()
+    elif _is_stream(path):  # a pipe, e.g. `scatter sample <(gunzip -c mesh.ply.gz)`: read it once
+        file_type = (input_format or os.path.splitext(path)[1].lstrip(".")).lower()
+        if not file_type:
+            raise ScatterUsageError(f"{path}: a pipe has no file suffix to tell the format; pass --input-format")
+        _check_readable(path)
+        with open(path, "rb") as f:
+            data = f.read()
+        if not data:
+            raise ScatterError(f"{path}: no data in the pipe")
+        file_obj = io.BytesIO(data)
     else:
         _check_readable(path)
         file_type = (input_format or os.path.splitext(path)[1].lstrip(".")).lower()
@@ -159,8 +170,19 @@ def _check_readable(path):
         raise ScatterError(f"{path}: is a directory, not a mesh file")
     if not os.access(path, os.R_OK):
         raise ScatterError(f"{path}: permission denied")
-    if os.path.getsize(path) == 0:
+    if not _is_stream(path) and os.path.getsize(path) == 0:
         raise ScatterError(f"{path}: the file is empty")
+
+
+def _is_stream(path):
+    """Whether ``path`` is standard input or a pipe, socket or device: read once, no size."""
+    if path == "-":
+        return True
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
 def _geometry(name, mesh, source) -> Geometry:

@@ -54,6 +54,35 @@ def test_empty_file(tmp_path, existing):
     assert_untouched(existing)
 
 
+def feed_fifo(path, data):
+    """A named pipe at ``path`` that a thread fills with ``data`` once a reader opens it."""
+    import os
+    import threading
+
+    os.mkfifo(path)
+
+    def write():
+        with open(path, "wb") as f:
+            f.write(data)
+
+    threading.Thread(target=write, daemon=True).start()
+    return path
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="named pipes")
+def test_mesh_from_a_pipe_is_read_once(tmp_path, sample_mesh):
+    # `scatter sample <(gunzip -c mesh.ply.gz)`: a pipe has no size and cannot be reread.
+    data = sample_mesh("skull.ply").read_bytes()
+    from_file = run_scatter("sample", sample_mesh("skull.ply"), "-n", 50, "-f", "xyz", check=True).stdout
+    piped = run_scatter("sample", feed_fifo(tmp_path / "mesh.ply", data), "-n", 50, "-f", "xyz", check=True)
+    assert piped.stdout == from_file
+    no_suffix = feed_fifo(tmp_path / "mesh", data)
+    assert_one_line_error(run_scatter("sample", no_suffix, "-n", 5), 2, "--input-format")
+    with open(no_suffix, "rb") as f:  # let the writer finish
+        f.read()
+    assert_one_line_error(run_scatter("sample", feed_fifo(tmp_path / "none.ply", b""), "-n", 5), 1, "no data")
+
+
 def test_directory(tmp_path):
     assert_one_line_error(run_scatter("sample", tmp_path), 1, "directory")
 
