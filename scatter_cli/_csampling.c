@@ -303,8 +303,8 @@ typedef struct {
     double *pts, *b;
 } Draw;
 
-/* Points at[j] (j < count) from their draws ub[3 j .. 3 j + 2]. */
-static void draw_block(const Draw *d, const double *ub, const int32_t *at, npy_intp count)
+/* Points at[j] (j < count; base + j when at is NULL) from their draws ub[3 j .. 3 j + 2]. */
+static void draw_block(const Draw *d, const double *ub, int64_t base, const int32_t *at, npy_intp count)
 {
     const Corners *c = d->c;
     int64_t face[BLOCK];
@@ -316,7 +316,7 @@ static void draw_block(const Draw *d, const double *ub, const int32_t *at, npy_i
         for (npy_intp j = 0; j < count; j++)
             memcpy(vi + 3 * j, c->faces + 3 * (c->rows ? c->rows[face[j]] : face[j]), 3 * sizeof(int64_t));
     for (npy_intp j = 0; j < count; j++) {
-        int64_t k = at[j];
+        int64_t k = at ? at[j] : base + j;
         double b1 = 1.0 - sqrt(ub[3 * j + 1]); /* warps.square_to_triangle */
         double b2 = (1.0 - b1) * ub[3 * j + 2];
         if (d->b) {
@@ -366,7 +366,7 @@ static int draw_sorted(const Draw *d, Pcg *rng, npy_intp n)
         double ub[3 * BLOCK];
         for (npy_intp j = 0; j < count; j++)
             memcpy(ub + 3 * j, u + 3 * (int64_t)order[k0 + j], 3 * sizeof(double));
-        draw_block(d, ub, order + k0, count);
+        draw_block(d, ub, 0, order + k0, count);
     }
     free(start);
     free(order);
@@ -408,7 +408,7 @@ static PyObject *draw(PyObject *self, PyObject *args)
     Draw d = {cdf, last, g, wide, m, &c, used, pts, b};
     int ok = 1;
     Py_BEGIN_ALLOW_THREADS
-    if (in_face_order && n >= 2 * BLOCK)
+    if (in_face_order && n >= 2 * BLOCK && n < INT32_MAX)
         ok = draw_sorted(&d, &rng, n);
     else
         for (npy_intp k0 = 0; k0 < n; k0 += BLOCK) {
@@ -416,10 +416,7 @@ static PyObject *draw(PyObject *self, PyObject *args)
             double ub[3 * BLOCK]; /* the draws of points k0 .. k0 + count - 1 */
             for (npy_intp j = 0; j < 3 * count; j++)
                 ub[j] = pcg_double(&rng);
-            int32_t at[BLOCK];
-            for (npy_intp j = 0; j < count; j++)
-                at[j] = (int32_t)(k0 + j);
-            draw_block(&d, ub, at, count);
+            draw_block(&d, ub, k0, NULL, count);
         }
     Py_END_ALLOW_THREADS
     if (!ok)
