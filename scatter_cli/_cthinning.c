@@ -350,35 +350,28 @@ static PyObject *grid(PyObject *self, PyObject *args)
     }
     if (!radix_sort(key, perm, n))
         goto unlock;
-    /* the cap: rank in input order within each fine cell (the sort is stable). Most
-       point sets have no fine cell over the cap: then every point is active under its
-       own number, and ``number`` is not needed. */
+    /* the cap: rank in input order within each fine cell (the sort is stable); a point
+       past the cap is marked in the spare high bit of its ``sub``. Most point sets have
+       none: then every point is active under its own number, and ``number`` is unused. */
     int over = 0;
     int64_t seen[8] = {0};
     for (int64_t s = 0; cap > 0 && s < n; s++) {
         if (s > 0 && key[s] != key[s - 1])
             memset(seen, 0, sizeof(seen));
-        over |= seen[sub[perm[s]]]++ >= cap;
+        if (seen[sub[perm[s]]]++ >= cap) {
+            sub[perm[s]] |= 0x80;
+            over = 1;
+        }
     }
-    if (over) {
-        memset(seen, 0, sizeof(seen));
-        for (int64_t s = 0; s < n; s++) {
-            if (s > 0 && key[s] != key[s - 1])
-                memset(seen, 0, sizeof(seen));
-            number[perm[s]] = seen[sub[perm[s]]]++ < cap;
+    for (int64_t i = 0; i < n; i++) {
+        if (!over)
+            active[a++] = i;
+        else if (sub[i] & 0x80)
+            number[i] = -1;
+        else {
+            active[a] = i;
+            number[i] = a++;
         }
-        for (int64_t i = 0; i < n; i++) {
-            if (number[i]) {
-                active[a] = i;
-                number[i] = a++;
-            } else {
-                number[i] = -1;
-            }
-        }
-    } else {
-        for (int64_t i = 0; i < n; i++)
-            active[i] = i;
-        a = n;
     }
     int64_t k = 0;
     uint64_t last = 0;

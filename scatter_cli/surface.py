@@ -135,22 +135,20 @@ def _read_file(source, input_format):
         if not data:
             raise ScatterError("<stdin>: no data on standard input")
         file_obj, file_type = io.BytesIO(data), input_format.lower()
-    elif _is_stream(path):  # a pipe, e.g. `scatter sample <(gunzip -c mesh.ply.gz)`: read it once
-        file_type = (input_format or os.path.splitext(path)[1].lstrip(".")).lower()
-        if not file_type:
-            raise ScatterUsageError(f"{path}: a pipe has no file suffix to tell the format; pass --input-format")
-        _check_readable(path)
-        with open(path, "rb") as f:
-            data = f.read()
-        if not data:
-            raise ScatterError(f"{path}: no data in the pipe")
-        file_obj = io.BytesIO(data)
     else:
         _check_readable(path)
+        stream = _is_stream(path)
         file_type = (input_format or os.path.splitext(path)[1].lstrip(".")).lower()
         if not file_type:
-            raise ScatterUsageError(f"{path}: no file suffix to tell the format; pass --input-format")
+            pipe = "a pipe has " if stream else ""
+            raise ScatterUsageError(f"{path}: {pipe}no file suffix to tell the format; pass --input-format")
         file_obj = path
+        if stream:  # a pipe, e.g. `scatter sample <(gunzip -c mesh.ply.gz)`: read it once
+            with open(path, "rb") as f:
+                data = f.read()
+            if not data:
+                raise ScatterError(f"{path}: no data in the pipe")
+            file_obj = io.BytesIO(data)
     if file_type not in trimesh.available_formats():
         raise ScatterUsageError(f"{path}: unknown mesh format '{file_type}' (try one of: {', '.join(MESH_FORMATS)})")
     try:
