@@ -9,7 +9,7 @@ from setuptools import Extension, setup
 
 # No fused multiply-add and no fast math: the kernels must round exactly as the NumPy path
 # does. (-fno-math-errno only lets sqrt be inlined; no input of ours is negative.)
-FLAGS = ["-O3", "-ffp-contract=off", "-fno-fast-math", "-fno-math-errno",
+FLAGS = ["-O3", "-ffp-contract=off", "-fno-fast-math", "-fno-math-errno", "-fno-trapping-math",
          "-Wno-stringop-overflow", "-Werror=implicit-function-declaration"]
 
 

@@ -1,15 +1,18 @@
 /* Compiled pair graph and greedy thinning: the same results as thinning.py's NumPy path.
  *
- * grid() sorts points by cell (side >= reach). pairs() and greedy() visit the cells in key
- * order and test each cell's points against the 27 cells around it, which nine cursors
- * moving forward find in the sorted cell list (no hashing, little random access).
+ * grid() sorts points by cell (side >= reach) and holds their coordinates axis by axis in
+ * cell order. pairs() and greedy() visit the cells in key order. The 27 cells around a
+ * cell are nine runs of positions, one per column (dx, dy), since the cells z - 1 .. z + 1
+ * have consecutive keys; nine cursors moving forward find them in the sorted cell list.
+ * A pair is found once, from its earlier point, in the runs after it.
  * greedy() takes a maximal independent set of the pairs shorter than a radius, least
- * crowded first; it keeps each point's neighbours as a bit mask over the 27 cells (about
- * 24 bytes a point) rather than a pair list (about 280), because memory is time: on this
- * host every freshly touched gigabyte costs about a second. Distances and crowding are computed with
- * the same float64 operations as the NumPy code (built with -ffp-contract=off) and
- * crowding is a sum of integers, so neither the order pairs are found in nor the path
- * changes a result.
+ * crowded first: one pass sums each point's crowding over its pairs, then a walk in
+ * order of crowding keeps each point not yet blocked and blocks its neighbours, found
+ * again in the grid. No pair list is kept: memory is time, and on this host every freshly
+ * touched gigabyte costs about a second. Distances and crowding are computed with the
+ * same float64 operations as the NumPy code (built with -ffp-contract=off; the AVX-512
+ * paths multiply and add separately too) and crowding is a sum of whole numbers, so
+ * neither the order pairs are found in nor the path changes a result.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -31,18 +34,97 @@ static uint64_t pack(int64_t x, int64_t y, int64_t z)
     return ((uint64_t)x << (2 * BITS)) | ((uint64_t)y << BITS) | (uint64_t)z;
 }
 
-static void free_buffer(PyObject *capsule)
+/* The kernels' arrays come from a pool that keeps what they give back for their next
+ * call, up to POOL_BYTES: on this host freshly touched memory costs more than much of the
+ * work done on it (a page fault per 4 kB; about a second per GB). A block carries its
+ * size in a header before it. */
+#define POOL_SLOTS 32
+#define POOL_BYTES ((size_t)128 << 20)
+#define POOL_SMALLEST 65536
+#define HEAD 64
+static void *pool[POOL_SLOTS];
+static size_t pooled;
+static pthread_mutex_t pool_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static size_t capacity(void *p)
 {
-    free(PyCapsule_GetPointer(capsule, NULL));
+    return *(size_t *)((char *)p - HEAD);
 }
 
-/* A 1-D array over ``data`` (from malloc), which it frees when it goes. */
+/* size bytes: the smallest pooled block that fits without wasting more than its size,
+ * else a new one. */
+static void *take(size_t size)
+{
+    int best = -1;
+    pthread_mutex_lock(&pool_lock);
+    for (int k = 0; k < POOL_SLOTS; k++)
+        if (pool[k] && capacity(pool[k]) >= size && capacity(pool[k]) <= 2 * size + POOL_SMALLEST &&
+            (best < 0 || capacity(pool[k]) < capacity(pool[best])))
+            best = k;
+    void *p = best >= 0 ? pool[best] : NULL;
+    if (p) {
+        pool[best] = NULL;
+        pooled -= capacity(p);
+    }
+    pthread_mutex_unlock(&pool_lock);
+    if (p)
+        return p;
+    char *raw = malloc(size + HEAD);
+    if (!raw)
+        return NULL;
+    *(size_t *)raw = size;
+    return raw + HEAD;
+}
+
+static void *take_zeroed(size_t size)
+{
+    void *p = take(size);
+    if (p)
+        memset(p, 0, size);
+    return p;
+}
+
+static void give(void *p)
+{
+    if (!p)
+        return;
+    size_t size = capacity(p);
+    int kept = 0;
+    pthread_mutex_lock(&pool_lock);
+    for (int k = 0; k < POOL_SLOTS && !kept && size >= POOL_SMALLEST && pooled + size <= POOL_BYTES; k++)
+        if (!pool[k]) {
+            pool[k] = p;
+            pooled += size;
+            kept = 1;
+        }
+    pthread_mutex_unlock(&pool_lock);
+    if (!kept)
+        free((char *)p - HEAD);
+}
+
+/* p (from take, holding used bytes) grown to size bytes, or NULL (p still held). */
+static void *grow(void *p, size_t used, size_t size)
+{
+    void *q = take(size);
+    if (q && p) {
+        memcpy(q, p, used);
+        give(p);
+    }
+    return q;
+}
+
+static void free_buffer(PyObject *capsule)
+{
+    give(PyCapsule_GetPointer(capsule, NULL));
+}
+
+/* A 1-D array over ``data`` (from take), which it gives back when it goes. */
 static PyObject *owned_array(int type, npy_intp n, void *data)
 {
     npy_intp dims[1] = {n};
     PyObject *capsule = PyCapsule_New(data, NULL, free_buffer);
     if (!capsule) {
-        free(data);
+        give(data);
         return NULL;
     }
     PyObject *arr = PyArray_SimpleNewFromData(1, dims, type, data);
@@ -61,11 +143,11 @@ static PyObject *owned_array(int type, npy_intp n, void *data)
  * all keys share. */
 static int radix_sort(uint64_t *key, int32_t *idx, int64_t n)
 {
-    uint64_t *k2 = malloc((n ? n : 1) * sizeof(uint64_t));
-    int32_t *i2 = malloc((n ? n : 1) * sizeof(int32_t));
+    uint64_t *k2 = take((n ? n : 1) * sizeof(uint64_t));
+    int32_t *i2 = take((n ? n : 1) * sizeof(int32_t));
     if (!k2 || !i2) {
-        free(k2);
-        free(i2);
+        give(k2);
+        give(i2);
         return 0;
     }
     uint64_t differ = 0;
@@ -87,8 +169,8 @@ static int radix_sort(uint64_t *key, int32_t *idx, int64_t n)
         memcpy(key, k2, n * sizeof(uint64_t));
         memcpy(idx, i2, n * sizeof(int32_t));
     }
-    free(k2);
-    free(i2);
+    give(k2);
+    give(i2);
     return 1;
 }
 
@@ -106,13 +188,13 @@ static int pairs_reserve(Pairs *e, int64_t more)
     int64_t cap = e->cap ? e->cap : 1 << 12;
     while (cap < e->size + more)
         cap *= 2;
-    int64_t *i = realloc(e->i, cap * sizeof(int64_t));
+    int64_t *i = grow(e->i, e->size * sizeof(int64_t), cap * sizeof(int64_t));
     if (i)
         e->i = i;
-    int64_t *j = realloc(e->j, cap * sizeof(int64_t));
+    int64_t *j = grow(e->j, e->size * sizeof(int64_t), cap * sizeof(int64_t));
     if (j)
         e->j = j;
-    double *d = realloc(e->d, cap * sizeof(double));
+    double *d = grow(e->d, e->size * sizeof(double), cap * sizeof(double));
     if (d)
         e->d = d;
     if (!i || !j || !d)
@@ -124,49 +206,11 @@ static int pairs_reserve(Pairs *e, int64_t more)
 /* A grid built by grid(), as C arrays. */
 typedef struct {
     const int64_t *order;      /* (a,) active number at each position */
-    const double *xyz;         /* (a, 3) coordinates, in cell order */
+    const double *x, *y, *z;   /* (a,) coordinates, in cell order */
     const uint64_t *ukey;      /* (cells,) cell keys, ascending */
     const int64_t *cell_start; /* (cells + 1,) first position of each cell */
     int64_t a, cells;
 } Grid;
-
-/* Points side by side: those of the 27 cells around one cell, or one point's hits. */
-typedef struct {
-    double *x, *y, *z, *d2;
-    int32_t *at; /* position */
-    int64_t size, cap;
-} Near;
-
-static int near_reserve(Near *l, int64_t need)
-{
-    if (need <= l->cap)
-        return 1;
-    int64_t cap = l->cap ? l->cap : 1024;
-    while (cap < need)
-        cap *= 2;
-    double **f[4] = {&l->x, &l->y, &l->z, &l->d2};
-    for (int k = 0; k < 4; k++) {
-        double *p = realloc(*f[k], cap * sizeof(double));
-        if (!p)
-            return 0;
-        *f[k] = p;
-    }
-    int32_t *at = realloc(l->at, cap * sizeof(int32_t));
-    if (!at)
-        return 0;
-    l->at = at;
-    l->cap = cap;
-    return 1;
-}
-
-static void near_free(Near *l)
-{
-    free(l->x);
-    free(l->y);
-    free(l->z);
-    free(l->d2);
-    free(l->at);
-}
 
 /* For each cell, the positions of the 27 cells around it, as nine ranges (one per column
  * dx, dy: the cells z - 1 .. z + 1 are consecutive keys): range k of cell c is positions
@@ -192,53 +236,13 @@ static void column_ranges(const Grid *g, int32_t *ranges)
     }
 }
 
-static int64_t near_count(const int32_t *r)
+/* The number of points in the 27 cells of ranges r (18,). */
+static int64_t around_count(const int32_t *r)
 {
     int64_t n = 0;
     for (int k = 0; k < 9; k++)
         n += r[2 * k + 1] - r[2 * k];
     return n;
-}
-
-/* The points of the nine ranges r (18,) side by side in near. */
-static int gather(const Grid *g, const int32_t *r, Near *near)
-{
-    if (!near_reserve(near, near_count(r)))
-        return 0;
-    near->size = 0;
-    for (int k = 0; k < 9; k++)
-        for (int64_t s = r[2 * k]; s < r[2 * k + 1]; s++) {
-            near->x[near->size] = g->xyz[3 * s];
-            near->y[near->size] = g->xyz[3 * s + 1];
-            near->z[near->size] = g->xyz[3 * s + 2];
-            near->at[near->size++] = (int32_t)s;
-        }
-    return 1;
-}
-
-/* The points of near closer than reach to position s (s itself left out): their index
- * in near into hits->at, their squared distances into hits->d2. No branches in the loops
- * over near, and the first one is vectorised. */
-static int close_to(const Grid *g, int64_t s, Near *near, double r2, Near *hits)
-{
-    if (!near_reserve(hits, near->size))
-        return 0;
-    double px = g->xyz[3 * s], py = g->xyz[3 * s + 1], pz = g->xyz[3 * s + 2];
-    const double *restrict x = near->x, *restrict y = near->y, *restrict z = near->z;
-    double *restrict d2 = near->d2;
-    for (int64_t l = 0; l < near->size; l++) {
-        double dx = px - x[l], dy = py - y[l], dz = pz - z[l];
-        double e = dx * dx + dy * dy; /* thinning._self_pairs' order of operations */
-        d2[l] = e + dz * dz;
-    }
-    int64_t w = 0;
-    for (int64_t l = 0; l < near->size; l++) {
-        hits->at[w] = (int32_t)l;
-        hits->d2[w] = d2[l];
-        w += (d2[l] < r2) & (near->at[l] != s);
-    }
-    hits->size = w;
-    return 1;
 }
 
 static int get_grid(PyObject *args, Grid *g, double *reach, double *radius, PyObject **okept, int *threads)
@@ -255,10 +259,12 @@ static int get_grid(PyObject *args, Grid *g, double *reach, double *radius, PyOb
             return 0;
         }
     g->order = PyArray_DATA((PyArrayObject *)o[0]);
-    g->xyz = PyArray_DATA((PyArrayObject *)o[1]);
+    g->x = PyArray_DATA((PyArrayObject *)o[1]);
     g->ukey = PyArray_DATA((PyArrayObject *)o[2]);
     g->cell_start = PyArray_DATA((PyArrayObject *)o[3]);
     g->a = PyArray_SIZE((PyArrayObject *)o[0]);
+    g->y = g->x + g->a;
+    g->z = g->y + g->a;
     g->cells = PyArray_SIZE((PyArrayObject *)o[2]);
     if (PyArray_SIZE((PyArrayObject *)o[1]) != 3 * g->a || PyArray_SIZE((PyArrayObject *)o[3]) != g->cells + 1 ||
         g->cell_start[g->cells] != g->a || g->a >= INT32_MAX ||
@@ -286,7 +292,7 @@ PyDoc_STRVAR(grid_doc,
 "from corner lo (3,) float64 as thinning._Frame. With cap > 0 only the first cap points\n"
 "(input order) of each fine cell are active, else all. active (a,) int64: their input\n"
 "indices, ascending, which numbers them 0..a-1. They are held in cell order: position s\n"
-"is active point order[s] (int64) at xyz[s] ((a, 3) float64); cell c has the positions\n"
+"is active point order[s] (int64) at xyz[:, s] ((3, a) float64); cell c has the positions\n"
 "cell_start[c] .. cell_start[c + 1] - 1 and key ukey[c] (uint64, ascending).");
 
 static PyObject *grid(PyObject *self, PyObject *args)
@@ -311,16 +317,15 @@ static PyObject *grid(PyObject *self, PyObject *args)
 
     int ok = 0;
     int64_t a = 0, cells = 0;
-    uint64_t *key = malloc(m * sizeof(uint64_t)), *ukey = malloc(m * sizeof(uint64_t));
-    int32_t *perm = malloc(m * sizeof(int32_t)); /* n < 2^31 */
-    int64_t *number = malloc(m * sizeof(int64_t));
-    int64_t *cell_start = malloc((m + 1) * sizeof(int64_t)), *active = malloc(m * sizeof(int64_t));
-    int64_t *order = malloc(m * sizeof(int64_t));
-    unsigned char *sub = malloc(m);
-    double *xyz = malloc(3 * m * sizeof(double));
+    uint64_t *key = take(m * sizeof(uint64_t)), *ukey = take(m * sizeof(uint64_t));
+    int32_t *perm = take(m * sizeof(int32_t)); /* n < 2^31 */
+    int64_t *number = take(m * sizeof(int64_t));
+    int64_t *cell_start = take((m + 1) * sizeof(int64_t)), *active = take(m * sizeof(int64_t));
+    int64_t *order = take(m * sizeof(int64_t));
+    unsigned char *sub = take(m);
+    double *xyz = take(3 * m * sizeof(double));
     if (!key || !ukey || !perm || !number || !cell_start || !active || !order || !sub || !xyz)
         goto done;
-
     Py_BEGIN_ALLOW_THREADS
     /* A cell is two fine cells a side (side >= reach); ``sub`` says which of its eight.
        Cells are sorted by a compact key, in the order of their packed keys (x, then y,
@@ -386,7 +391,9 @@ static PyObject *grid(PyObject *self, PyObject *args)
             ukey[cells] = pack(x + cmin[0], y + cmin[1], z + cmin[2]);
             cell_start[cells++] = k;
         }
-        memcpy(xyz + 3 * k, pts + 3 * i, 3 * sizeof(double));
+        xyz[k] = pts[3 * i];
+        xyz[a + k] = pts[3 * i + 1];
+        xyz[2 * a + k] = pts[3 * i + 2];
         order[k++] = over ? number[i] : i;
     }
     cell_start[cells] = a;
@@ -394,27 +401,127 @@ static PyObject *grid(PyObject *self, PyObject *args)
 unlock:
     Py_END_ALLOW_THREADS
 done:
-    free(key);
-    free(perm);
-    free(number);
-    free(sub);
+    give(key);
+    give(perm);
+    give(number);
+    give(sub);
     if (!ok) {
-        free(ukey);
-        free(cell_start);
-        free(active);
-        free(order);
-        free(xyz);
+        give(ukey);
+        give(cell_start);
+        give(active);
+        give(order);
+        give(xyz);
         return PyErr_NoMemory();
     }
     PyObject *oxyz = owned_array(NPY_FLOAT64, 3 * a, xyz);
     if (!oxyz)
         return NULL;
-    npy_intp dims[2] = {a, 3};
+    npy_intp dims[2] = {3, a};
     PyArray_Dims shape = {dims, 2};
     PyObject *xyz2 = PyArray_Newshape((PyArrayObject *)oxyz, &shape, NPY_CORDER);
     Py_DECREF(oxyz);
     return Py_BuildValue("NNNNN", owned_array(NPY_INT64, a, active), owned_array(NPY_INT64, a, order), xyz2,
                          owned_array(NPY_UINT64, cells, ukey), owned_array(NPY_INT64, cells + 1, cell_start));
+}
+
+/* The points of positions t0 .. t1 - 1 closer to position s than sqrt(r2): their positions
+ * go on at, their squared distances on d2, from entry w on; returns the new end. No
+ * branches: the distances are computed in one vectorised loop, then kept or passed over. */
+static int64_t hits_in(const Grid *g, int64_t s, int64_t t0, int64_t t1, double r2, double *restrict d2,
+                       int32_t *restrict at, int64_t w, double *restrict tmp)
+{
+    double px = g->x[s], py = g->y[s], pz = g->z[s];
+    const double *restrict x = g->x + t0, *restrict y = g->y + t0, *restrict z = g->z + t0;
+    int64_t n = t1 - t0;
+    for (int64_t l = 0; l < n; l++) {
+        double dx = px - x[l], dy = py - y[l], dz = pz - z[l];
+        double e = dx * dx + dy * dy; /* thinning._self_pairs' order of operations */
+        tmp[l] = e + dz * dz;
+    }
+    for (int64_t l = 0; l < n; l++) {
+        at[w] = (int32_t)(t0 + l);
+        d2[w] = tmp[l];
+        w += tmp[l] < r2;
+    }
+    return w;
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+/* hits_in with AVX-512: eight distances at a time, and the hits packed in registers
+ * (compress to memory is slow on some cores). The same float64 operations in the same
+ * order, so the same hits; it may write up to eight entries past the new end. */
+__attribute__((target("avx512f,avx512vl"))) static int64_t
+hits_in_avx512(const Grid *g, int64_t s, int64_t t0, int64_t t1, double r2, double *restrict d2,
+               int32_t *restrict at, int64_t w, double *restrict tmp)
+{
+    (void)tmp;
+    __m512d px = _mm512_set1_pd(g->x[s]), py = _mm512_set1_pd(g->y[s]), pz = _mm512_set1_pd(g->z[s]);
+    __m512d limit = _mm512_set1_pd(r2);
+    __m256i at8 = _mm256_add_epi32(_mm256_set1_epi32((int32_t)t0), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+    for (int64_t t = t0; t < t1; t += 8) {
+        __mmask8 live = t1 - t >= 8 ? 0xff : (__mmask8)((1u << (t1 - t)) - 1);
+        __m512d dx = _mm512_sub_pd(px, _mm512_maskz_loadu_pd(live, g->x + t));
+        __m512d dy = _mm512_sub_pd(py, _mm512_maskz_loadu_pd(live, g->y + t));
+        __m512d dz = _mm512_sub_pd(pz, _mm512_maskz_loadu_pd(live, g->z + t));
+        __m512d e = _mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy));
+        __m512d d = _mm512_add_pd(e, _mm512_mul_pd(dz, dz));
+        __mmask8 hit = _mm512_mask_cmp_pd_mask(live, d, limit, _CMP_LT_OQ);
+        _mm512_storeu_pd(d2 + w, _mm512_maskz_compress_pd(hit, d));
+        _mm256_storeu_si256((__m256i *)(at + w), _mm256_maskz_compress_epi32(hit, at8));
+        w += __builtin_popcount(hit);
+        at8 = _mm256_add_epi32(at8, _mm256_set1_epi32(8));
+    }
+    return w;
+}
+#endif
+
+typedef int64_t (*HitsIn)(const Grid *, int64_t, int64_t, int64_t, double, double *, int32_t *, int64_t, double *);
+static HitsIn find_hits = hits_in;
+
+/* Room for the hits of one point among its 27 cells. */
+typedef struct {
+    double *d2, *tmp;
+    double *weight;
+    int32_t *at;
+} Scratch;
+
+static int scratch_init(Scratch *b, int64_t most)
+{
+    most += 16; /* room for whole vectors past the end */
+    b->d2 = malloc(most * sizeof(double));
+    b->tmp = malloc(most * sizeof(double));
+    b->at = malloc(most * sizeof(int32_t));
+    b->weight = malloc(most * sizeof(double));
+    return b->d2 && b->tmp && b->at && b->weight;
+}
+
+static void scratch_free(Scratch *b)
+{
+    free(b->d2);
+    free(b->tmp);
+    free(b->at);
+    free(b->weight);
+}
+
+/* The points after position s (cell ranges r) closer than sqrt(r2), into b: those after it
+ * in its own column (its cell and the one above), then in the columns (0, 1), (1, -1),
+ * (1, 0) and (1, 1), which come later in key order. Returns how many. */
+static int64_t later_hits(const Grid *g, const int32_t *r, int64_t s, double r2, Scratch *b)
+{
+    int64_t hits = find_hits(g, s, s + 1, r[9], r2, b->d2, b->at, 0, b->tmp);
+    for (int col = 5; col < 9; col++)
+        hits = find_hits(g, s, r[2 * col], r[2 * col + 1], r2, b->d2, b->at, hits, b->tmp);
+    return hits;
+}
+
+/* The most points in the 27 cells of any cell. */
+static int64_t most_around(const Grid *g, const int32_t *ranges)
+{
+    int64_t most = 0;
+    for (int64_t c = 0; c < g->cells; c++)
+        most = around_count(ranges + 18 * c) > most ? around_count(ranges + 18 * c) : most;
+    return most;
 }
 
 PyDoc_STRVAR(pairs_doc,
@@ -430,186 +537,202 @@ static PyObject *pairs(PyObject *self, PyObject *args)
         return NULL;
     int ok = 0;
     Pairs e = {0};
-    Near near = {0}, hits = {0};
-    int32_t *ranges = malloc((18 * g.cells + 1) * sizeof(int32_t));
+    Scratch b = {0};
+    int32_t *ranges = take((18 * g.cells + 1) * sizeof(int32_t));
     if (!ranges)
         return PyErr_NoMemory();
     Py_BEGIN_ALLOW_THREADS
     double r2 = reach * reach;
     column_ranges(&g, ranges);
-    for (int64_t c = 0; c < g.cells; c++) {
-        if (!gather(&g, ranges + 18 * c, &near))
-            goto unlock;
+    if (!scratch_init(&b, most_around(&g, ranges)))
+        goto unlock;
+    for (int64_t c = 0; c < g.cells; c++)
         for (int64_t s = g.cell_start[c]; s < g.cell_start[c + 1]; s++) {
-            if (!close_to(&g, s, &near, r2, &hits) || !pairs_reserve(&e, hits.size))
+            int64_t hits = later_hits(&g, ranges + 18 * c, s, r2, &b);
+            if (!pairs_reserve(&e, hits))
                 goto unlock;
-            for (int64_t t = 0; t < hits.size; t++) {
-                int64_t i = g.order[s], j = g.order[near.at[hits.at[t]]];
-                e.i[e.size] = i;
-                e.j[e.size] = j;
-                e.d[e.size] = sqrt(hits.d2[t]);
-                e.size += i < j;
+            for (int64_t h = 0; h < hits; h++) {
+                int64_t i = g.order[s], j = g.order[b.at[h]];
+                e.i[e.size] = i < j ? i : j;
+                e.j[e.size] = i < j ? j : i;
+                e.d[e.size++] = sqrt(b.d2[h]);
             }
         }
-    }
     ok = pairs_reserve(&e, 1); /* an array needs a buffer, even an empty one */
 unlock:
     Py_END_ALLOW_THREADS
-    free(ranges);
-    near_free(&near);
-    near_free(&hits);
+    give(ranges);
+    scratch_free(&b);
     if (!ok) {
-        free(e.i);
-        free(e.j);
-        free(e.d);
+        give(e.i);
+        give(e.j);
+        give(e.d);
         return PyErr_NoMemory();
     }
     return Py_BuildValue("NNN", owned_array(NPY_INT64, e.size, e.i), owned_array(NPY_INT64, e.size, e.j),
                          owned_array(NPY_FLOAT64, e.size, e.d));
 }
 
-/* The greedy's working arrays. The crowding pass, which finds every point's neighbours,
- * leaves them as a bit mask over the point's ``near`` list (the 27 cells around its
- * cell), so the greedy blocks the neighbours of a kept point without searching again. */
+/* floor(v) for 0 <= v < 2^52, in operations that vectorise: adding and taking away 2^52
+ * rounds v to a whole number, which is one too high when it rounded up. */
+static inline double floor_weight(double v)
+{
+    double t = (v + 4503599627370496.0) - 4503599627370496.0;
+    return t - (t > v ? 1.0 : 0.0);
+}
+
+/* The crowding weight floor((1 - d * scale) * CROWD_SCALE) of each squared distance
+ * d2 (n,) into weight (n,), d = sqrt(d2) < radius = 1 / (2 scale). */
+__attribute__((target_clones("avx512f", "default"))) static void
+weigh(const double *restrict d2, double *restrict weight, int64_t n, double scale)
+{
+    for (int64_t h = 0; h < n; h++) /* vectorised */
+        weight[h] = floor_weight((1.0 - sqrt(d2[h]) * scale) * CROWD_SCALE);
+}
+
+/* What the greedy's passes share. */
 typedef struct {
     const Grid *g;
-    const int32_t *ranges;   /* (cells, 18) column_ranges */
-    const int64_t *mask_at;  /* (cells + 1,) first mask word of each cell */
-    uint64_t *mask;
-    uint64_t *crowd;         /* (a,) by active number */
-    int64_t *where;          /* (a,) position of each active number */
-    int32_t *cell_of;        /* (a,) cell of each position */
-    double r2, radius;
+    const int32_t *ranges; /* (cells, 18) column_ranges */
+    int64_t most;          /* the most positions around one cell */
+    double r2, radius;     /* below r2 a squared distance is an edge of the greedy's graph */
 } Greedy;
-
-static int64_t words(int64_t bits)
-{
-    return (bits + 63) / 64;
-}
-
-/* The crowding of point p (3,) against the points of near: the sum of
- * floor((1 - d * scale) * CROWD_SCALE) over those at distance d < radius, d from squared
- * distances below r2 (the grid's reach squared), near index ``self`` (p itself) left out.
- * Those points' bits are set in mask (words(near->size) words), the others cleared. A
- * first pass marks the points within reach word by word with no branches; only they go
- * on to the square root. */
-static uint64_t crowding_of(const double *p, int64_t self, Near *near, double r2, double radius, double scale,
-                            uint64_t *mask)
-{
-    const double *restrict x = near->x, *restrict y = near->y, *restrict z = near->z;
-    double *restrict d2 = near->d2;
-    int64_t n = near->size;
-    for (int64_t l = 0; l < n; l++) {
-        double dx = p[0] - x[l], dy = p[1] - y[l], dz = p[2] - z[l];
-        double e = dx * dx + dy * dy; /* thinning._self_pairs' order of operations */
-        d2[l] = e + dz * dz;
-    }
-    uint64_t sum = 0;
-    for (int64_t word = 0; 64 * word < n; word++) {
-        int64_t end = n - 64 * word < 64 ? n - 64 * word : 64;
-        const double *dw = d2 + 64 * word;
-        uint64_t bits = 0;
-        for (int64_t b = 0; b < end; b++)
-            bits |= (uint64_t)(dw[b] < r2) << b;
-        if (self >= 64 * word && self < 64 * word + 64)
-            bits &= ~((uint64_t)1 << (self - 64 * word));
-        for (uint64_t left = bits; left; left &= left - 1) {
-            int b = __builtin_ctzll(left);
-            double d = sqrt(dw[b]);
-            if (d < radius) /* makes the weight positive, so truncation is floor */
-                sum += (uint64_t)(int64_t)((1.0 - d * scale) * CROWD_SCALE);
-            else
-                bits &= ~((uint64_t)1 << b);
-        }
-        mask[word] = bits;
-    }
-    return sum;
-}
 
 typedef struct {
     const Greedy *w;
     int64_t c0, c1;
+    double *crowd; /* (a,) by position: this job's part of every sum (whole numbers below 2^53) */
     int ok;
 } CrowdJob;
 
-/* Crowding of the points of cells c0 .. c1 - 1, and their neighbour masks. */
+/* Crowding from the pairs whose earlier point is in cells c0 .. c1 - 1: each pair's weight
+ * floor((1 - d / (2 radius)) * CROWD_SCALE) goes to both its ends. */
 static void *crowd_job(void *arg)
 {
     CrowdJob *job = arg;
     const Greedy *w = job->w;
     const Grid *g = w->g;
-    Near near = {0};
+    double *restrict crowd = job->crowd;
     double scale = 1.0 / (2.0 * w->radius);
-    job->ok = 1;
+    Scratch b;
+    job->ok = scratch_init(&b, w->most);
     for (int64_t c = job->c0; job->ok && c < job->c1; c++) {
         const int32_t *r = w->ranges + 18 * c;
-        job->ok = gather(g, r, &near);
-        int64_t nw = words(near.size), self = 0; /* near index of the cell's first point */
-        for (int k = 0; k < 4; k++)
-            self += r[2 * k + 1] - r[2 * k];
-        self += g->cell_start[c] - r[8];
-        for (int64_t s = g->cell_start[c]; job->ok && s < g->cell_start[c + 1]; s++, self++) {
-            uint64_t *mask = w->mask + w->mask_at[c] + (s - g->cell_start[c]) * nw;
-            w->crowd[g->order[s]] = crowding_of(g->xyz + 3 * s, self, &near, w->r2, w->radius, scale, mask);
-            w->where[g->order[s]] = s;
-            w->cell_of[s] = (int32_t)c;
+        for (int64_t s = g->cell_start[c]; s < g->cell_start[c + 1]; s++) {
+            int64_t hits = later_hits(g, r, s, w->r2, &b);
+            weigh(b.d2, b.weight, hits, scale);
+            double sum = 0;
+            for (int64_t h = 0; h < hits; h++) {
+                crowd[b.at[h]] += b.weight[h];
+                sum += b.weight[h];
+            }
+            crowd[s] += sum;
         }
     }
-    near_free(&near);
+    scratch_free(&b);
     return NULL;
 }
 
 #define MAX_THREADS 16
 
-/* The crowding pass over all cells, split between threads (each point's sum and mask are
- * its own, so the split changes nothing). */
-static int crowding(const Greedy *w, int threads)
+/* The crowding of every point by active number into crowd (a,), and its position into
+ * where (a,). The cells are split between threads at about equal numbers of points; each
+ * sums into its own array (a pair may end in another's cells) and the arrays are added
+ * up: sums of whole numbers, so the split changes nothing. */
+static int crowding(const Greedy *w, int threads, uint64_t *crowd, int32_t *where)
 {
+    const Grid *g = w->g;
     CrowdJob jobs[MAX_THREADS];
     pthread_t ids[MAX_THREADS];
     int started[MAX_THREADS] = {0}, ok = 1;
-    int64_t cells = w->g->cells;
     threads = threads < 1 ? 1 : (threads > MAX_THREADS ? MAX_THREADS : threads);
-    if (cells < 1024 * threads)
+    if (g->a < 16384 * threads)
         threads = 1;
+    int64_t c = 0;
     for (int k = 0; k < threads; k++) {
-        CrowdJob job = {w, cells * k / threads, cells * (k + 1) / threads, 0};
+        CrowdJob job = {w, c, g->cells, take_zeroed((g->a ? g->a : 1) * sizeof(double)), 0};
+        while (k + 1 < threads && job.c1 > c && g->cell_start[c] < g->a * (k + 1) / threads)
+            c++;
+        job.c1 = k + 1 < threads ? c : g->cells;
         jobs[k] = job;
-        if (k > 0)
-            started[k] = pthread_create(&ids[k], NULL, crowd_job, &jobs[k]) == 0;
+        if (!job.crowd)
+            ok = 0;
     }
-    crowd_job(&jobs[0]);
-    for (int k = 1; k < threads; k++) {
+    for (int k = 1; ok && k < threads; k++)
+        started[k] = pthread_create(&ids[k], NULL, crowd_job, &jobs[k]) == 0;
+    if (ok)
+        crowd_job(&jobs[0]);
+    for (int k = 1; ok && k < threads; k++) {
         if (started[k])
             pthread_join(ids[k], NULL);
         else
             crowd_job(&jobs[k]);
     }
-    for (int k = 0; k < threads; k++)
+    for (int k = 0; ok && k < threads; k++)
         ok &= jobs[k].ok;
+    if (ok)
+        for (int64_t s = 0; s < g->a; s++) {
+            double sum = 0;
+            for (int k = 0; k < threads; k++)
+                sum += jobs[k].crowd[s];
+            crowd[g->order[s]] = (uint64_t)sum;
+            where[g->order[s]] = (int32_t)s;
+        }
+    for (int k = 0; k < threads; k++)
+        give(jobs[k].crowd);
     return ok;
 }
 
-/* Block the neighbours of position s, read from its mask. */
-static void block_around(const Greedy *w, int64_t s, char *blocked)
+/* Block the points of the 27 cells around position s (cell c) closer than the radius. */
+static void block_around(const Greedy *w, int64_t s, int64_t c, char *restrict blocked)
 {
     const Grid *g = w->g;
-    int64_t c = w->cell_of[s];
     const int32_t *r = w->ranges + 18 * c;
-    int64_t nw = words(near_count(r));
-    const uint64_t *mask = w->mask + w->mask_at[c] + (s - g->cell_start[c]) * nw;
-    int k = 0;
-    int64_t before = 0; /* near index of range k's first point */
-    for (int64_t word = 0; word < nw; word++) {
-        for (uint64_t bits = mask[word]; bits; bits &= bits - 1) {
-            int64_t l = 64 * word + __builtin_ctzll(bits);
-            while (l >= before + r[2 * k + 1] - r[2 * k]) {
-                before += r[2 * k + 1] - r[2 * k];
-                k++;
-            }
-            blocked[r[2 * k] + (l - before)] = 1;
+    double px = g->x[s], py = g->y[s], pz = g->z[s], r2 = w->r2;
+    for (int col = 0; col < 9; col++)
+        for (int64_t t = r[2 * col]; t < r[2 * col + 1]; t++) {
+            double dx = px - g->x[t], dy = py - g->y[t], dz = pz - g->z[t];
+            double e = dx * dx + dy * dy;
+            blocked[t] |= e + dz * dz < r2;
         }
-    }
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+/* block_around with AVX-512, eight points at a time. */
+__attribute__((target("avx512f,avx512vl,avx512bw"))) static void
+block_around_avx512(const Greedy *w, int64_t s, int64_t c, char *restrict blocked)
+{
+    const Grid *g = w->g;
+    const int32_t *r = w->ranges + 18 * c;
+    __m512d px = _mm512_set1_pd(g->x[s]), py = _mm512_set1_pd(g->y[s]), pz = _mm512_set1_pd(g->z[s]);
+    __m512d limit = _mm512_set1_pd(w->r2);
+    __m128i ones = _mm_set1_epi8(1);
+    for (int col = 0; col < 9; col++)
+        for (int64_t t = r[2 * col], t1 = r[2 * col + 1]; t < t1; t += 8) {
+            __mmask8 live = t1 - t >= 8 ? 0xff : (__mmask8)((1u << (t1 - t)) - 1);
+            __m512d dx = _mm512_sub_pd(px, _mm512_maskz_loadu_pd(live, g->x + t));
+            __m512d dy = _mm512_sub_pd(py, _mm512_maskz_loadu_pd(live, g->y + t));
+            __m512d dz = _mm512_sub_pd(pz, _mm512_maskz_loadu_pd(live, g->z + t));
+            __m512d e = _mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy));
+            __mmask8 hit = _mm512_mask_cmp_pd_mask(live, _mm512_add_pd(e, _mm512_mul_pd(dz, dz)), limit, _CMP_LT_OQ);
+            _mm_mask_storeu_epi8(blocked + t, (__mmask16)hit, ones);
+        }
+}
+#endif
+
+typedef void (*BlockAround)(const Greedy *, int64_t, int64_t, char *);
+static BlockAround block = block_around;
+
+/* The least x with sqrt(x) >= radius. sqrt is monotonic, so sqrt(x) < radius exactly when
+ * x is below it: the test needs no square root. */
+static double square_bound(double radius)
+{
+    double x = radius * radius;
+    while (x > 0 && sqrt(x) >= radius)
+        x = nextafter(x, 0);
+    while (sqrt(x) < radius)
+        x = nextafter(x, INFINITY);
+    return x;
 }
 
 PyDoc_STRVAR(greedy_doc,
@@ -630,60 +753,45 @@ static PyObject *greedy(PyObject *self, PyObject *args)
         return NULL;
     npy_bool *kept = PyArray_DATA((PyArrayObject *)okept);
     int64_t a = g.a, m = a ? a : 1;
-    Greedy w = {&g, NULL, NULL, NULL, NULL, NULL, NULL, reach * reach, radius};
-    int32_t *ranges = malloc((18 * g.cells + 1) * sizeof(int32_t));
-    int64_t *mask_at = malloc((g.cells + 1) * sizeof(int64_t));
-    uint64_t *mask = NULL, *crowd = malloc(m * sizeof(uint64_t));
-    int32_t *rank = malloc(m * sizeof(int32_t)); /* a < 2^31 */
-    int64_t *where = malloc(m * sizeof(int64_t));
-    int32_t *cell_of = malloc(m * sizeof(int32_t));
-    char *blocked = calloc(m, 1);
-    int ok = ranges && mask_at && crowd && rank && where && cell_of && blocked;
+    int32_t *ranges = take((18 * g.cells + 1) * sizeof(int32_t));
+    uint64_t *crowd = take(m * sizeof(uint64_t));
+    int32_t *where = take(m * sizeof(int32_t));
+    int32_t *cell_of = take(m * sizeof(int32_t));
+    char *blocked = take_zeroed(m);
+    int ok = ranges && crowd && where && cell_of && blocked;
     Py_BEGIN_ALLOW_THREADS
+    double below = square_bound(radius); /* d < radius */
+    Greedy w = {&g, ranges, 0, reach * reach < below ? reach * reach : below, radius};
     if (ok) {
         column_ranges(&g, ranges);
-        mask_at[0] = 0;
+        w.most = most_around(&g, ranges);
+        ok = crowding(&w, threads, crowd, where);
+    }
+    if (ok) {
         for (int64_t c = 0; c < g.cells; c++)
-            mask_at[c + 1] = mask_at[c] + (g.cell_start[c + 1] - g.cell_start[c]) * words(near_count(ranges + 18 * c));
-        mask = malloc((mask_at[g.cells] + 1) * sizeof(uint64_t));
-        ok = mask != NULL;
-    }
-    if (ok) {
-        Greedy filled = {&g, ranges, mask_at, mask, crowd, where, cell_of, reach * reach, radius};
-        w = filled;
-        ok = crowding(&w, threads);
-    }
-    if (ok) {
-        for (int64_t p = 0; p < a; p++)
-            rank[p] = (int32_t)p;
-        ok = radix_sort(crowd, rank, a); /* stable: ties stay in active-number order */
+            for (int64_t s = g.cell_start[c]; s < g.cell_start[c + 1]; s++)
+                cell_of[s] = (int32_t)c;
+        /* positions by ascending crowding, ties by active number (the sort is stable) */
+        ok = radix_sort(crowd, where, a);
     }
     if (ok) {
         memset(kept, 0, (size_t)a);
         for (int64_t k = 0; k < a; k++) {
-            if (k + 16 < a) /* the walk jumps about at random: ask for the rows early */
-                __builtin_prefetch(where + rank[k + 16]);
-            if (k + 8 < a) {
-                int64_t ahead = where[rank[k + 8]];
-                __builtin_prefetch(blocked + ahead);
-                __builtin_prefetch(w.cell_of + ahead);
-            }
-            int64_t s = where[rank[k]];
+            if (k + 8 < a)
+                __builtin_prefetch(blocked + where[k + 8]);
+            int64_t s = where[k];
             if (blocked[s])
                 continue;
-            kept[rank[k]] = 1;
-            block_around(&w, s, blocked);
+            kept[g.order[s]] = 1;
+            block(&w, s, cell_of[s], blocked);
         }
     }
     Py_END_ALLOW_THREADS
-    free(ranges);
-    free(mask_at);
-    free(mask);
-    free(crowd);
-    free(rank);
-    free(where);
-    free(cell_of);
-    free(blocked);
+    give(ranges);
+    give(crowd);
+    give(where);
+    give(cell_of);
+    give(blocked);
     if (!ok)
         return PyErr_NoMemory();
     Py_RETURN_NONE;
@@ -705,5 +813,13 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC PyInit__cthinning(void)
 {
     import_array();
+#if defined(__x86_64__) && defined(__GNUC__)
+    __builtin_cpu_init();
+    if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+        __builtin_cpu_supports("avx512bw") && !getenv("SCATTER_NO_AVX512")) {
+        find_hits = hits_in_avx512;
+        block = block_around_avx512;
+    }
+#endif
     return PyModule_Create(&module);
 }
