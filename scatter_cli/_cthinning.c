@@ -815,8 +815,9 @@ PyMODINIT_FUNC PyInit__cthinning(void)
     import_array();
 #if defined(__x86_64__) && defined(__GNUC__)
     __builtin_cpu_init();
+    const char *plain = getenv("SCATTER_NO_AVX512"); /* set and not "0": the plain loops */
     if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-        __builtin_cpu_supports("avx512bw") && !getenv("SCATTER_NO_AVX512")) {
+        __builtin_cpu_supports("avx512bw") && !(plain && *plain && strcmp(plain, "0") != 0)) {
         find_hits = hits_in_avx512;
         block = block_around_avx512;
     }

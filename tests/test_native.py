@@ -4,6 +4,11 @@ Every other test runs with the kernels (CI builds them), so these parity tests a
 carries those results over to the NumPy path that runs where no C compiler was found.
 """
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 import trimesh
@@ -13,6 +18,8 @@ from scatter_cli import native, sampling, thinning
 from scatter_cli.surface import Geometry, Instance, Surface, load_surface
 
 from .conftest import SAMPLES, spread_triangles, triangles_mesh
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture
@@ -184,6 +191,39 @@ def test_greedy_does_not_depend_on_the_thread_count(threads, monkeypatch):
     want = thinning.thin_by_radius(points, radius)
     monkeypatch.setenv("SCATTER_THREADS", threads)
     np.testing.assert_array_equal(thinning.thin_by_radius(points, radius), want)
+
+
+_THIN_IN_A_CHILD = """
+import sys
+import numpy as np
+from scatter_cli import thinning
+from tests.test_native import point_sets
+out = {}
+for name in ("sphere", "clustered", "wall"):
+    points, radius = point_sets()[name]
+    out[name + "-radius"] = thinning.thin_by_radius(points, radius)
+    out[name + "-count"] = thinning.thin_to_count(points, 500, 1.0)[0]
+    i, j, d = thinning._pairs(points, radius)
+    key = np.lexsort((j, i))
+    out[name + "-pairs"] = np.stack([i[key], j[key], d[key].view(np.int64)])
+np.savez(sys.argv[1], **out)
+"""
+
+
+def test_the_avx512_loops_keep_the_same_points(tmp_path):
+    """With and without the AVX-512 distance loops (SCATTER_NO_AVX512=1) the kernel finds
+    the same pairs and keeps the same points. (On a CPU without AVX-512 both runs take
+    the plain loops.)"""
+    runs = []
+    for plain in ("", "1"):
+        out = tmp_path / f"plain{plain}.npz"
+        env = {k: v for k, v in os.environ.items() if k != "SCATTER_NO_AVX512"}
+        env.update({"SCATTER_NO_AVX512": plain} if plain else {})
+        subprocess.run([sys.executable, "-c", _THIN_IN_A_CHILD, str(out)], cwd=REPO, env=env, check=True)
+        runs.append(np.load(out))
+    assert set(runs[0].files) == set(runs[1].files)
+    for key in runs[0].files:
+        np.testing.assert_array_equal(runs[0][key], runs[1][key], err_msg=key)
 
 
 def test_kernels_refuse_bad_arrays_instead_of_crashing():
