@@ -684,44 +684,15 @@ static int crowding(const Greedy *w, int threads, uint64_t *crowd, int32_t *wher
 }
 
 /* Block the points of the 27 cells around position s (cell c) closer than the radius. */
-static void block_around(const Greedy *w, int64_t s, int64_t c, char *restrict blocked)
+static void block_around(const Greedy *w, int64_t s, int64_t c, Scratch *b, char *blocked)
 {
-    const Grid *g = w->g;
     const int32_t *r = w->ranges + 18 * c;
-    double px = g->x[s], py = g->y[s], pz = g->z[s], r2 = w->r2;
+    int64_t hits = 0;
     for (int col = 0; col < 9; col++)
-        for (int64_t t = r[2 * col]; t < r[2 * col + 1]; t++) {
-            double dx = px - g->x[t], dy = py - g->y[t], dz = pz - g->z[t];
-            double e = dx * dx + dy * dy;
-            blocked[t] |= e + dz * dz < r2;
-        }
+        hits = find_hits(w->g, s, r[2 * col], r[2 * col + 1], w->r2, b->d2, b->at, hits, b->tmp);
+    for (int64_t h = 0; h < hits; h++)
+        blocked[b->at[h]] = 1;
 }
-
-#if defined(__x86_64__) && defined(__GNUC__)
-/* block_around with AVX-512, eight points at a time. */
-__attribute__((target("avx512f,avx512vl,avx512bw"))) static void
-block_around_avx512(const Greedy *w, int64_t s, int64_t c, char *restrict blocked)
-{
-    const Grid *g = w->g;
-    const int32_t *r = w->ranges + 18 * c;
-    __m512d px = _mm512_set1_pd(g->x[s]), py = _mm512_set1_pd(g->y[s]), pz = _mm512_set1_pd(g->z[s]);
-    __m512d limit = _mm512_set1_pd(w->r2);
-    __m128i ones = _mm_set1_epi8(1);
-    for (int col = 0; col < 9; col++)
-        for (int64_t t = r[2 * col], t1 = r[2 * col + 1]; t < t1; t += 8) {
-            __mmask8 live = t1 - t >= 8 ? 0xff : (__mmask8)((1u << (t1 - t)) - 1);
-            __m512d dx = _mm512_sub_pd(px, _mm512_maskz_loadu_pd(live, g->x + t));
-            __m512d dy = _mm512_sub_pd(py, _mm512_maskz_loadu_pd(live, g->y + t));
-            __m512d dz = _mm512_sub_pd(pz, _mm512_maskz_loadu_pd(live, g->z + t));
-            __m512d e = _mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(dy, dy));
-            __mmask8 hit = _mm512_mask_cmp_pd_mask(live, _mm512_add_pd(e, _mm512_mul_pd(dz, dz)), limit, _CMP_LT_OQ);
-            _mm_mask_storeu_epi8(blocked + t, (__mmask16)hit, ones);
-        }
-}
-#endif
-
-typedef void (*BlockAround)(const Greedy *, int64_t, int64_t, char *);
-static BlockAround block = block_around;
 
 /* The least x with sqrt(x) >= radius. sqrt is monotonic, so sqrt(x) < radius exactly when
  * x is below it: the test needs no square root. */
@@ -758,6 +729,7 @@ static PyObject *greedy(PyObject *self, PyObject *args)
     int32_t *where = take(m * sizeof(int32_t));
     int32_t *cell_of = take(m * sizeof(int32_t));
     char *blocked = take_zeroed(m);
+    Scratch near = {0};
     int ok = ranges && crowd && where && cell_of && blocked;
     Py_BEGIN_ALLOW_THREADS
     double below = square_bound(radius); /* d < radius */
@@ -765,7 +737,7 @@ static PyObject *greedy(PyObject *self, PyObject *args)
     if (ok) {
         column_ranges(&g, ranges);
         w.most = most_around(&g, ranges);
-        ok = crowding(&w, threads, crowd, where);
+        ok = crowding(&w, threads, crowd, where) && scratch_init(&near, w.most);
     }
     if (ok) {
         for (int64_t c = 0; c < g.cells; c++)
@@ -783,10 +755,11 @@ static PyObject *greedy(PyObject *self, PyObject *args)
             if (blocked[s])
                 continue;
             kept[g.order[s]] = 1;
-            block(&w, s, cell_of[s], blocked);
+            block_around(&w, s, cell_of[s], &near, blocked);
         }
     }
     Py_END_ALLOW_THREADS
+    scratch_free(&near);
     give(ranges);
     give(crowd);
     give(where);
@@ -817,10 +790,8 @@ PyMODINIT_FUNC PyInit__cthinning(void)
     __builtin_cpu_init();
     const char *plain = getenv("SCATTER_NO_AVX512"); /* set and not "0": the plain loops */
     if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-        __builtin_cpu_supports("avx512bw") && !(plain && *plain && strcmp(plain, "0") != 0)) {
+        !(plain && *plain && strcmp(plain, "0") != 0))
         find_hits = hits_in_avx512;
-        block = block_around_avx512;
-    }
 #endif
     return PyModule_Create(&module);
 }
