@@ -595,7 +595,8 @@ typedef struct {
     const Grid *g;
     const int32_t *ranges; /* (cells, 18) column_ranges */
     int64_t most;          /* the most positions around one cell */
-    double r2, radius;     /* below r2 a squared distance is an edge of the greedy's graph */
+    double r2;             /* below it a squared distance is an edge of the greedy's graph */
+    double radius;         /* the thinning radius, for the crowding weights */
 } Greedy;
 
 typedef struct {
