@@ -182,6 +182,8 @@ static PyObject *guide(PyObject *self, PyObject *args)
         return PyErr_Format(PyExc_ValueError, "empty cdf");
     if (start < 0 || stop > m || start > stop)
         return PyErr_Format(PyExc_ValueError, "guide range out of bounds");
+    if (m & (m - 1))
+        return PyErr_Format(PyExc_ValueError, "the guide table's size must be a power of two");
     Py_BEGIN_ALLOW_THREADS
     double total = cdf[last];
     double lower = ((double)start / (double)m) * total;
@@ -194,8 +196,10 @@ static PyObject *guide(PyObject *self, PyObject *args)
             hi = mid;
     }
     int64_t i = lo, prev = 0;
+    double step = 1.0 / (double)m; /* m is a power of two: k * step is k / m exactly */
     for (int64_t k = start; k <= stop; k++) {
-        lower = ((double)k / (double)m) * total;
+        lower = ((double)k * step) * total;
+        i += i < n && cdf[i] <= lower; /* most buckets move on by one face at most: no branch */
         while (i < n && cdf[i] <= lower)
             i++;
         int64_t first = i < last ? i : last;

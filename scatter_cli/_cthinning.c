@@ -3,16 +3,18 @@
  * grid() sorts points by cell (side >= reach) and holds their coordinates axis by axis in
  * cell order. pairs() and greedy() visit the cells in key order. The 27 cells around a
  * cell are nine runs of positions, one per column (dx, dy), since the cells z - 1 .. z + 1
- * have consecutive keys; nine cursors moving forward find them in the sorted cell list.
+ * have consecutive keys; a table over the box of cells (or, for a box too large, nine
+ * cursors moving forward in the sorted cell list) finds them.
  * A pair is found once, from its earlier point, in the runs after it.
  * greedy() takes a maximal independent set of the pairs shorter than a radius, least
- * crowded first: one pass sums each point's crowding over its pairs, then a walk in
- * order of crowding keeps each point not yet blocked and blocks its neighbours, found
- * again in the grid. No pair list is kept: memory is time, and on this host every freshly
- * touched gigabyte costs about a second. Distances and crowding are computed with the
- * same float64 operations as the NumPy code (built with -ffp-contract=off; the AVX-512
- * paths multiply and add separately too) and crowding is a sum of whole numbers, so
- * neither the order pairs are found in nor the path changes a result.
+ * crowded first, in rounds: one pass on all threads sums each point's crowding and lists
+ * its neighbours (6 bytes a neighbour); each round then keeps, in order of crowding, the
+ * least crowded share of the undecided points that are not yet dropped, drops their
+ * neighbours, and takes the dropped out of their own neighbours' crowding. Distances and
+ * crowding are computed with the same float64 operations as the NumPy code (built with
+ * -ffp-contract=off; the AVX-512 paths multiply and add separately too) and crowding is a
+ * sum of whole numbers, so neither the order pairs are found in nor the path changes a
+ * result.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -216,7 +218,7 @@ typedef struct {
  * dx, dy: the cells z - 1 .. z + 1 are consecutive keys): range k of cell c is positions
  * ranges[18 c + 2 k] .. ranges[18 c + 2 k + 1] - 1. Cells are visited in key order, so
  * each column's search goes on from where it stopped. */
-static void column_ranges(const Grid *g, int32_t *ranges)
+static void column_ranges_by_search(const Grid *g, int32_t *ranges)
 {
     int64_t cursor[9] = {0};
     for (int64_t c = 0; c < g->cells; c++) {
@@ -236,6 +238,59 @@ static void column_ranges(const Grid *g, int32_t *ranges)
     }
 }
 
+/* column_ranges through a table over the box of cells (one cell wider on every side, two
+ * above in z): for each place, how many cells have a smaller key. The search loops
+ * branch unpredictably; this has no branches, and fills the table in two passes. Returns
+ * 0, doing nothing, when the box is too large for its cells. */
+static int column_ranges_by_table(const Grid *g, int32_t *ranges)
+{
+    const uint64_t mask = ((uint64_t)1 << BITS) - 1;
+    int64_t lo[3] = {(int64_t)(g->ukey[0] >> (2 * BITS)), INT64_MAX, INT64_MAX}, hi[3] = {0, 0, 0};
+    hi[0] = (int64_t)(g->ukey[g->cells - 1] >> (2 * BITS));
+    for (int64_t c = 0; c < g->cells; c++) {
+        int64_t y = (int64_t)((g->ukey[c] >> BITS) & mask), z = (int64_t)(g->ukey[c] & mask);
+        lo[1] = y < lo[1] ? y : lo[1];
+        hi[1] = y > hi[1] ? y : hi[1];
+        lo[2] = z < lo[2] ? z : lo[2];
+        hi[2] = z > hi[2] ? z : hi[2];
+    }
+    int64_t nx = hi[0] - lo[0] + 3, ny = hi[1] - lo[1] + 3, nz = hi[2] - lo[2] + 4;
+    int64_t most = 64 * g->cells + (1 << 16);
+    if (nx * ny > most || nx * ny * nz > most)
+        return 0;
+    int32_t *below = take_zeroed(nx * ny * nz * sizeof(int32_t));
+    if (!below)
+        return 0;
+#define PLACE(x, y, z) ((((x) - lo[0] + 1) * ny + ((y) - lo[1] + 1)) * nz + ((z) - lo[2] + 1))
+    for (int64_t c = 0; c < g->cells; c++)
+        below[PLACE((int64_t)(g->ukey[c] >> (2 * BITS)), (int64_t)((g->ukey[c] >> BITS) & mask),
+                    (int64_t)(g->ukey[c] & mask))] = 1;
+    int32_t seen = 0;
+    for (int64_t p = 0; p < nx * ny * nz; p++) {
+        int32_t here = below[p];
+        below[p] = seen;
+        seen += here;
+    }
+    for (int64_t c = 0; c < g->cells; c++) {
+        int64_t x = (int64_t)(g->ukey[c] >> (2 * BITS)), y = (int64_t)((g->ukey[c] >> BITS) & mask);
+        int64_t z = (int64_t)(g->ukey[c] & mask);
+        for (int col = 0; col < 9; col++) {
+            int64_t p = PLACE(x + col / 3 - 1, y + col % 3 - 1, z - 1);
+            ranges[18 * c + 2 * col] = (int32_t)g->cell_start[below[p]];
+            ranges[18 * c + 2 * col + 1] = (int32_t)g->cell_start[below[p + 3]];
+        }
+    }
+#undef PLACE
+    give(below);
+    return 1;
+}
+
+static void column_ranges(const Grid *g, int32_t *ranges)
+{
+    if (g->cells && !column_ranges_by_table(g, ranges))
+        column_ranges_by_search(g, ranges);
+}
+
 /* The number of points in the 27 cells of ranges r (18,). */
 static int64_t around_count(const int32_t *r)
 {
@@ -245,11 +300,12 @@ static int64_t around_count(const int32_t *r)
     return n;
 }
 
-static int get_grid(PyObject *args, Grid *g, double *reach, double *radius, PyObject **okept, int *threads)
+static int get_grid(PyObject *args, Grid *g, double *reach, double *radius, PyObject **okept, Py_ssize_t *share,
+                    Py_ssize_t *least, int *threads)
 {
     PyObject *o[4];
-    if (!PyArg_ParseTuple(args, okept ? "OOOOddOi" : "OOOOd", &o[0], &o[1], &o[2], &o[3], reach, radius, okept,
-                          threads))
+    if (!PyArg_ParseTuple(args, okept ? "OOOOddOnni" : "OOOOd", &o[0], &o[1], &o[2], &o[3], reach, radius, okept,
+                          share, least, threads))
         return 0;
     int types[4] = {NPY_INT64, NPY_FLOAT64, NPY_UINT64, NPY_INT64};
     for (int k = 0; k < 4; k++)
@@ -533,7 +589,7 @@ static PyObject *pairs(PyObject *self, PyObject *args)
 {
     Grid g;
     double reach, unused = 0;
-    if (!get_grid(args, &g, &reach, &unused, NULL, NULL))
+    if (!get_grid(args, &g, &reach, &unused, NULL, NULL, NULL, NULL))
         return NULL;
     int ok = 0;
     Pairs e = {0};
@@ -599,21 +655,55 @@ typedef struct {
     double radius;         /* the thinning radius, for the crowding weights */
 } Greedy;
 
+/* Crowding weights are whole numbers from 32767 (d just under the radius, after rounding)
+ * to 65536 (d = 0): stored less LIFT, they fit in 16 bits. */
+#define LIFT 32000
+
+/* One thread's share of the pairs: those whose earlier point is in cells c0 .. c1 - 1. */
 typedef struct {
     const Greedy *w;
     int64_t c0, c1;
-    double *crowd; /* (a,) by position: this job's part of every sum (whole numbers below 2^53) */
+    double *crowd;  /* (a,) by position: this job's part of every sum (whole numbers below 2^53) */
+    int32_t *into;  /* (a,) how many of this job's pairs end at each position; then where in
+                       each row its entries go, from the row's start */
+    int32_t *later; /* (a,) shared: how many pairs each of this job's positions found */
+    int32_t *to;    /* (size,) the later end of each pair found, in the order found */
+    uint16_t *lift; /* (size,) its weight less LIFT */
+    int64_t size, cap;
+    const int64_t *off; /* the adjacency to fill (see crowding) */
+    int32_t *nbr;
+    uint16_t *nlift;
     int ok;
-} CrowdJob;
+} Job;
 
-/* Crowding from the pairs whose earlier point is in cells c0 .. c1 - 1: each pair's weight
- * floor((1 - d / (2 radius)) * CROWD_SCALE) goes to both its ends. */
+static int job_reserve(Job *job, int64_t more)
+{
+    if (job->size + more <= job->cap)
+        return 1;
+    int64_t cap = job->cap ? job->cap : 1 << 14;
+    while (cap < job->size + more)
+        cap *= 2;
+    int32_t *to = grow(job->to, job->size * sizeof(int32_t), cap * sizeof(int32_t));
+    if (to)
+        job->to = to;
+    uint16_t *lift = grow(job->lift, job->size * sizeof(uint16_t), cap * sizeof(uint16_t));
+    if (lift)
+        job->lift = lift;
+    if (!to || !lift)
+        return 0;
+    job->cap = cap;
+    return 1;
+}
+
+/* The pairs whose earlier point is in the job's cells, with their crowding: each pair's
+ * weight floor((1 - d / (2 radius)) * CROWD_SCALE) goes to both its ends. */
 static void *crowd_job(void *arg)
 {
-    CrowdJob *job = arg;
+    Job *job = arg;
     const Greedy *w = job->w;
     const Grid *g = w->g;
     double *restrict crowd = job->crowd;
+    int32_t *restrict into = job->into;
     double scale = 1.0 / (2.0 * w->radius);
     Scratch b;
     job->ok = scratch_init(&b, w->most);
@@ -621,78 +711,139 @@ static void *crowd_job(void *arg)
         const int32_t *r = w->ranges + 18 * c;
         for (int64_t s = g->cell_start[c]; s < g->cell_start[c + 1]; s++) {
             int64_t hits = later_hits(g, r, s, w->r2, &b);
+            if (!job_reserve(job, hits)) {
+                job->ok = 0;
+                break;
+            }
             weigh(b.d2, b.weight, hits, scale);
+            int32_t *restrict to = job->to + job->size;
+            uint16_t *restrict lift = job->lift + job->size;
             double sum = 0;
             for (int64_t h = 0; h < hits; h++) {
                 crowd[b.at[h]] += b.weight[h];
+                into[b.at[h]]++;
                 sum += b.weight[h];
+                to[h] = b.at[h];
+                lift[h] = (uint16_t)(b.weight[h] - LIFT);
             }
             crowd[s] += sum;
+            job->later[s] = (int32_t)hits;
+            job->size += hits;
         }
     }
     scratch_free(&b);
     return NULL;
 }
 
+/* The job's pairs into the adjacency, both ways. */
+static void *fill_job(void *arg)
+{
+    Job *job = arg;
+    const Grid *g = job->w->g;
+    const int64_t *off = job->off;
+    int64_t e = 0;
+    for (int64_t s = g->cell_start[job->c0]; s < g->cell_start[job->c1]; s++)
+        for (int64_t h = 0; h < job->later[s]; h++, e++) {
+            int32_t t = job->to[e];
+            int64_t q = off[t] + job->into[t]++;
+            job->nbr[off[s] + h] = t;
+            job->nlift[off[s] + h] = job->lift[e];
+            job->nbr[q] = (int32_t)s;
+            job->nlift[q] = job->lift[e];
+        }
+    return NULL;
+}
+
 #define MAX_THREADS 16
 
-/* The crowding of every point by active number into crowd (a,), and its position into
- * where (a,). The cells are split between threads at about equal numbers of points; each
- * sums into its own array (a pair may end in another's cells) and the arrays are added
- * up: sums of whole numbers, so the split changes nothing. */
-static int crowding(const Greedy *w, int threads, uint64_t *crowd, int32_t *where)
+/* fn on each job, job 0 on this thread and the others on threads of their own (or here,
+ * if a thread cannot be started). */
+static void run_jobs(void *(*fn)(void *), Job *jobs, int threads)
 {
-    const Grid *g = w->g;
-    CrowdJob jobs[MAX_THREADS];
     pthread_t ids[MAX_THREADS];
-    int started[MAX_THREADS] = {0}, ok = 1;
-    threads = threads < 1 ? 1 : (threads > MAX_THREADS ? MAX_THREADS : threads);
-    if (g->a < 16384 * threads)
-        threads = 1;
-    int64_t c = 0;
-    for (int k = 0; k < threads; k++) {
-        CrowdJob job = {w, c, g->cells, take_zeroed((g->a ? g->a : 1) * sizeof(double)), 0};
-        while (k + 1 < threads && job.c1 > c && g->cell_start[c] < g->a * (k + 1) / threads)
-            c++;
-        job.c1 = k + 1 < threads ? c : g->cells;
-        jobs[k] = job;
-        if (!job.crowd)
-            ok = 0;
-    }
-    for (int k = 1; ok && k < threads; k++)
-        started[k] = pthread_create(&ids[k], NULL, crowd_job, &jobs[k]) == 0;
-    if (ok)
-        crowd_job(&jobs[0]);
-    for (int k = 1; ok && k < threads; k++) {
+    int started[MAX_THREADS] = {0};
+    for (int k = 1; k < threads; k++)
+        started[k] = pthread_create(&ids[k], NULL, fn, &jobs[k]) == 0;
+    fn(&jobs[0]);
+    for (int k = 1; k < threads; k++) {
         if (started[k])
             pthread_join(ids[k], NULL);
         else
-            crowd_job(&jobs[k]);
+            fn(&jobs[k]);
     }
-    for (int k = 0; ok && k < threads; k++)
-        ok &= jobs[k].ok;
-    if (ok)
-        for (int64_t s = 0; s < g->a; s++) {
-            double sum = 0;
-            for (int k = 0; k < threads; k++)
-                sum += jobs[k].crowd[s];
-            crowd[g->order[s]] = (uint64_t)sum;
-            where[g->order[s]] = (int32_t)s;
-        }
-    for (int k = 0; k < threads; k++)
-        give(jobs[k].crowd);
-    return ok;
 }
 
-/* Block the points of the 27 cells around position s (cell c) closer than the radius. */
-static void block_around(const Greedy *w, int64_t s, int64_t c, Scratch *b, char *blocked)
+/* The crowding of every position into crowd (a,), and the neighbours of every position: s
+ * has nbr[off[s]] .. nbr[off[s + 1] - 1] with weights lift + LIFT (off (a + 1,) given, nbr and lift allocated). The cells are split
+ * between threads at about equal numbers of points. Each sums into its own array (a pair
+ * may end in another's cells) and the arrays are added up: sums of whole numbers, so the
+ * split changes nothing. A row holds the pairs its point found, then those found by job 0,
+ * job 1, ...; the order within a row changes no result. */
+static int crowding(const Greedy *w, int threads, int64_t *crowd, int64_t *off, int32_t **nbr,
+                    uint16_t **lift)
 {
-    const int32_t *r = w->ranges + 18 * c;
-    int64_t hits = 0;
-    for (int col = 0; col < 9; col++)
-        hits = find_hits(w->g, s, r[2 * col], r[2 * col + 1], w->r2, b->d2, b->at, hits, b->tmp);
-    for (int64_t h = 0; h < hits; h++)
-        blocked[b->at[h]] = 1;
+    const Grid *g = w->g;
+    int64_t a = g->a, m = a ? a : 1;
+    Job jobs[MAX_THREADS];
+    int ok = 1;
+    int32_t *later = take(m * sizeof(int32_t));
+    threads = threads < 1 ? 1 : (threads > MAX_THREADS ? MAX_THREADS : threads);
+    if (a < 16384 * threads)
+        threads = 1;
+    int64_t c = 0;
+    for (int k = 0; k < threads; k++) {
+        Job job = {w, c, g->cells, take_zeroed(m * sizeof(double)), take_zeroed(m * sizeof(int32_t)), later};
+        while (k + 1 < threads && job.c1 > c && g->cell_start[c] < a * (k + 1) / threads)
+            c++;
+        job.c1 = k + 1 < threads ? c : g->cells;
+        /* room for the usual number of pairs (about 9 a point at 8 candidates to a kept
+           point), so that the lists seldom grow */
+        ok &= job_reserve(&job, 12 * (g->cell_start[job.c1] - g->cell_start[job.c0]));
+        jobs[k] = job;
+        ok &= job.crowd && job.into && later;
+    }
+
+    if (ok)
+        run_jobs(crowd_job, jobs, threads);
+
+    for (int k = 0; ok && k < threads; k++)
+        ok &= jobs[k].ok;
+    if (ok) {
+        off[0] = 0;
+        for (int64_t s = 0; s < a; s++) {
+            double sum = 0;
+            int64_t row = later[s];
+            for (int k = 0; k < threads; k++) {
+                sum += jobs[k].crowd[s];
+                int32_t n = jobs[k].into[s];
+                jobs[k].into[s] = (int32_t)row;
+                row += n;
+            }
+            crowd[s] = (int64_t)sum;
+            off[s + 1] = off[s] + row;
+        }
+        *nbr = take((off[a] ? off[a] : 1) * sizeof(int32_t));
+        *lift = take((off[a] ? off[a] : 1) * sizeof(uint16_t));
+        ok = *nbr && *lift;
+    }
+    if (ok) {
+        for (int k = 0; k < threads; k++) {
+            jobs[k].off = off;
+            jobs[k].nbr = *nbr;
+            jobs[k].nlift = *lift;
+        }
+
+        run_jobs(fill_job, jobs, threads);
+
+    }
+    for (int k = 0; k < threads; k++) {
+        give(jobs[k].crowd);
+        give(jobs[k].into);
+        give(jobs[k].to);
+        give(jobs[k].lift);
+    }
+    give(later);
+    return ok;
 }
 
 /* The least x with sqrt(x) >= radius. sqrt is monotonic, so sqrt(x) < radius exactly when
@@ -707,65 +858,179 @@ static double square_bound(double radius)
     return x;
 }
 
+/* The k-th smallest (from 0) of v (n,) >= 0, which it overwrites: eleven bits at a time
+ * from the top, counting, then keeping only the values in the bucket of the k-th. */
+static int64_t kth_smallest(int64_t *v, int64_t n, int64_t k)
+{
+    uint64_t top = 1;
+    for (int64_t i = 0; i < n; i++)
+        top |= (uint64_t)v[i];
+    int shift = 64 - __builtin_clzll(top);
+    for (;;) {
+        shift = shift > 11 ? shift - 11 : 0;
+        int64_t count[2048] = {0};
+        for (int64_t i = 0; i < n; i++)
+            count[(v[i] >> shift) & 2047]++;
+        int64_t b = 0;
+        while (k >= count[b])
+            k -= count[b++];
+        int64_t m = 0;
+        for (int64_t i = 0; i < n; i++) {
+            v[m] = v[i];
+            m += ((v[i] >> shift) & 2047) == b;
+        }
+        if (shift == 0)
+            return v[0];
+        n = m;
+    }
+}
+
+/* What gone[] says of a position: undecided (0), kept, or dropped. */
+#define KEPT 1
+#define DROPPED 2
+
+/* The batch of a round: the max(least, ceil(u / share)) least crowded of the u undecided
+ * positions left (u,), ties included, into batch, by ascending crowding, ties by active
+ * number (order). value and key are room for u entries. Returns how many, or -1 when out of
+ * memory. */
+static int64_t batch_of(const int64_t *crowd, const int32_t *left, int64_t u, int64_t share, int64_t least,
+                        const int64_t *order, int64_t *value, int32_t *batch, uint64_t *key)
+{
+    int64_t want = u / share + (u % share != 0), n = 0;
+    want = want > least ? want : least;
+    int64_t limit = INT64_MAX;
+    if (want < u) {
+        for (int64_t t = 0; t < u; t++)
+            value[t] = crowd[left[t]];
+        limit = kth_smallest(value, u, want - 1);
+    }
+    for (int64_t t = 0; t < u; t++) {
+        batch[n] = left[t];
+        key[n] = (uint64_t)order[left[t]];
+        n += crowd[left[t]] <= limit;
+    }
+    /* stable sorts: by active number, then by crowding */
+    if (!radix_sort(key, batch, n))
+        return -1;
+    for (int64_t t = 0; t < n; t++)
+        key[t] = (uint64_t)crowd[batch[t]];
+    return radix_sort(key, batch, n) ? n : -1;
+}
+
+/* The neighbours of every position, from crowding(). */
+typedef struct {
+    const int64_t *off;    /* (a + 1,) position s has entries off[s] .. off[s + 1] - 1 */
+    const int32_t *nbr;    /* the neighbours' positions */
+    const uint16_t *lift;  /* their weights less LIFT */
+} Rows;
+
+/* The greedy over a round's batch (n,): a point not gone yet is kept, and its neighbours go. */
+static void keep_batch(const Rows *r, const int32_t *batch, int64_t n, const int64_t *order, char *gone,
+                       npy_bool *kept)
+{
+    for (int64_t k = 0; k < n; k++) {
+        int32_t p = batch[k];
+        if (k + 8 < n) /* rows far apart in memory: ask for them early */
+            __builtin_prefetch(r->nbr + r->off[batch[k + 8]]);
+        if (gone[p])
+            continue;
+        kept[order[p]] = 1;
+        gone[p] = KEPT;
+        for (int64_t e = r->off[p]; e < r->off[p + 1]; e++)
+            gone[r->nbr[e]] = gone[r->nbr[e]] ? gone[r->nbr[e]] : DROPPED;
+    }
+}
+
+/* The points just dropped leave their neighbours' crowding (that of points gone no longer
+ * matters); left (u,) keeps the undecided, in order, and the new count is returned. The
+ * dropped are listed in room (u,) in position order, so that their rows are read in
+ * memory order. */
+static int64_t drop(const Rows *r, int32_t *left, int64_t u, char *gone, int64_t *restrict crowd, int32_t *room)
+{
+    int64_t still = 0, dropped = 0;
+    for (int64_t t = 0; t < u; t++) {
+        int32_t s = left[t];
+        room[dropped] = s;
+        dropped += gone[s] == DROPPED;
+        left[still] = s;
+        still += !gone[s];
+    }
+    for (int64_t k = 0; k < dropped; k++) {
+        if (k + 8 < dropped) {
+            __builtin_prefetch(r->nbr + r->off[room[k + 8]]);
+            __builtin_prefetch(r->lift + r->off[room[k + 8]]);
+        }
+        for (int64_t e = r->off[room[k]]; e < r->off[room[k] + 1]; e++)
+            crowd[r->nbr[e]] -= r->lift[e] + LIFT;
+    }
+    return still;
+}
+
 PyDoc_STRVAR(greedy_doc,
-"greedy(order, xyz, ukey, cell_start, reach, radius, kept, threads)\n\n"
-"Maximal independent set of the pairs of a grid() closer than reach whose distance is\n"
-"below radius, taken in ascending crowding (sum of floor((1 - d * (1 / (2 radius))) * 65536)\n"
-"over those pairs), ties by active number: thinning._least_crowded_first on the pairs\n"
-"of thinning._self_pairs(..., reach). Fills kept (a,) bool, by active number. The\n"
-"crowding is summed on ``threads`` threads; the result does not depend on how many.");
+"greedy(order, xyz, ukey, cell_start, reach, radius, kept, share, least, threads)\n\n"
+"thinning._least_crowded_first on the pairs of thinning._self_pairs(..., reach) shorter\n"
+"than radius: a maximal independent set taken in rounds. Each round takes the max(least,\n"
+"ceil(u / share)) least crowded of the u undecided points (ties included), crowding being\n"
+"the sum of floor((1 - d * (1 / (2 radius))) * 65536) over undecided neighbours, and keeps\n"
+"them greedily in ascending crowding, ties by active number. Fills kept (a,) bool, by\n"
+"active number. The first crowding is summed on ``threads`` threads; the result does not\n"
+"depend on how many.");
 
 static PyObject *greedy(PyObject *self, PyObject *args)
 {
     Grid g;
     double reach, radius;
     PyObject *okept;
+    Py_ssize_t share, least;
     int threads;
-    if (!get_grid(args, &g, &reach, &radius, &okept, &threads))
+    if (!get_grid(args, &g, &reach, &radius, &okept, &share, &least, &threads))
         return NULL;
+    if (share < 1 || least < 1)
+        return PyErr_Format(PyExc_ValueError, "share and least must be positive");
     npy_bool *kept = PyArray_DATA((PyArrayObject *)okept);
     int64_t a = g.a, m = a ? a : 1;
     int32_t *ranges = take((18 * g.cells + 1) * sizeof(int32_t));
-    uint64_t *crowd = take(m * sizeof(uint64_t));
-    int32_t *where = take(m * sizeof(int32_t));
-    int32_t *cell_of = take(m * sizeof(int32_t));
-    char *blocked = take_zeroed(m);
-    Scratch near = {0};
-    int ok = ranges && crowd && where && cell_of && blocked;
+    int64_t *crowd = take(m * sizeof(int64_t)), *value = take(m * sizeof(int64_t));
+    int32_t *left = take(m * sizeof(int32_t)), *batch = take(m * sizeof(int32_t));
+    uint64_t *key = take(m * sizeof(uint64_t));
+    int64_t *off = take((m + 1) * sizeof(int64_t));
+    char *gone = take_zeroed(m);
+    int32_t *nbr = NULL;
+    uint16_t *lift = NULL;
+    int ok = ranges && crowd && value && left && batch && key && off && gone;
     Py_BEGIN_ALLOW_THREADS
     double below = square_bound(radius); /* d < radius */
     Greedy w = {&g, ranges, 0, reach * reach < below ? reach * reach : below, radius};
     if (ok) {
         column_ranges(&g, ranges);
         w.most = most_around(&g, ranges);
-        ok = crowding(&w, threads, crowd, where) && scratch_init(&near, w.most);
+        ok = crowding(&w, threads, crowd, off, &nbr, &lift);
     }
-    if (ok) {
-        for (int64_t c = 0; c < g.cells; c++)
-            for (int64_t s = g.cell_start[c]; s < g.cell_start[c + 1]; s++)
-                cell_of[s] = (int32_t)c;
-        /* positions by ascending crowding, ties by active number (the sort is stable) */
-        ok = radix_sort(crowd, where, a);
-    }
-    if (ok) {
+    if (ok)
         memset(kept, 0, (size_t)a);
-        for (int64_t k = 0; k < a; k++) {
-            if (k + 8 < a)
-                __builtin_prefetch(blocked + where[k + 8]);
-            int64_t s = where[k];
-            if (blocked[s])
-                continue;
-            kept[g.order[s]] = 1;
-            block_around(&w, s, cell_of[s], &near, blocked);
+    Rows rows = {off, nbr, lift};
+    /* left: the undecided positions, ascending */
+    for (int64_t s = 0; ok && s < a; s++)
+        left[s] = (int32_t)s;
+    for (int64_t u = ok ? a : 0; ok && u > 0;) {
+        int64_t n = batch_of(crowd, left, u, share, least, g.order, value, batch, key);
+        ok = n >= 0;
+        if (ok) {
+            keep_batch(&rows, batch, n, g.order, gone, kept);
+            u = drop(&rows, left, u, gone, crowd, batch);
         }
     }
     Py_END_ALLOW_THREADS
-    scratch_free(&near);
     give(ranges);
     give(crowd);
-    give(where);
-    give(cell_of);
-    give(blocked);
+    give(value);
+    give(left);
+    give(batch);
+    give(key);
+    give(off);
+    give(gone);
+    give(nbr);
+    give(lift);
     if (!ok)
         return PyErr_NoMemory();
     Py_RETURN_NONE;

@@ -117,8 +117,8 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
             warn=None, oversampling=None) -> Run:
     """Load (if needed) and plan a sampling job; see :func:`sample` for the arguments.
 
-    ``oversampling``: candidates per output point for Poisson thinning (default: 10, or
-    15 for sets of up to 20,000 points); more buys a larger rho for more time.
+    ``oversampling``: candidates per output point for Poisson thinning (default: 8, or
+    15 for sets of up to 5,000 points); more buys a larger rho for more time.
     """
     t0 = time.perf_counter()
     names = parse_attributes(attributes)
@@ -180,12 +180,13 @@ def _take(blocks, index):
                           for b, part, end in zip(blocks, np.split(index, cuts[:-1]), ends)])
 
 
-# Candidates per output point for thinning: the relative radius reached grows with it
-# (0.66 at 3, 0.72 at 5, 0.76 at 10 on a sphere) and so does the time. Small sets have
-# relatively more boundary and need more choice to reach rho 0.75 (skull, 2,000 points:
-# 0.745 at 10, 0.758 at 15).
-OVERSAMPLING = 10
-SMALL_SET, SMALL_SET_OVERSAMPLING = 20_000, 15
+# Candidates per output point for thinning: the spacing reachable grows with it and so
+# does the time (the radius that keeps exactly N on the skull at 10,000 points: 0.750 d_hex
+# at 6, 0.771 at 8, 0.786 at 10, 0.804 at 15; the search aims 1 to 2 % lower). Small
+# sets have relatively more boundary and need more choice to reach rho 0.75 (at 2,000
+# points and 8 candidates: skull 0.761, CAD plate 0.752; at 1,000, skull 0.747).
+OVERSAMPLING = 8
+SMALL_SET, SMALL_SET_OVERSAMPLING = 5_000, 15
 # --radius fixes d_min, so more candidates only add points (rho 0.699, 0.729, 0.755, 0.777
 # at 2, 3, 5, 10 times the hexagonal count on the 1.3M-face icosphere) while the pair
 # graph grows with the square of the factor (0.5, 0.8, 1.7, 8.5 s of thinning).

@@ -290,7 +290,7 @@ def fit_slope(rows, key="error"):
     return float(np.polyfit(x, y, 1)[0])
 
 
-POISSON_OVERSAMPLING = (3, 5, 10, 15)
+POISSON_OVERSAMPLING = (3, 5, 8, 10, 15)
 
 
 def poisson_hook(surface, area, counts, seed, notes):

@@ -157,8 +157,11 @@ def point_sets():
     wall = rng.random((10_000, 3)) * [1, 1, 0]
     wall[::2, 2] = 0.013  # two sheets closer than the radius
     far = rng.random((3000, 3)) * 1e-3 + 1e7  # huge coordinates, small extent
+    # cells along a diagonal: their box is too large for the kernel's table of cells, which
+    # then searches the sorted cell list instead
+    line = rng.random((4000, 1)) * [1.0, 1.0, 1.0] + rng.normal(scale=1e-3, size=(4000, 3))
     return {"sphere": (sphere, 0.05), "clustered": (clustered, 0.02), "duplicated": (duplicated, 0.03),
-            "wall": (wall, 0.02), "far": (far, 1e-4)}
+            "wall": (wall, 0.02), "far": (far, 1e-4), "line": (line, 0.003)}
 
 
 @pytest.mark.parametrize("name", list(point_sets()))
@@ -187,7 +190,11 @@ def test_pair_kernel_finds_the_pairs_of_the_numpy_search(name):
 
 @pytest.mark.parametrize("threads", ["1", "2", "5"])
 def test_greedy_does_not_depend_on_the_thread_count(threads, monkeypatch):
-    points, radius = point_sets()["sphere"]
+    # enough points for the kernel to split the crowding pass (16,384 a thread at least)
+    points = np.random.default_rng(5).normal(size=(90_000, 3))
+    points /= np.linalg.norm(points, axis=1, keepdims=True)
+    radius = 0.02
+    monkeypatch.setenv("SCATTER_THREADS", "1")
     want = thinning.thin_by_radius(points, radius)
     monkeypatch.setenv("SCATTER_THREADS", threads)
     np.testing.assert_array_equal(thinning.thin_by_radius(points, radius), want)
