@@ -187,9 +187,9 @@ def _take(blocks, index):
 # points and 8 candidates: skull 0.761, CAD plate 0.752; at 1,000, skull 0.747).
 OVERSAMPLING = 8
 SMALL_SET, SMALL_SET_OVERSAMPLING = 5_000, 15
-# --radius fixes d_min, so more candidates only add points (rho 0.699, 0.729, 0.755, 0.777
-# at 2, 3, 5, 10 times the hexagonal count on the 1.3M-face icosphere) while the pair
-# graph grows with the square of the factor (0.5, 0.8, 1.7, 8.5 s of thinning).
+# --radius fixes d_min, so more candidates only add points (rho 0.710, 0.745, 0.778, 0.810
+# at 2, 3, 5, 10 times the hexagonal count on the 1.3M-face icosphere at R = 0.0094) while
+# the pair graph grows with the square of the factor (0.07, 0.13, 0.23, 0.66 s of thinning).
 RADIUS_OVERSAMPLING = 5
 MAX_CANDIDATES = 50_000_000
 
