@@ -665,14 +665,15 @@ typedef struct {
     int64_t c0, c1;
     double *crowd;  /* (a,) by position: this job's part of every sum (whole numbers below 2^53) */
     int32_t *into;  /* (a,) how many of this job's pairs end at each position; then where in
-                       each row its entries go, from the row's start */
+                       each backward row its entries go, from the row's start */
     int32_t *later; /* (a,) shared: how many pairs each of this job's positions found */
-    int32_t *to;    /* (size,) the later end of each pair found, in the order found */
+    int64_t *first; /* (a,) shared: where they start in to and lift */
+    int32_t *to;    /* (size,) the later end of each pair found, in position order */
     uint16_t *lift; /* (size,) its weight less LIFT */
     int64_t size, cap;
-    const int64_t *off; /* the adjacency to fill (see crowding) */
-    int32_t *nbr;
-    uint16_t *nlift;
+    const int64_t *back; /* the backward rows to fill (see Rows) */
+    int32_t *bnbr;
+    uint16_t *blift;
     int ok;
 } Job;
 
@@ -728,6 +729,7 @@ static void *crowd_job(void *arg)
             }
             crowd[s] += sum;
             job->later[s] = (int32_t)hits;
+            job->first[s] = job->size;
             job->size += hits;
         }
     }
@@ -735,21 +737,19 @@ static void *crowd_job(void *arg)
     return NULL;
 }
 
-/* The job's pairs into the adjacency, both ways. */
+/* The job's pairs into the backward rows of their later ends. */
 static void *fill_job(void *arg)
 {
     Job *job = arg;
     const Grid *g = job->w->g;
-    const int64_t *off = job->off;
+    const int64_t *back = job->back;
     int64_t e = 0;
     for (int64_t s = g->cell_start[job->c0]; s < g->cell_start[job->c1]; s++)
         for (int64_t h = 0; h < job->later[s]; h++, e++) {
             int32_t t = job->to[e];
-            int64_t q = off[t] + job->into[t]++;
-            job->nbr[off[s] + h] = t;
-            job->nlift[off[s] + h] = job->lift[e];
-            job->nbr[q] = (int32_t)s;
-            job->nlift[q] = job->lift[e];
+            int64_t q = back[t] + job->into[t]++;
+            job->bnbr[q] = (int32_t)s;
+            job->blift[q] = job->lift[e];
         }
     return NULL;
 }
@@ -773,46 +773,77 @@ static void run_jobs(void *(*fn)(void *), Job *jobs, int threads)
     }
 }
 
-/* The crowding of every position into crowd (a,), and the neighbours of every position: s
- * has nbr[off[s]] .. nbr[off[s + 1] - 1] with weights lift + LIFT (off (a + 1,) given, nbr and lift allocated). The cells are split
- * between threads at about equal numbers of points. Each sums into its own array (a pair
- * may end in another's cells) and the arrays are added up: sums of whole numbers, so the
- * split changes nothing. A row holds the pairs its point found, then those found by job 0,
- * job 1, ...; the order within a row changes no result. */
-static int crowding(const Greedy *w, int threads, int64_t *crowd, int64_t *off, int32_t **nbr,
-                    uint16_t **lift)
+/* The neighbours of every position s, in two rows: forward, the later[s] pairs it found,
+ * from first[s] in the lists of the job that holds it (positions jobs_start[k] ..
+ * jobs_start[k + 1] - 1 belong to job k); backward, those that found it, bnbr[back[s]] ..
+ * bnbr[back[s + 1] - 1]. Weights are lift + LIFT. Each pair is stored twice, 6 bytes each
+ * time. */
+typedef struct {
+    int jobs;
+    int64_t jobs_start[MAX_THREADS + 1];
+    int32_t *fnbr[MAX_THREADS];
+    uint16_t *flift[MAX_THREADS];
+    int32_t *later;
+    int64_t *first, *back;
+    int32_t *bnbr;
+    uint16_t *blift;
+} Rows;
+
+static void rows_free(Rows *r)
+{
+    for (int k = 0; k < r->jobs; k++) {
+        give(r->fnbr[k]);
+        give(r->flift[k]);
+    }
+    give(r->later);
+    give(r->first);
+    give(r->back);
+    give(r->bnbr);
+    give(r->blift);
+}
+
+/* The crowding of every position into crowd (a,), and the neighbours of every position into
+ * rows. The cells are split between threads at about equal numbers of points. Each sums
+ * into its own array (a pair may end in another's cells) and the arrays are added up: sums
+ * of whole numbers, so the split changes nothing. A backward row holds the pairs found by
+ * job 0, then job 1, ...; the order within a row changes no result. */
+static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
 {
     const Grid *g = w->g;
     int64_t a = g->a, m = a ? a : 1;
     Job jobs[MAX_THREADS];
-    int ok = 1;
-    int32_t *later = take(m * sizeof(int32_t));
     threads = threads < 1 ? 1 : (threads > MAX_THREADS ? MAX_THREADS : threads);
     if (a < 16384 * threads)
         threads = 1;
+    rows->jobs = threads;
+    rows->later = take(m * sizeof(int32_t));
+    rows->first = take(m * sizeof(int64_t));
+    rows->back = take((m + 1) * sizeof(int64_t));
+    int ok = rows->later && rows->first && rows->back;
     int64_t c = 0;
     for (int k = 0; k < threads; k++) {
-        Job job = {w, c, g->cells, take_zeroed(m * sizeof(double)), take_zeroed(m * sizeof(int32_t)), later};
+        Job job = {w, c, g->cells, take_zeroed(m * sizeof(double)), take_zeroed(m * sizeof(int32_t)), rows->later,
+                   rows->first};
         while (k + 1 < threads && job.c1 > c && g->cell_start[c] < a * (k + 1) / threads)
             c++;
         job.c1 = k + 1 < threads ? c : g->cells;
+        rows->jobs_start[k] = g->cell_start[job.c0];
         /* room for the usual number of pairs (about 9 a point at 8 candidates to a kept
            point), so that the lists seldom grow */
         ok &= job_reserve(&job, 12 * (g->cell_start[job.c1] - g->cell_start[job.c0]));
         jobs[k] = job;
-        ok &= job.crowd && job.into && later;
+        ok &= job.crowd && job.into;
     }
-
+    rows->jobs_start[threads] = a;
     if (ok)
         run_jobs(crowd_job, jobs, threads);
-
     for (int k = 0; ok && k < threads; k++)
         ok &= jobs[k].ok;
     if (ok) {
-        off[0] = 0;
+        rows->back[0] = 0;
         for (int64_t s = 0; s < a; s++) {
             double sum = 0;
-            int64_t row = later[s];
+            int64_t row = 0;
             for (int k = 0; k < threads; k++) {
                 sum += jobs[k].crowd[s];
                 int32_t n = jobs[k].into[s];
@@ -820,29 +851,26 @@ static int crowding(const Greedy *w, int threads, int64_t *crowd, int64_t *off, 
                 row += n;
             }
             crowd[s] = (int64_t)sum;
-            off[s + 1] = off[s] + row;
+            rows->back[s + 1] = rows->back[s] + row;
         }
-        *nbr = take((off[a] ? off[a] : 1) * sizeof(int32_t));
-        *lift = take((off[a] ? off[a] : 1) * sizeof(uint16_t));
-        ok = *nbr && *lift;
+        rows->bnbr = take((rows->back[a] ? rows->back[a] : 1) * sizeof(int32_t));
+        rows->blift = take((rows->back[a] ? rows->back[a] : 1) * sizeof(uint16_t));
+        ok = rows->bnbr && rows->blift;
     }
     if (ok) {
         for (int k = 0; k < threads; k++) {
-            jobs[k].off = off;
-            jobs[k].nbr = *nbr;
-            jobs[k].nlift = *lift;
+            jobs[k].back = rows->back;
+            jobs[k].bnbr = rows->bnbr;
+            jobs[k].blift = rows->blift;
         }
-
         run_jobs(fill_job, jobs, threads);
-
     }
     for (int k = 0; k < threads; k++) {
         give(jobs[k].crowd);
         give(jobs[k].into);
-        give(jobs[k].to);
-        give(jobs[k].lift);
+        rows->fnbr[k] = jobs[k].to;
+        rows->flift[k] = jobs[k].lift;
     }
-    give(later);
     return ok;
 }
 
@@ -917,12 +945,34 @@ static int64_t batch_of(const int64_t *crowd, const int32_t *left, int64_t u, in
     return radix_sort(key, batch, n) ? n : -1;
 }
 
-/* The neighbours of every position, from crowding(). */
-typedef struct {
-    const int64_t *off;    /* (a + 1,) position s has entries off[s] .. off[s + 1] - 1 */
-    const int32_t *nbr;    /* the neighbours' positions */
-    const uint16_t *lift;  /* their weights less LIFT */
-} Rows;
+
+/* Visit every neighbour of position s: fn(neighbour, its weight less LIFT). */
+#define FOR_NEIGHBOURS(r, s, v, wt, body)                                                    \
+    do {                                                                                     \
+        int k_ = 0;                                                                          \
+        while ((s) >= (r)->jobs_start[k_ + 1])                                               \
+            k_++;                                                                            \
+        const int32_t *fn_ = (r)->fnbr[k_] + (r)->first[s];                                  \
+        const uint16_t *fl_ = (r)->flift[k_] + (r)->first[s];                                \
+        for (int64_t e_ = 0; e_ < (r)->later[s]; e_++) {                                     \
+            int32_t v = fn_[e_];                                                             \
+            int64_t wt = fl_[e_];                                                            \
+            body;                                                                            \
+        }                                                                                    \
+        for (int64_t e_ = (r)->back[s]; e_ < (r)->back[(s) + 1]; e_++) {                     \
+            int32_t v = (r)->bnbr[e_];                                                       \
+            int64_t wt = (r)->blift[e_];                                                     \
+            body;                                                                            \
+        }                                                                                    \
+    } while (0)
+
+/* Ask early for the rows of position s: far apart in memory when visited in crowding
+ * order. */
+static inline void prefetch_rows(const Rows *r, int32_t s)
+{
+    __builtin_prefetch(r->bnbr + r->back[s]);
+    __builtin_prefetch(r->blift + r->back[s]);
+}
 
 /* The greedy over a round's batch (n,): a point not gone yet is kept, and its neighbours go. */
 static void keep_batch(const Rows *r, const int32_t *batch, int64_t n, const int64_t *order, char *gone,
@@ -930,14 +980,13 @@ static void keep_batch(const Rows *r, const int32_t *batch, int64_t n, const int
 {
     for (int64_t k = 0; k < n; k++) {
         int32_t p = batch[k];
-        if (k + 8 < n) /* rows far apart in memory: ask for them early */
-            __builtin_prefetch(r->nbr + r->off[batch[k + 8]]);
+        if (k + 8 < n)
+            prefetch_rows(r, batch[k + 8]);
         if (gone[p])
             continue;
         kept[order[p]] = 1;
         gone[p] = KEPT;
-        for (int64_t e = r->off[p]; e < r->off[p + 1]; e++)
-            gone[r->nbr[e]] = gone[r->nbr[e]] ? gone[r->nbr[e]] : DROPPED;
+        FOR_NEIGHBOURS(r, p, v, wt, (void)wt; gone[v] = gone[v] ? gone[v] : DROPPED);
     }
 }
 
@@ -956,12 +1005,9 @@ static int64_t drop(const Rows *r, int32_t *left, int64_t u, char *gone, int64_t
         still += !gone[s];
     }
     for (int64_t k = 0; k < dropped; k++) {
-        if (k + 8 < dropped) {
-            __builtin_prefetch(r->nbr + r->off[room[k + 8]]);
-            __builtin_prefetch(r->lift + r->off[room[k + 8]]);
-        }
-        for (int64_t e = r->off[room[k]]; e < r->off[room[k] + 1]; e++)
-            crowd[r->nbr[e]] -= r->lift[e] + LIFT;
+        if (k + 8 < dropped)
+            prefetch_rows(r, room[k + 8]);
+        FOR_NEIGHBOURS(r, room[k], v, wt, crowd[v] -= wt + LIFT);
     }
     return still;
 }
@@ -975,6 +1021,7 @@ PyDoc_STRVAR(greedy_doc,
 "them greedily in ascending crowding, ties by active number. Fills kept (a,) bool, by\n"
 "active number. The first crowding is summed on ``threads`` threads; the result does not\n"
 "depend on how many.");
+
 
 static PyObject *greedy(PyObject *self, PyObject *args)
 {
@@ -993,22 +1040,19 @@ static PyObject *greedy(PyObject *self, PyObject *args)
     int64_t *crowd = take(m * sizeof(int64_t)), *value = take(m * sizeof(int64_t));
     int32_t *left = take(m * sizeof(int32_t)), *batch = take(m * sizeof(int32_t));
     uint64_t *key = take(m * sizeof(uint64_t));
-    int64_t *off = take((m + 1) * sizeof(int64_t));
     char *gone = take_zeroed(m);
-    int32_t *nbr = NULL;
-    uint16_t *lift = NULL;
-    int ok = ranges && crowd && value && left && batch && key && off && gone;
+    Rows rows = {0};
+    int ok = ranges && crowd && value && left && batch && key && gone;
     Py_BEGIN_ALLOW_THREADS
     double below = square_bound(radius); /* d < radius */
     Greedy w = {&g, ranges, 0, reach * reach < below ? reach * reach : below, radius};
     if (ok) {
         column_ranges(&g, ranges);
         w.most = most_around(&g, ranges);
-        ok = crowding(&w, threads, crowd, off, &nbr, &lift);
+        ok = crowding(&w, threads, crowd, &rows);
     }
     if (ok)
         memset(kept, 0, (size_t)a);
-    Rows rows = {off, nbr, lift};
     /* left: the undecided positions, ascending */
     for (int64_t s = 0; ok && s < a; s++)
         left[s] = (int32_t)s;
@@ -1021,16 +1065,14 @@ static PyObject *greedy(PyObject *self, PyObject *args)
         }
     }
     Py_END_ALLOW_THREADS
+    rows_free(&rows);
     give(ranges);
     give(crowd);
     give(value);
     give(left);
     give(batch);
     give(key);
-    give(off);
     give(gone);
-    give(nbr);
-    give(lift);
     if (!ok)
         return PyErr_NoMemory();
     Py_RETURN_NONE;
