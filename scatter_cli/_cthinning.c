@@ -946,32 +946,33 @@ static int64_t batch_of(const int64_t *crowd, const int32_t *left, int64_t u, in
 }
 
 
-/* Visit every neighbour of position s: fn(neighbour, its weight less LIFT). */
-#define FOR_NEIGHBOURS(r, s, v, wt, body)                                                    \
-    do {                                                                                     \
-        int k_ = 0;                                                                          \
-        while ((s) >= (r)->jobs_start[k_ + 1])                                               \
-            k_++;                                                                            \
-        const int32_t *fn_ = (r)->fnbr[k_] + (r)->first[s];                                  \
-        const uint16_t *fl_ = (r)->flift[k_] + (r)->first[s];                                \
-        for (int64_t e_ = 0; e_ < (r)->later[s]; e_++) {                                     \
-            int32_t v = fn_[e_];                                                             \
-            int64_t wt = fl_[e_];                                                            \
-            body;                                                                            \
-        }                                                                                    \
-        for (int64_t e_ = (r)->back[s]; e_ < (r)->back[(s) + 1]; e_++) {                     \
-            int32_t v = (r)->bnbr[e_];                                                       \
-            int64_t wt = (r)->blift[e_];                                                     \
-            body;                                                                            \
-        }                                                                                    \
-    } while (0)
+/* A run of neighbours and their weights less LIFT. */
+typedef struct {
+    const int32_t *nbr;
+    const uint16_t *lift;
+    int64_t n;
+} Span;
+
+/* The two rows of position s. */
+static inline void rows_of(const Rows *r, int32_t s, Span row[2])
+{
+    int k = 0;
+    while (s >= r->jobs_start[k + 1])
+        k++;
+    row[0] = (Span){r->fnbr[k] + r->first[s], r->flift[k] + r->first[s], r->later[s]};
+    row[1] = (Span){r->bnbr + r->back[s], r->blift + r->back[s], r->back[s + 1] - r->back[s]};
+}
 
 /* Ask early for the rows of position s: far apart in memory when visited in crowding
  * order. */
 static inline void prefetch_rows(const Rows *r, int32_t s)
 {
-    __builtin_prefetch(r->bnbr + r->back[s]);
-    __builtin_prefetch(r->blift + r->back[s]);
+    Span row[2];
+    rows_of(r, s, row);
+    for (int h = 0; h < 2; h++) {
+        __builtin_prefetch(row[h].nbr);
+        __builtin_prefetch(row[h].lift);
+    }
 }
 
 /* The greedy over a round's batch (n,): a point not gone yet is kept, and its neighbours go. */
@@ -986,7 +987,11 @@ static void keep_batch(const Rows *r, const int32_t *batch, int64_t n, const int
             continue;
         kept[order[p]] = 1;
         gone[p] = KEPT;
-        FOR_NEIGHBOURS(r, p, v, wt, (void)wt; gone[v] = gone[v] ? gone[v] : DROPPED);
+        Span row[2];
+        rows_of(r, p, row);
+        for (int h = 0; h < 2; h++)
+            for (int64_t e = 0; e < row[h].n; e++)
+                gone[row[h].nbr[e]] = gone[row[h].nbr[e]] ? gone[row[h].nbr[e]] : DROPPED;
     }
 }
 
@@ -1007,7 +1012,11 @@ static int64_t drop(const Rows *r, int32_t *left, int64_t u, char *gone, int64_t
     for (int64_t k = 0; k < dropped; k++) {
         if (k + 8 < dropped)
             prefetch_rows(r, room[k + 8]);
-        FOR_NEIGHBOURS(r, room[k], v, wt, crowd[v] -= wt + LIFT);
+        Span row[2];
+        rows_of(r, room[k], row);
+        for (int h = 0; h < 2; h++)
+            for (int64_t e = 0; e < row[h].n; e++)
+                crowd[row[h].nbr[e]] -= row[h].lift[e] + LIFT;
     }
     return still;
 }
