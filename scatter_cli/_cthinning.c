@@ -183,23 +183,33 @@ typedef struct {
     int64_t size, cap;
 } Pairs;
 
+/* *p (from take, holding used bytes) grown to size bytes; 0, *p unchanged, when out of
+ * memory. */
+static int grow_array(void **p, size_t used, size_t size)
+{
+    void *q = grow(*p, used, size);
+    if (q)
+        *p = q;
+    return q != NULL;
+}
+
+/* Room for more entries after size, in a list of cap: doubled from cap, or from first. */
+static int64_t room_for(int64_t size, int64_t cap, int64_t more, int64_t first)
+{
+    cap = cap ? cap : first;
+    while (cap < size + more)
+        cap *= 2;
+    return cap;
+}
+
 static int pairs_reserve(Pairs *e, int64_t more)
 {
     if (e->size + more <= e->cap)
         return 1;
-    int64_t cap = e->cap ? e->cap : 1 << 12;
-    while (cap < e->size + more)
-        cap *= 2;
-    int64_t *i = grow(e->i, e->size * sizeof(int64_t), cap * sizeof(int64_t));
-    if (i)
-        e->i = i;
-    int64_t *j = grow(e->j, e->size * sizeof(int64_t), cap * sizeof(int64_t));
-    if (j)
-        e->j = j;
-    double *d = grow(e->d, e->size * sizeof(double), cap * sizeof(double));
-    if (d)
-        e->d = d;
-    if (!i || !j || !d)
+    int64_t cap = room_for(e->size, e->cap, more, 1 << 12);
+    if (!grow_array((void **)&e->i, e->size * sizeof(int64_t), cap * sizeof(int64_t)) ||
+        !grow_array((void **)&e->j, e->size * sizeof(int64_t), cap * sizeof(int64_t)) ||
+        !grow_array((void **)&e->d, e->size * sizeof(double), cap * sizeof(double)))
         return 0;
     e->cap = cap;
     return 1;
@@ -681,16 +691,9 @@ static int job_reserve(Job *job, int64_t more)
 {
     if (job->size + more <= job->cap)
         return 1;
-    int64_t cap = job->cap ? job->cap : 1 << 14;
-    while (cap < job->size + more)
-        cap *= 2;
-    int32_t *to = grow(job->to, job->size * sizeof(int32_t), cap * sizeof(int32_t));
-    if (to)
-        job->to = to;
-    uint16_t *lift = grow(job->lift, job->size * sizeof(uint16_t), cap * sizeof(uint16_t));
-    if (lift)
-        job->lift = lift;
-    if (!to || !lift)
+    int64_t cap = room_for(job->size, job->cap, more, 1 << 14);
+    if (!grow_array((void **)&job->to, job->size * sizeof(int32_t), cap * sizeof(int32_t)) ||
+        !grow_array((void **)&job->lift, job->size * sizeof(uint16_t), cap * sizeof(uint16_t)))
         return 0;
     job->cap = cap;
     return 1;
