@@ -550,6 +550,7 @@ typedef struct {
     double *d2, *tmp;
     double *weight;
     int32_t *at;
+    uint16_t *lift;
 } Scratch;
 
 static int scratch_init(Scratch *b, int64_t most)
@@ -559,7 +560,8 @@ static int scratch_init(Scratch *b, int64_t most)
     b->tmp = malloc(most * sizeof(double));
     b->at = malloc(most * sizeof(int32_t));
     b->weight = malloc(most * sizeof(double));
-    return b->d2 && b->tmp && b->at && b->weight;
+    b->lift = malloc(most * sizeof(uint16_t));
+    return b->d2 && b->tmp && b->at && b->weight && b->lift;
 }
 
 static void scratch_free(Scratch *b)
@@ -568,6 +570,7 @@ static void scratch_free(Scratch *b)
     free(b->tmp);
     free(b->at);
     free(b->weight);
+    free(b->lift);
 }
 
 /* The points after position s (cell ranges r) closer than sqrt(r2), into b: those after it
@@ -681,6 +684,8 @@ typedef struct {
     int32_t *to;    /* (size,) the later end of each pair found, in position order */
     uint16_t *lift; /* (size,) its weight less LIFT */
     int64_t size, cap;
+    int64_t budget; /* list no more pairs than this; past it, over is set and the lists stop */
+    int over;
     const int64_t *back; /* the backward rows to fill (see Rows) */
     int32_t *bnbr;
     uint16_t *blift;
@@ -715,22 +720,27 @@ static void *crowd_job(void *arg)
         const int32_t *r = w->ranges + 18 * c;
         for (int64_t s = g->cell_start[c]; s < g->cell_start[c + 1]; s++) {
             int64_t hits = later_hits(g, r, s, w->r2, &b);
-            if (!job_reserve(job, hits)) {
+            job->over |= job->size + hits > job->budget;
+            if (!job->over && !job_reserve(job, hits)) {
                 job->ok = 0;
                 break;
             }
             weigh(b.d2, b.weight, hits, scale);
-            int32_t *restrict to = job->to + job->size;
-            uint16_t *restrict lift = job->lift + job->size;
             double sum = 0;
             for (int64_t h = 0; h < hits; h++) {
                 crowd[b.at[h]] += b.weight[h];
-                into[b.at[h]]++;
                 sum += b.weight[h];
+            }
+            crowd[s] += sum;
+            if (job->over)
+                continue;
+            int32_t *restrict to = job->to + job->size;
+            uint16_t *restrict lift = job->lift + job->size;
+            for (int64_t h = 0; h < hits; h++) {
+                into[b.at[h]]++;
                 to[h] = b.at[h];
                 lift[h] = (uint16_t)(b.weight[h] - LIFT);
             }
-            crowd[s] += sum;
             job->later[s] = (int32_t)hits;
             job->first[s] = job->size;
             job->size += hits;
@@ -782,6 +792,9 @@ static void run_jobs(void *(*fn)(void *), Job *jobs, int threads)
  * bnbr[back[s + 1] - 1]. Weights are lift + LIFT. Each pair is stored twice, 6 bytes each
  * time. */
 typedef struct {
+    const Greedy *w;     /* with by_grid: the rows are found again in the grid */
+    const int32_t *cell; /* (a,) the cell of each position, with by_grid */
+    int by_grid;
     int jobs;
     int64_t jobs_start[MAX_THREADS + 1];
     int32_t *fnbr[MAX_THREADS];
@@ -803,6 +816,28 @@ static void rows_free(Rows *r)
     give(r->back);
     give(r->bnbr);
     give(r->blift);
+    give((void *)r->cell);
+}
+
+/* Lists hold at most this many pairs a point (about 9 at 8 candidates to a kept point, 5 for
+ * --radius): beyond it (clustered points in an uncapped grid can have millions of pairs) the
+ * rows are found again in the grid when needed, slower but in memory that does not grow
+ * with the pairs. */
+#define MOST_LISTED 64
+
+/* Rows found again in the grid: each position's cell. */
+static int by_grid(const Greedy *w, Rows *rows)
+{
+    const Grid *g = w->g;
+    int32_t *cell = take((g->a ? g->a : 1) * sizeof(int32_t));
+    if (!cell)
+        return 0;
+    for (int64_t c = 0; c < g->cells; c++)
+        for (int64_t s = g->cell_start[c]; s < g->cell_start[c + 1]; s++)
+            cell[s] = (int32_t)c;
+    rows->w = w;
+    rows->cell = cell;
+    return 1;
 }
 
 /* The crowding of every position into crowd (a,), and the neighbours of every position into
@@ -833,15 +868,19 @@ static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
         rows->jobs_start[k] = g->cell_start[job.c0];
         /* room for the usual number of pairs (about 9 a point at 8 candidates to a kept
            point), so that the lists seldom grow */
-        ok &= job_reserve(&job, 12 * (g->cell_start[job.c1] - g->cell_start[job.c0]));
+        int64_t points = g->cell_start[job.c1] - g->cell_start[job.c0];
+        ok &= job_reserve(&job, 12 * points);
+        job.budget = MOST_LISTED * points + 65536;
         jobs[k] = job;
         ok &= job.crowd && job.into;
     }
     rows->jobs_start[threads] = a;
     if (ok)
         run_jobs(crowd_job, jobs, threads);
-    for (int k = 0; ok && k < threads; k++)
+    for (int k = 0; ok && k < threads; k++) {
         ok &= jobs[k].ok;
+        rows->by_grid |= jobs[k].over;
+    }
     if (ok) {
         rows->back[0] = 0;
         for (int64_t s = 0; s < a; s++) {
@@ -856,17 +895,20 @@ static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
             crowd[s] = (int64_t)sum;
             rows->back[s + 1] = rows->back[s] + row;
         }
+    }
+    if (ok && rows->by_grid)
+        ok = by_grid(w, rows);
+    else if (ok) {
         rows->bnbr = take((rows->back[a] ? rows->back[a] : 1) * sizeof(int32_t));
         rows->blift = take((rows->back[a] ? rows->back[a] : 1) * sizeof(uint16_t));
         ok = rows->bnbr && rows->blift;
-    }
-    if (ok) {
-        for (int k = 0; k < threads; k++) {
+        for (int k = 0; ok && k < threads; k++) {
             jobs[k].back = rows->back;
             jobs[k].bnbr = rows->bnbr;
             jobs[k].blift = rows->blift;
         }
-        run_jobs(fill_job, jobs, threads);
+        if (ok)
+            run_jobs(fill_job, jobs, threads);
     }
     for (int k = 0; k < threads; k++) {
         give(jobs[k].crowd);
@@ -874,6 +916,13 @@ static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
         rows->fnbr[k] = jobs[k].to;
         rows->flift[k] = jobs[k].lift;
     }
+    if (rows->by_grid)
+        for (int k = 0; k < threads; k++) {
+            give(rows->fnbr[k]);
+            give(rows->flift[k]);
+            rows->fnbr[k] = NULL;
+            rows->flift[k] = NULL;
+        }
     return ok;
 }
 
@@ -956,9 +1005,22 @@ typedef struct {
     int64_t n;
 } Span;
 
-/* The two rows of position s. */
-static inline void rows_of(const Rows *r, int32_t s, Span row[2])
+/* The two rows of position s; b is room for them when they are found in the grid (then
+ * the first holds s itself too, with weight 65536: its own crowding no longer matters). */
+static inline void rows_of(const Rows *r, int32_t s, Span row[2], Scratch *b)
 {
+    if (r->by_grid) {
+        const int32_t *around = r->w->ranges + 18 * r->cell[s];
+        int64_t n = 0;
+        for (int col = 0; col < 9; col++)
+            n = find_hits(r->w->g, s, around[2 * col], around[2 * col + 1], r->w->r2, b->d2, b->at, n, b->tmp);
+        weigh(b->d2, b->weight, n, 1.0 / (2.0 * r->w->radius));
+        for (int64_t h = 0; h < n; h++)
+            b->lift[h] = (uint16_t)(b->weight[h] - LIFT);
+        row[0] = (Span){b->at, b->lift, n};
+        row[1] = (Span){NULL, NULL, 0};
+        return;
+    }
     int k = 0;
     while (s >= r->jobs_start[k + 1])
         k++;
@@ -971,7 +1033,9 @@ static inline void rows_of(const Rows *r, int32_t s, Span row[2])
 static inline void prefetch_rows(const Rows *r, int32_t s)
 {
     Span row[2];
-    rows_of(r, s, row);
+    if (r->by_grid)
+        return;
+    rows_of(r, s, row, NULL);
     for (int h = 0; h < 2; h++) {
         __builtin_prefetch(row[h].nbr);
         __builtin_prefetch(row[h].lift);
@@ -980,7 +1044,7 @@ static inline void prefetch_rows(const Rows *r, int32_t s)
 
 /* The greedy over a round's batch (n,): a point not gone yet is kept, and its neighbours go. */
 static void keep_batch(const Rows *r, const int32_t *batch, int64_t n, const int64_t *order, char *gone,
-                       npy_bool *kept)
+                       npy_bool *kept, Scratch *b)
 {
     for (int64_t k = 0; k < n; k++) {
         int32_t p = batch[k];
@@ -991,7 +1055,7 @@ static void keep_batch(const Rows *r, const int32_t *batch, int64_t n, const int
         kept[order[p]] = 1;
         gone[p] = KEPT;
         Span row[2];
-        rows_of(r, p, row);
+        rows_of(r, p, row, b);
         for (int h = 0; h < 2; h++)
             for (int64_t e = 0; e < row[h].n; e++)
                 gone[row[h].nbr[e]] = gone[row[h].nbr[e]] ? gone[row[h].nbr[e]] : DROPPED;
@@ -1002,7 +1066,8 @@ static void keep_batch(const Rows *r, const int32_t *batch, int64_t n, const int
  * matters); left (u,) keeps the undecided, in order, and the new count is returned. The
  * dropped are listed in room (u,) in position order, so that their rows are read in
  * memory order. */
-static int64_t drop(const Rows *r, int32_t *left, int64_t u, char *gone, int64_t *restrict crowd, int32_t *room)
+static int64_t drop(const Rows *r, int32_t *left, int64_t u, char *gone, int64_t *restrict crowd, int32_t *room,
+                    Scratch *b)
 {
     int64_t still = 0, dropped = 0;
     for (int64_t t = 0; t < u; t++) {
@@ -1016,7 +1081,7 @@ static int64_t drop(const Rows *r, int32_t *left, int64_t u, char *gone, int64_t
         if (k + 8 < dropped)
             prefetch_rows(r, room[k + 8]);
         Span row[2];
-        rows_of(r, room[k], row);
+        rows_of(r, room[k], row, b);
         for (int h = 0; h < 2; h++)
             for (int64_t e = 0; e < row[h].n; e++)
                 crowd[row[h].nbr[e]] -= row[h].lift[e] + LIFT;
@@ -1054,6 +1119,7 @@ static PyObject *greedy(PyObject *self, PyObject *args)
     uint64_t *key = take(m * sizeof(uint64_t));
     char *gone = take_zeroed(m);
     Rows rows = {0};
+    Scratch near = {0};
     int ok = ranges && crowd && value && left && batch && key && gone;
     Py_BEGIN_ALLOW_THREADS
     double below = square_bound(radius); /* d < radius */
@@ -1061,7 +1127,7 @@ static PyObject *greedy(PyObject *self, PyObject *args)
     if (ok) {
         column_ranges(&g, ranges);
         w.most = most_around(&g, ranges);
-        ok = crowding(&w, threads, crowd, &rows);
+        ok = crowding(&w, threads, crowd, &rows) && (!rows.by_grid || scratch_init(&near, w.most));
     }
     if (ok)
         memset(kept, 0, (size_t)a);
@@ -1072,12 +1138,13 @@ static PyObject *greedy(PyObject *self, PyObject *args)
         int64_t n = batch_of(crowd, left, u, share, least, g.order, value, batch, key);
         ok = n >= 0;
         if (ok) {
-            keep_batch(&rows, batch, n, g.order, gone, kept);
-            u = drop(&rows, left, u, gone, crowd, batch);
+            keep_batch(&rows, batch, n, g.order, gone, kept, &near);
+            u = drop(&rows, left, u, gone, crowd, batch, &near);
         }
     }
     Py_END_ALLOW_THREADS
     rows_free(&rows);
+    scratch_free(&near);
     give(ranges);
     give(crowd);
     give(value);

@@ -160,8 +160,10 @@ def point_sets():
     # cells along a diagonal: their box is too large for the kernel's table of cells, which
     # then searches the sorted cell list instead
     line = rng.random((4000, 1)) * [1.0, 1.0, 1.0] + rng.normal(scale=1e-3, size=(4000, 3))
+    # about 160 neighbours a point: more pairs than the kernel lists, so it finds them again
+    dense = rng.random((20_000, 3)) * [1, 1, 0]
     return {"sphere": (sphere, 0.05), "clustered": (clustered, 0.02), "duplicated": (duplicated, 0.03),
-            "wall": (wall, 0.02), "far": (far, 1e-4), "line": (line, 0.003)}
+            "wall": (wall, 0.02), "far": (far, 1e-4), "line": (line, 0.003), "dense": (dense, 0.05)}
 
 
 @pytest.mark.parametrize("name", list(point_sets()))
