@@ -8,9 +8,10 @@
  * A pair is found once, from its earlier point, in the runs after it.
  * greedy() takes a maximal independent set of the pairs shorter than a radius, least
  * crowded first, in rounds: one pass on all threads sums each point's crowding and lists
- * its neighbours (6 bytes a neighbour); each round then keeps, in order of crowding, the
- * least crowded share of the undecided points that are not yet dropped, drops their
- * neighbours, and takes the dropped out of their own neighbours' crowding. Distances and
+ * its neighbours (6 bytes a neighbour; past MOST_LISTED a point they are found again in
+ * the grid when needed); each round then keeps, in order of crowding, the least crowded
+ * share of the undecided points that are not yet dropped, drops their neighbours, and
+ * takes the dropped out of their own neighbours' crowding. Distances and
  * crowding are computed with the same float64 operations as the NumPy code (built with
  * -ffp-contract=off; the AVX-512 paths multiply and add separately too) and crowding is a
  * sum of whole numbers, so neither the order pairs are found in nor the path changes a
