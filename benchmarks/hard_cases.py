@@ -23,13 +23,15 @@ from scatter_cli.sampling import SamplePlan  # noqa: E402
 from scatter_cli.surface import load_surface  # noqa: E402
 from tests.conftest import spread_triangles, triangles_mesh  # noqa: E402
 from tests.hardcheck import ALPHA, exact_face_errors, pooled_chi2_pvalue, two_sum_le_one  # noqa: E402
-from tests.test_hard_numeric import Float32CdfPlan, UnweightedPlan, area_groups  # noqa: E402
+from scatter_cli.sources import RandomSource  # noqa: E402
+from tests.doubles import Float32CdfPlan, UnweightedSource  # noqa: E402
+from tests.test_hard_numeric import area_groups  # noqa: E402
 
 
-def face_counts(plan, n, seed, block=1 << 22):
-    counts = np.zeros(plan.surface.face_count)
-    for a in range(0, n, block):
-        counts += np.bincount(plan.draw(a, min(n, a + block), seed).face, minlength=len(counts))
+def face_counts(source, faces, block=1 << 22):
+    counts = np.zeros(faces)
+    for a in range(0, source.count, block):
+        counts += np.bincount(source.draw(a, min(source.count, a + block)).face, minlength=faces)
     return counts
 
 
@@ -40,10 +42,11 @@ def wide(faces, n):
     surface = load_surface(triangles_mesh(tri))
     del tri
     print(f"[1] {faces:,} faces, areas {areas.min():.3g} .. {areas.max():.3g}; built in {time.perf_counter() - t:.0f} s")
-    for name, kind, must_pass in (("scatter", SamplePlan, True), ("unweighted", UnweightedPlan, False),
-                                  ("float32 CDF", Float32CdfPlan, False)):
+    for name, kind, must_pass in (("scatter", lambda: RandomSource(SamplePlan(surface), n, 6), True),
+                                  ("unweighted", lambda: UnweightedSource(SamplePlan(surface), n, 6), False),
+                                  ("float32 CDF", lambda: RandomSource(Float32CdfPlan(surface), n, 6), False)):
         t = time.perf_counter()
-        counts = face_counts(kind(surface), n, seed=6)
+        counts = face_counts(kind(), surface.face_count)
         obs, exp = area_groups(areas, counts, n)
         p_dec = pooled_chi2_pvalue(obs, exp)
         p_face = pooled_chi2_pvalue(counts, n * areas / areas.sum())

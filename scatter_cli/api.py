@@ -1,4 +1,9 @@
-"""The Python API that the command line wraps: ``sample`` and the streaming ``prepare``."""
+"""The Python API that the command line wraps: ``sample`` and the streaming ``prepare``.
+
+A run flows one way: file -> surface -> plan -> source -> chunks -> writer. ``prepare``
+checks every option, loads the surface, builds its source of points (thinned into a new
+source when asked) and returns a :class:`Run`, whose ``chunks()`` a writer streams.
+"""
 
 from __future__ import annotations
 
@@ -8,10 +13,11 @@ import time
 import numpy as np
 
 from .attributes import AttributeMaker
-from .errors import ScatterError, ScatterUsageError
-from .methods import DRAWS, SOBOL_MAX_COUNT
+from .errors import ScatterUsageError
+from .methods import SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
-from .sampling import RawChunk, SamplePlan, chunk_ranges, in_blocks, run_chunks
+from .sampling import SamplePlan, chunk_ranges, run_chunks
+from .sources import Source, ThinnedSource, make_source, thinned
 from .surface import Surface, apply_matrix, load_surface
 
 METHODS = ("random", "stratified", "sobol")
@@ -20,64 +26,52 @@ PRECISIONS = ("auto", "float32", "float64")
 # --precision auto keeps float32 while its rounding moves no point by more than this
 # fraction of the bounding-box diagonal.
 AUTO_PRECISION_TOLERANCE = 1e-6
+# Candidates drawn per output point before thinning: more buy a larger spacing (rho) for
+# more time (docs/sampling.md: oversampling).
+OVERSAMPLING = 8  # for --poisson -n N
+SMALL_SET, SMALL_SET_OVERSAMPLING = 5_000, 15  # for --poisson sets of up to SMALL_SET points
+RADIUS_OVERSAMPLING = 5  # for --radius: times the most points an R-spaced set can hold
+MAX_CANDIDATES = 50_000_000  # a larger thinning job is refused
 
 
 class Run:
-    """A prepared sampling job: the plan, the output layout and the point count.
+    """A prepared sampling job: a source of points, the attributes and the output layout.
 
     ``chunks()`` yields :class:`Samples` of at most ``chunk_size`` points, in output
     order, so a writer can stream any count in flat memory.
     """
 
-    def __init__(self, surface, plan, count, seed, attributes, dtype, chunk_size, info, sampler=None,
-                 method="random"):
-        self.surface = surface
-        self.method = method
-        self.plan = plan
-        self.sampler = sampler or plan  # a weighting's sampler, or the plain plan
-        self.count = count
-        self.seed = seed
+    def __init__(self, source: Source, maker: AttributeMaker, dtype, chunk_size: int, info: dict):
+        self.source = source
+        self.maker = maker
         self.dtype = np.dtype(dtype)
-        self.maker = AttributeMaker(surface, attributes)
         self.chunk_size = chunk_size
         self.info = info
-        self.layout = column_layout({ATTRIBUTES[a][0] for a in attributes}, self.dtype)
-        self.kept = None  # RawChunk of the thinned set, when thinning
+        self.layout = column_layout({ATTRIBUTES[a][0] for a in maker.names}, self.dtype)
+
+    @property
+    def count(self) -> int:
+        return self.source.count
+
+    @property
+    def kept(self):
+        """The thinned points (a RawChunk), or None when the run is not thinned."""
+        return self.source.kept if isinstance(self.source, ThinnedSource) else None
 
     def _job(self, start, stop):
-        if self.kept is not None:
-            raw = self.kept.slice(start, stop)
-        elif self.method == "random":
-            raw = self.sampler.draw(start, stop, self.seed, self.maker.needs_bary)
-        else:
-            used, b = DRAWS[self.method](self.plan, self.count, start, stop, self.seed)
-            raw = self.plan.place(start, used, b, self.maker.needs_bary)
-        attrs = self.maker.make(raw, self.dtype)
-        return Samples(raw.points.astype(self.dtype, copy=False), attrs)
+        raw = self.source.draw(start, stop)
+        return Samples(raw.points.astype(self.dtype, copy=False), self.maker.make(raw, self.dtype))
 
-    def thin(self, candidates, radius):
-        """Replace the run's points by a Poisson-disk subset of ``candidates`` random points.
+    def chunks(self, start=0, stop=None, *, threads=None):
+        """Samples chunks of points ``start .. stop - 1`` (default: all) in output order.
 
-        ``radius`` None: exactly ``self.count`` points, spaced as far apart as reached.
+        They are the slice ``start:stop`` of the whole run's points, byte for byte, and
+        cost only their share of it.
         """
-        from . import thinning
-
-        t = time.perf_counter()
-        want_bary = self.maker.needs_bary  # for the attributes of the points kept, if any
-        blocks = in_blocks(lambda i, j: self.sampler.draw(i, j, self.seed, want_bary), candidates)
-        points = np.concatenate([b.points for b in blocks]) if len(blocks) > 1 else blocks[0].points
-        t1 = time.perf_counter()
-        if radius is not None:
-            index = thinning.thin_by_radius(points, radius)
-            d_min = None
-        else:
-            index, d_min = thinning.thin_to_count(points, self.count, self.info["area"])
-        self.kept = _take(blocks, index)
-        self.count = len(index)
-        self.info.update(count=self.count, candidates=candidates, radius=radius)
-        if d_min is not None:
-            self.info.update(d_min=d_min, rho=thinning.relative_radius(d_min, self.info["area"], self.count))
-        self.info["timings"].update(candidates=t1 - t, thinning=time.perf_counter() - t1)
+        stop = self.count if stop is None else stop
+        if not 0 <= start <= stop <= self.count:
+            raise ValueError(f"points {start}..{stop} are outside the run's 0..{self.count}")
+        yield from run_chunks(self._job, chunk_ranges(stop, self.chunk_size, start), threads)
 
     def spacing(self):
         """d_min, mean nearest-neighbour distance and rho of the output (thinning runs)."""
@@ -85,18 +79,13 @@ class Run:
 
         return spacing_stats(self.kept.points, self.info["area"])
 
-    def chunks(self, threads=None):
-        """Samples chunks in output order."""
-        yield from run_chunks(self._job, chunk_ranges(self.count, self.chunk_size), threads)
-
     def collect(self) -> Samples:
         """All points in one :class:`Samples` (memory grows with the count)."""
         n = self.count
         points = np.empty((n, 3), dtype=self.dtype)
         attributes = {}
-        # Fill preallocated arrays chunk by chunk: no concatenation copy at the end. The
-        # workers round to the output type; copying into the output on the workers instead
-        # measured slower (0.37 s against 0.23 s for 10^7 points on the skull).
+        # Preallocated arrays filled chunk by chunk: no concatenation copy at the end
+        # (docs/sampling.md: collecting).
         pos = 0
         for chunk in self.chunks():
             k = len(chunk)
@@ -115,87 +104,64 @@ class Run:
 def prepare(mesh, count=None, *, density=None, seed=0, method="random", attributes=(), poisson=False,
             radius=None, weight=None, objects=None, precision="auto", chunk_size=None, input_format=None,
             warn=None, oversampling=None) -> Run:
-    """Load (if needed) and plan a sampling job; see :func:`sample` for the arguments.
+    """Check the options, load ``mesh`` (if a path) and prepare its run; see :func:`sample`.
 
     ``oversampling``: candidates per output point for Poisson thinning (default: 8, or
     15 for sets of up to 5,000 points); more buys a larger rho for more time.
     """
     t0 = time.perf_counter()
     names = parse_attributes(attributes)
-    _check_options(count, density, seed, method, precision, chunk_size, radius)
-    # vertices and faces are all a job needs unless an attribute or weight reads the file's
-    # colours, UVs or normals
-    plain = not weight and set(names) <= PLAIN_ATTRIBUTES
+    check_options(count, density, seed, method, precision, chunk_size, radius, poisson, weight, oversampling)
+    plain = not weight and set(names) <= PLAIN_ATTRIBUTES  # no colours, UVs or normals to read
     surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects,
                                                                   plain=plain)
     t1 = time.perf_counter()
-    sampler = None
-    if weight:
-        from .weighting import weighted_plan
+    plan, weighting, area = plan_surface(surface, weight, warn)
+    count = point_count(count, density, area, method)
+    dtype = choose_precision(plan, precision, warn)
+    maker = AttributeMaker(surface, names)
+    info = {"source": surface.source, "count": count, "area": area, "faces": surface.face_count,
+            "faces_used": plan.faces_used, "seed": seed, "method": method, "precision": dtype.name,
+            "timings": {"load": t1 - t0, "plan": time.perf_counter() - t1}}
+    if weighting is not None:
+        info["weight"] = weight
+    thin = poisson or radius is not None
+    n = candidate_count(area, count, radius, surface.source, oversampling) if thin else count
+    source = make_source(plan, n, seed, maker.needs_bary, method=method, weighting=weighting, area=area)
+    if thin:
+        source, thinning = thinned(source, count, radius)
+        info["timings"].update(thinning.pop("timings"))
+        info.update(thinning)
+    return Run(source, maker, dtype, chunk_size or plan.default_chunk, info)
 
-        plan, sampler = weighted_plan(surface, weight)
+
+def plan_surface(surface: Surface, weight=None, warn=None):
+    """(plan, weighting or None, area): the face table of ``surface`` (over area times the
+    weight ``--weight weight`` reads from the file, if given) and its unweighted area."""
+    weighting = None
+    if weight:
+        from .weighting import read_weight, weighted_plan
+
+        weighting = read_weight(surface, weight)
+        plan = weighted_plan(surface, weighting)
     else:
         plan = SamplePlan(surface)
     if plan.non_finite and warn:
         warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
-    area = plan.area if sampler is None else SamplePlan(surface).area  # weighted CDF total != area
+    area = plan.area if weighting is None else SamplePlan(surface).area  # a weighted CDF's total is no area
+    return plan, weighting, area
+
+
+def point_count(count, density, area, method="random") -> int:
+    """The run's point count: ``count``, else ``density`` times ``area``, else 10,000."""
     if density is not None:
         count = int(round(density * area))
-    elif count is None:
-        count = 10000
-    if poisson and radius is not None:
-        raise ScatterUsageError("give either --poisson (an exact count) or --radius, not both")
-    if radius is not None and density is not None:
-        raise ScatterUsageError("with --radius the count follows from R: drop --density")
-    if method != "random" and (poisson or radius is not None or sampler is not None):
-        raise ScatterUsageError(f"--method {method} does not combine with --poisson, --radius or --weight "
-                                "(they work on the random method)")
-    if method == "sobol" and count > SOBOL_MAX_COUNT:
-        raise ScatterUsageError(f"--method sobol gives at most 2^32 = {SOBOL_MAX_COUNT:,} points per run, not {count:,}")
-    dtype = choose_precision(plan, precision, warn)
-    info = {
-        "source": surface.source,
-        "count": count,
-        "area": area,
-        "faces": surface.face_count,
-        "faces_used": plan.faces_used,
-        "seed": seed,
-        "method": method,
-        "precision": np.dtype(dtype).name,
-        "timings": {"load": t1 - t0, "plan": time.perf_counter() - t1},
-    }
-    if sampler is not None:
-        info["weight"] = weight
-    run = Run(surface, plan, count, seed, names, dtype, chunk_size or plan.default_chunk, info, sampler, method)
-    if poisson or radius is not None:
-        run.thin(candidate_count(area, count, radius, surface.source, oversampling), radius)
-    return run
-
-
-def _take(blocks, index):
-    """Rows ``index`` (k,) ascending of the chunks ``blocks`` end to end, as one chunk."""
-    ends = np.cumsum([len(b.points) for b in blocks])
-    cuts = np.searchsorted(index, ends)
-    return RawChunk.join([b.take(part - (end - len(b.points)))
-                          for b, part, end in zip(blocks, np.split(index, cuts[:-1]), ends)])
-
-
-# Candidates per output point for thinning: the spacing reachable grows with it and so
-# does the time (the radius that keeps exactly N on the skull at 10,000 points: 0.750 d_hex
-# at 6, 0.771 at 8, 0.786 at 10, 0.804 at 15; the search aims 1 to 2 % lower). Small
-# sets have relatively more boundary and need more choice to reach rho 0.75 (at 2,000
-# points and 8 candidates: skull 0.761, CAD plate 0.752; at 1,000, skull 0.747).
-OVERSAMPLING = 8
-SMALL_SET, SMALL_SET_OVERSAMPLING = 5_000, 15
-# --radius fixes d_min, so more candidates only add points (rho 0.710, 0.745, 0.778, 0.810
-# at 2, 3, 5, 10 times the hexagonal count on the 1.3M-face icosphere at R = 0.0094) while
-# the pair graph grows with the square of the factor (0.07, 0.13, 0.23, 0.66 s of thinning).
-RADIUS_OVERSAMPLING = 5
-MAX_CANDIDATES = 50_000_000
+        _check_sobol_count(method, count)
+    return 10000 if count is None else count
 
 
 def candidate_count(area, count, radius, source, oversampling=None):
-    """How many uniform candidates to draw before thinning."""
+    """How many uniform candidates to draw before thinning (``area`` unused without ``radius``)."""
     if radius is not None:
         # no R-spaced set holds more than the hexagonal packing of spacing R
         bound = area / (math.sqrt(3) / 2 * radius * radius)
@@ -228,7 +194,9 @@ def sample(mesh, count=10000, *, density=None, seed=0, method="random", attribut
     return samples
 
 
-def _check_options(count, density, seed, method, precision, chunk_size, radius):
+def check_options(count=None, density=None, seed=0, method="random", precision="auto", chunk_size=None,
+                  radius=None, poisson=False, weight=None, oversampling=None):
+    """Raise ScatterUsageError for any option, or combination, that is wrong whatever the mesh."""
     if count is not None and density is not None:
         raise ScatterUsageError("give either a count (-n) or a --density, not both")
     if count is not None and (not isinstance(count, (int, np.integer)) or count < 0):
@@ -245,6 +213,28 @@ def _check_options(count, density, seed, method, precision, chunk_size, radius):
         raise ScatterUsageError(f"--chunk-size must be a positive integer, not {chunk_size!r}")
     if radius is not None and not (math.isfinite(radius) and radius > 0):
         raise ScatterUsageError(f"--radius must be a positive number, not {radius!r}")
+    if oversampling is not None and not (math.isfinite(oversampling) and oversampling > 0):
+        raise ScatterUsageError(f"oversampling must be a positive number, not {oversampling!r}")
+    if weight:
+        from .weighting import parse_weight
+
+        parse_weight(weight)
+    if poisson and radius is not None:
+        raise ScatterUsageError("give either --poisson (an exact count) or --radius, not both")
+    if radius is not None and density is not None:
+        raise ScatterUsageError("with --radius the count follows from R: drop --density")
+    if method != "random" and (poisson or radius is not None or weight):
+        raise ScatterUsageError(f"--method {method} does not combine with --poisson, --radius or --weight "
+                                "(they work on the random method)")
+    if count is not None:
+        _check_sobol_count(method, count)
+        if poisson:
+            candidate_count(None, count, None, None, oversampling)
+
+
+def _check_sobol_count(method, count):
+    if method == "sobol" and count > SOBOL_MAX_COUNT:
+        raise ScatterUsageError(f"--method sobol gives at most 2^32 = {SOBOL_MAX_COUNT:,} points per run, not {count:,}")
 
 
 def sampled_bounds(plan: SamplePlan):

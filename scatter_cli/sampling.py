@@ -20,14 +20,9 @@ from .surface import Surface, apply_matrix, cofactor, corners, doubled_areas
 from .warps import square_to_triangle
 
 DRAWS_PER_POINT = 3
-DEFAULT_CHUNK = 1 << 17
-# The kernel takes a chunk's points in face order on meshes of at least SORT_FACES faces
-# (_csampling.c): the more points a chunk holds, the closer their faces and the faster
-# (per 10^7 points on one thread, on the 1.31M-face icosphere: 0.73 to 0.84 s in draw
-# order; in face order 0.71 to 0.83 s at 2^17 points a chunk, 0.59 s at 2^18, 0.51 to
-# 0.57 s at 2^19, 0.51 s at 2^20; benchmarks/draw_time.py), so
-# large meshes get larger chunks. Small meshes sit in the caches: order changes nothing.
-# The NumPy path keeps 2^17: its temporaries outgrow the caches in larger chunks.
+DEFAULT_CHUNK = 1 << 17  # points a chunk, unless the mesh is large (docs/sampling.md: chunk sizes)
+# Faces from which the kernel takes a chunk's points in face order, and the chunk size it
+# gets then: larger chunks hold closer faces (docs/sampling.md: chunk sizes).
 SORT_FACES, LARGE_MESH_CHUNK = 1 << 18, 1 << 19
 _kernel = native.kernel("_csampling")
 
@@ -145,8 +140,9 @@ class SamplePlan:
         return face
 
     def draw(self, start: int, stop: int, seed: int, want_bary: bool = False) -> RawChunk:
-        """Points ``start`` to ``stop`` of the random sequence for ``seed``."""
-        if _kernel is None or type(self).select is not SamplePlan.select:  # (a subclass's own selection)
+        """Points ``start`` to ``stop`` of the random sequence for ``seed`` (the random
+        method's stream; :class:`scatter_cli.sources.RandomSource` is its source)."""
+        if _kernel is None:
             u = uniforms(seed, start, stop)
             return self.place(start, self.select(u[:, 0]), square_to_triangle(u[:, 1:3]), want_bary)
         n = stop - start
@@ -358,9 +354,9 @@ def in_blocks(fn, n, min_block=1 << 18):
         return list(pool.map(fn, cuts[:-1], cuts[1:]))
 
 
-def chunk_ranges(count: int, chunk_size: int):
-    """(start, stop) pairs covering ``range(count)``."""
-    return [(s, min(s + chunk_size, count)) for s in range(0, count, chunk_size)]
+def chunk_ranges(stop: int, chunk_size: int, start: int = 0):
+    """(start, stop) pairs of at most ``chunk_size`` covering ``range(start, stop)``."""
+    return [(s, min(s + chunk_size, stop)) for s in range(start, stop, chunk_size)]
 
 
 def run_chunks(job, ranges, threads=None):

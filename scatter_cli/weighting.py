@@ -59,23 +59,34 @@ def stream(seed: int, round_: int, start: int, stop: int):
     return np.random.Generator(bits).random((stop - start, DRAWS_PER_POINT))
 
 
-def weighted_plan(surface: Surface, spec):
-    """(plan, sampler) for ``--weight spec``: the plan's face CDF is area times weight."""
+def weighted_plan(surface: Surface, weight):
+    """The plan whose face CDF is area times ``weight.face_weights``."""
+    try:
+        return SamplePlan(surface, weights=weight.face_weights)
+    except ScatterError:
+        raise ScatterError(f"{surface.source}: --weight {weight.spec}: the weight is zero over the whole surface") from None
+
+
+def read_weight(surface: Surface, spec):
+    """The weight ``--weight spec`` reads from ``surface``'s colours or textures."""
     source, channel = parse_weight(spec)
     cls = VertexColorWeight if source == "vertex-color" else TextureWeight
-    weight = cls(surface, channel, spec)
-    try:
-        plan = SamplePlan(surface, weights=weight.face_weights)
-    except ScatterError:
-        raise ScatterError(f"{surface.source}: --weight {spec}: the weight is zero over the whole surface") from None
-    weight.bind(plan)
-    return plan, weight
+    return cls(surface, channel, spec)
+
+
+def weighted_source(plan, weight, count: int, seed: int, want_bary: bool, area: float):
+    """The source of ``count`` points with density proportional to ``weight``, from
+    ``plan = weighted_plan(surface, weight)``; ``area``: the surface's unweighted area."""
+    cls = VertexColorSource if isinstance(weight, VertexColorWeight) else TextureSource
+    return cls(plan, weight, count, seed, want_bary, area)
 
 
 class _Weight:
+    """A weight in [0, 1] over a surface, read from the file: the per-geometry colour
+    sources and the per-face weights the plan's CDF multiplies the areas by."""
+
     def __init__(self, surface, channel, spec):
         self.surface, self.channel, self.spec = surface, channel, spec
-        self.plan = None
         self._sources = {}
         textures = surface._cache.setdefault("textures", {})
         for gi in dict.fromkeys(i.geometry for i in surface.instances):
@@ -86,9 +97,6 @@ class _Weight:
                 raise ScatterError(f"{surface.source}: cannot use --weight {spec}: {where} no {self.what}")
             self._sources[gi] = src
 
-    def bind(self, plan):
-        self.plan = plan
-
 
 class VertexColorWeight(_Weight):
     kinds = ("vertex",)
@@ -97,46 +105,11 @@ class VertexColorWeight(_Weight):
     def __init__(self, surface, channel, spec):
         super().__init__(surface, channel, spec)
         # (F, 3) weights of each face's corners, per geometry.
-        self._corner_w = {gi: src.table[:, channel][src.faces] / 255.0 for gi, src in self._sources.items()}
+        self.corner_w = {gi: src.table[:, channel][src.faces] / 255.0 for gi, src in self._sources.items()}
 
     def face_weights(self, k, inst):
         """(F,) exact mean weight of each face of instance k."""
-        return self._corner_w[inst.geometry].mean(axis=1)
-
-    def bind(self, plan):
-        super().bind(plan)
-        # (N, 3) corner weights of the plan's used faces, in CDF order.
-        rows = []
-        for p in plan.parts:
-            w = self._corner_w[self.surface.instances[p.instance].geometry]
-            rows.append(w if p.faces is None else w[p.faces])
-        self._used_w = np.concatenate(rows)
-
-    def draw(self, start, stop, seed, want_bary=False):
-        u = stream(seed, 0, start, stop)
-        used = self.plan.select(u[:, 0])
-        return self.plan.place(start, used, self.barycentric(self._used_w[used], u[:, 1:]), want_bary)
-
-    @staticmethod
-    def barycentric(w, u):
-        """Corner weights ``w`` (n, 3) >= 0 and draws ``u`` (n, 3) -> (b1, b2) (n, 2)
-        distributed with density proportional to ``w0 b0 + w1 b1 + w2 b2``."""
-        n = len(w)
-        c = np.cumsum(w, axis=1)
-        x = u[:, 0] * c[:, 2]
-        k = (x >= c[:, 0]).astype(np.int64) + (x >= c[:, 1])
-        # A draw that rounds onto a zero-weight component goes to the heaviest one.
-        zero = w[np.arange(n), k] <= 0
-        if zero.any():
-            k[zero] = np.argmax(w[zero], axis=1)
-        t = 0.5 + np.sin(np.arcsin(2.0 * u[:, 1] - 1.0) / 3.0)
-        np.clip(t, 0.0, 1.0, out=t)
-        b = np.empty((n, 3))
-        rows = np.arange(n)
-        b[rows, k] = 1.0 - t
-        b[rows, (k + 1) % 3] = t * u[:, 2]
-        b[rows, (k + 2) % 3] = t - t * u[:, 2]
-        return b[:, 1:]
+        return self.corner_w[inst.geometry].mean(axis=1)
 
 
 class TextureWeight(_Weight):
@@ -152,14 +125,12 @@ class TextureWeight(_Weight):
             if src.factor is not None:
                 top = top * src.factor[channel] / 255.0
             self._bound[gi] = top / 255.0
+        # (instances,) the bound of each instance's geometry
+        self.instance_bound = np.array([self._bound[i.geometry] for i in surface.instances])
 
     def face_weights(self, k, inst):
         """(F,) the bound of the weight over the geometry (rejection makes it exact)."""
         return np.full(len(self.surface.geometries[inst.geometry].faces), self._bound[inst.geometry])
-
-    def bind(self, plan):
-        super().bind(plan)
-        self._inst_bound = np.array([self._bound[i.geometry] for i in self.surface.instances])
 
     def weight(self, raw):
         """(n,) weight in [0, 1] at the points of ``raw`` (bary required)."""
@@ -171,23 +142,73 @@ class TextureWeight(_Weight):
             out[rows] = src.colors(raw.face[rows], raw.bary[rows])[:, self.channel] / 255.0
         return out
 
-    def draw(self, start, stop, seed, want_bary=False):
+
+class _WeightedSource:
+    def __init__(self, plan, weight, count, seed, want_bary, area):
+        self.plan, self.weight, self.count, self.seed, self.want_bary = plan, weight, int(count), seed, want_bary
+        self.area = area
+
+
+class VertexColorSource(_WeightedSource):
+    """Points with density proportional to a vertex-colour channel (exact, no rejection)."""
+
+    def __init__(self, plan, weight, count, seed, want_bary, area):
+        super().__init__(plan, weight, count, seed, want_bary, area)
+        # (N, 3) corner weights of the plan's used faces, in CDF order.
+        rows = []
+        for p in plan.parts:
+            w = weight.corner_w[plan.surface.instances[p.instance].geometry]
+            rows.append(w if p.faces is None else w[p.faces])
+        self._used_w = np.concatenate(rows)
+
+    def draw(self, start, stop):
+        u = stream(self.seed, 0, start, stop)
+        used = self.plan.select(u[:, 0])
+        return self.plan.place(start, used, barycentric(self._used_w[used], u[:, 1:]), self.want_bary)
+
+
+def barycentric(w, u):
+    """Corner weights ``w`` (n, 3) >= 0 and draws ``u`` (n, 3) -> (b1, b2) (n, 2)
+    distributed with density proportional to ``w0 b0 + w1 b1 + w2 b2``."""
+    n = len(w)
+    c = np.cumsum(w, axis=1)
+    x = u[:, 0] * c[:, 2]
+    k = (x >= c[:, 0]).astype(np.int64) + (x >= c[:, 1])
+    # A draw that rounds onto a zero-weight component goes to the heaviest one.
+    zero = w[np.arange(n), k] <= 0
+    if zero.any():
+        k[zero] = np.argmax(w[zero], axis=1)
+    t = 0.5 + np.sin(np.arcsin(2.0 * u[:, 1] - 1.0) / 3.0)
+    np.clip(t, 0.0, 1.0, out=t)
+    b = np.empty((n, 3))
+    rows = np.arange(n)
+    b[rows, k] = 1.0 - t
+    b[rows, (k + 1) % 3] = t * u[:, 2]
+    b[rows, (k + 2) % 3] = t - t * u[:, 2]
+    return b[:, 1:]
+
+
+class TextureSource(_WeightedSource):
+    """Points with density proportional to a texture channel (exact, by rejection)."""
+
+    def draw(self, start, stop):
+        plan, bound = self.plan, self.weight.instance_bound
         n = stop - start
         final_used = np.empty(n, dtype=np.int64)
         final_b = np.empty((n, 2))
         todo = np.arange(n)
-        u = stream(seed, 0, start, stop)
+        u = stream(self.seed, 0, start, stop)
         for round_ in range(MAX_ROUNDS):
-            used = self.plan.select(u[:, 0])
+            used = plan.select(u[:, 0])
             b = square_to_triangle(u[:, 1:3])
-            raw = self.plan.place(0, used, b, want_bary=True)
-            ok = u[:, 3] * self._inst_bound[raw.instance] < self.weight(raw)
+            raw = plan.place(0, used, b, want_bary=True)
+            ok = u[:, 3] * bound[raw.instance] < self.weight.weight(raw)
             final_used[todo[ok]] = used[ok]
             final_b[todo[ok]] = b[ok]
             todo = todo[~ok]
             if not todo.size:
-                return self.plan.place(start, final_used, final_b, want_bary)
+                return plan.place(start, final_used, final_b, self.want_bary)
             lo, hi = int(todo[0]), int(todo[-1]) + 1
-            u = stream(seed, round_ + 1, start + lo, start + hi)[todo - lo]
-        raise ScatterError(f"{self.surface.source}: --weight {self.spec}: the weight is zero almost everywhere "
+            u = stream(self.seed, round_ + 1, start + lo, start + hi)[todo - lo]
+        raise ScatterError(f"{plan.surface.source}: --weight {self.weight.spec}: the weight is zero almost everywhere "
                            f"(no point accepted after {MAX_ROUNDS} rounds)")

@@ -15,7 +15,7 @@ from scatter_cli.errors import ScatterError, ScatterUsageError
 from scatter_cli.sampling import RawChunk
 from scatter_cli.surface import load_surface
 from scatter_cli.texture import CLAMP_TO_EDGE, MIRRORED_REPEAT, REPEAT, bilinear, wrap_index
-from scatter_cli.weighting import VertexColorWeight
+from scatter_cli.weighting import barycentric
 
 from .conftest import SAMPLES, run_scatter, scaled_scene
 
@@ -255,7 +255,7 @@ def test_vertex_colour_weight_is_exact_inside_a_face():
     rng = np.random.default_rng(1)
     w = np.array([0.9, 0.05, 0.3])
     u = rng.random((80_000, 3))
-    b12 = VertexColorWeight.barycentric(np.tile(w, (len(u), 1)), u)
+    b12 = barycentric(np.tile(w, (len(u), 1)), u)
     bary = np.column_stack([1 - b12.sum(1), b12])
     subs = subtriangles(2)
     expect = subs.mean(axis=1) @ w

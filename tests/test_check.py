@@ -6,16 +6,17 @@ import pytest
 pytest.importorskip("pymeshlab")
 
 from scatter_cli.check import ALPHA, run_check  # noqa: E402
+from scatter_cli.sampling import SamplePlan  # noqa: E402
 from scatter_cli.surface import load_surface  # noqa: E402
 
 from .conftest import run_scatter  # noqa: E402
-from .test_selection import UnweightedPlan  # noqa: E402
+from .doubles import UnweightedSource  # noqa: E402
 
 MESHES = ["skull.ply", "koala.obj", "spot_triangulated.obj", "cesiummilktruck.glb"]
 
 
 def unweighted_sampler(surface, count, seed):
-    return UnweightedPlan(surface).draw(0, count, seed).points
+    return UnweightedSource(SamplePlan(surface), count, seed).draw(0, count).points
 
 
 @pytest.mark.parametrize("name", MESHES)

@@ -14,10 +14,12 @@ from hypothesis import strategies as st
 import scatter_cli
 from scatter_cli.api import prepare
 from scatter_cli.sampling import SamplePlan
+from scatter_cli.sources import RandomSource
 from scatter_cli.surface import load_surface
 from scatter_cli.warps import square_to_triangle
 
 from .conftest import spread_triangles, triangles_mesh
+from .doubles import Float32CdfPlan, UnweightedSource
 from .hardcheck import (ALPHA, exact_face_errors, pooled_chi2_pvalue, recover_bary, two_sum_le_one,
                         uniform_in_triangle_pvalue)
 
@@ -145,25 +147,6 @@ def test_points_on_slivers_alone_stay_on_them():
 # ---------------------------------------------------------------- areas over 18 decades
 
 
-class UnweightedPlan(SamplePlan):
-    """Broken: every face equally likely."""
-
-    def select(self, u):
-        return np.minimum((u * self.faces_used).astype(np.int64), self.faces_used - 1)
-
-
-class Float32CdfPlan(SamplePlan):
-    """Broken subtly: the CDF accumulated in float32, so small faces round away."""
-
-    def __init__(self, surface):
-        super().__init__(surface)
-        steps = np.diff(self.cdf, prepend=0.0).astype(np.float32)
-        self.cdf = np.cumsum(steps, dtype=np.float32).astype(np.float64)
-        from scatter_cli.sampling import _guide_table
-
-        self.guide = _guide_table(self.cdf)
-
-
 def area_groups(areas, counts, n):
     """Observed and expected counts of faces grouped by area decade."""
     decade = np.floor(np.log10(areas)).astype(int)
@@ -173,11 +156,18 @@ def area_groups(areas, counts, n):
     return obs, exp
 
 
-def face_counts(plan, n, seed):
-    counts = np.zeros(plan.surface.face_count)
-    for a in range(0, n, 1 << 20):
-        counts += np.bincount(plan.draw(a, min(n, a + (1 << 20)), seed).face, minlength=len(counts))
+def face_counts(source, faces):
+    counts = np.zeros(faces)
+    for a in range(0, source.count, 1 << 20):
+        counts += np.bincount(source.draw(a, min(source.count, a + (1 << 20))).face, minlength=faces)
     return counts
+
+
+SOURCES = {
+    "scatter": lambda surface, n, seed: RandomSource(SamplePlan(surface), n, seed),
+    "unweighted": lambda surface, n, seed: UnweightedSource(SamplePlan(surface), n, seed),
+    "float32 CDF": lambda surface, n, seed: RandomSource(Float32CdfPlan(surface), n, seed),
+}
 
 
 @pytest.fixture(scope="module")
@@ -189,11 +179,11 @@ def wide_mesh():
     return load_surface(triangles_mesh(tri)), areas
 
 
-@pytest.mark.parametrize("plan_type,should_pass", [(SamplePlan, True), (UnweightedPlan, False), (Float32CdfPlan, False)])
-def test_face_shares_follow_areas_from_1e_minus_12_to_1e6(wide_mesh, plan_type, should_pass):
+@pytest.mark.parametrize("kind,should_pass", [("scatter", True), ("unweighted", False), ("float32 CDF", False)])
+def test_face_shares_follow_areas_from_1e_minus_12_to_1e6(wide_mesh, kind, should_pass):
     surface, areas = wide_mesh
     n = 4_000_000
-    counts = face_counts(plan_type(surface), n, seed=6)
+    counts = face_counts(SOURCES[kind](surface, n, 6), surface.face_count)
     obs, exp = area_groups(areas, counts, n)
     p = pooled_chi2_pvalue(obs, exp)
     assert (p > ALPHA) == should_pass, (p, obs, exp.round(1))

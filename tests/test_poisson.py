@@ -27,7 +27,7 @@ def test_radius_mode_is_spaced_and_maximal(sample_mesh, name, radius):
     kept = run.kept.points
     assert min_distance(kept) >= radius
     # maximal: every candidate is within R of a kept point
-    candidates = run.plan.draw(0, run.info["candidates"], 2).points
+    candidates = run.source.candidates.draw(0, run.info["candidates"]).points
     d, _ = cKDTree(kept).query(candidates)
     assert d.max() < radius
     assert run.count == len(kept) > 10
@@ -52,9 +52,9 @@ def test_exact_count_rho_on_a_sphere():
     assert relative_radius(min_distance(s.points), sphere.area, 10000) >= 0.75
 
 
-def face_order_thinning(run, count):
+def face_order_thinning(candidates, count):
     """A wrong thinning: keeps the candidates of the lowest-numbered faces."""
-    raw = run.plan.draw(0, 10 * count, run.seed)
+    raw = candidates.draw(0, candidates.count)
     return raw.points[np.argsort(raw.face, kind="stable")[:count]]
 
 
@@ -65,8 +65,8 @@ def test_thinned_set_is_uniform_at_coarse_scale(sample_mesh, name):
     good = scatter_cli.sample(surface, 5000, poisson=True, precision="float64", seed=3).points
     # coarse scale: 8 equal-area slabs per direction, far wider than the disk radius
     assert stats.region_test(good, tri, areas, k=8)["p_slabs"] > ALPHA
-    run = api.prepare(surface, 5000, precision="float64", seed=3)
-    assert stats.region_test(face_order_thinning(run, 5000), tri, areas, k=8)["p_slabs"] < ALPHA
+    candidates = api.prepare(surface, 50_000, precision="float64", seed=3).source
+    assert stats.region_test(face_order_thinning(candidates, 5000), tri, areas, k=8)["p_slabs"] < ALPHA
 
 
 def test_thinning_with_attributes_and_scene(sample_mesh):

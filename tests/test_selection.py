@@ -10,9 +10,11 @@ import pytest
 from scipy import stats
 
 from scatter_cli.sampling import SamplePlan
+from scatter_cli.sources import RandomSource
 from scatter_cli.surface import load_surface
 
 from .conftest import spread_triangles, triangles_mesh
+from .doubles import UnweightedSource
 
 ALPHA = 1e-3
 
@@ -32,19 +34,21 @@ def pooled_chi2_pvalue(observed, expected, min_expected=5.0):
     return stats.chi2.sf(stat, len(e) - 1)
 
 
-class UnweightedPlan(SamplePlan):
-    """The classic bug: every face equally likely, whatever its area."""
-
-    def select(self, u):
-        return np.minimum((u * self.faces_used).astype(np.int64), self.faces_used - 1)
-
-
-def face_counts(plan, n, seed=0):
-    counts = np.zeros(plan.surface.face_count)
-    for start in range(0, n, 1 << 18):
-        raw = plan.draw(start, min(n, start + (1 << 18)), seed)
-        counts += np.bincount(raw.face, minlength=len(counts))
+def face_counts(source, faces):
+    """(faces,) points per face over all of ``source``'s points."""
+    counts = np.zeros(faces)
+    for start in range(0, source.count, 1 << 18):
+        raw = source.draw(start, min(source.count, start + (1 << 18)))
+        counts += np.bincount(raw.face, minlength=faces)
     return counts
+
+
+def area_weighted(surface, n, seed=0):
+    return RandomSource(SamplePlan(surface), n, seed)
+
+
+def unweighted(surface, n, seed=0):
+    return UnweightedSource(SamplePlan(surface), n, seed)
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +62,7 @@ def spread_plan_inputs():
 def test_face_counts_follow_areas_over_twelve_decades(spread_plan_inputs, seed):
     surface, areas = spread_plan_inputs
     n = 2_000_000
-    counts = face_counts(SamplePlan(surface), n, seed)
+    counts = face_counts(area_weighted(surface, n, seed), surface.face_count)
     assert pooled_chi2_pvalue(counts, n * areas / areas.sum()) > ALPHA
     assert counts[areas < 1e-6 * areas.sum() / n].sum() <= 3  # no spurious hits on tiny faces
 
@@ -66,20 +70,19 @@ def test_face_counts_follow_areas_over_twelve_decades(spread_plan_inputs, seed):
 def test_dropping_area_weights_fails_the_same_test(spread_plan_inputs):
     surface, areas = spread_plan_inputs
     n = 2_000_000
-    counts = face_counts(UnweightedPlan(surface), n)
+    counts = face_counts(unweighted(surface, n), surface.face_count)
     assert pooled_chi2_pvalue(counts, n * areas / areas.sum()) < ALPHA
 
 
 def test_real_mesh_face_counts_follow_areas(sample_mesh):
     surface = load_surface(sample_mesh("pediment_join_plate_12.stl"))  # area ratio 9.4e6, 12 zero-area faces
-    plan = SamplePlan(surface)
     tri = surface.geometries[0].vertices[surface.geometries[0].faces]
     areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     n = 1_000_000
-    counts = face_counts(plan, n)
+    counts = face_counts(area_weighted(surface, n), surface.face_count)
     assert counts[areas == 0].sum() == 0
     assert pooled_chi2_pvalue(counts, n * areas / areas.sum()) > ALPHA
-    assert pooled_chi2_pvalue(face_counts(UnweightedPlan(surface), n), n * areas / areas.sum()) < ALPHA
+    assert pooled_chi2_pvalue(face_counts(unweighted(surface, n), surface.face_count), n * areas / areas.sum()) < ALPHA
 
 
 def test_tiny_faces_get_their_share_next_to_huge_ones():
