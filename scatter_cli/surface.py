@@ -78,10 +78,10 @@ def load_surface(source, *, input_format: str | None = None, objects=None, plain
     """Load ``source`` (path, ``'-'`` for standard input, trimesh.Trimesh or trimesh.Scene).
 
     ``plain``: only vertices and faces are wanted (no colours, UVs or normals from the
-    file), so a binary PLY triangle mesh is read without importing trimesh.
+    file), so the fast readers (readers.py) may read it without importing trimesh.
     """
     if plain and not objects and isinstance(source, (str, os.PathLike)) and not _is_stream(os.fspath(source)):
-        fast = _read_plain_ply(os.fspath(source), input_format)
+        fast = _read_plain(os.fspath(source), input_format)
         if fast is not None:
             return fast
     if import_trimesh is not None and "trimesh" not in sys.modules:
@@ -108,17 +108,25 @@ def load_surface(source, *, input_format: str | None = None, objects=None, plain
     return surface
 
 
-def _read_plain_ply(path, input_format):
-    """The Surface of a binary PLY triangle mesh read by plyread, or None (use trimesh)."""
-    from .plyread import read_triangles
+def _read_plain(path, input_format):
+    """The Surface of a mesh file read by the fast readers, or None (use trimesh).
 
-    if (input_format or os.path.splitext(path)[1].lstrip(".")).lower() != "ply":
-        return None
+    One geometry makes a mesh, several a scene, as trimesh.load makes them; the names
+    follow trimesh's for an OBJ split by material (file name, then name_1, name_2...).
+    """
+    from .readers import read_mesh
+
     _check_readable(path)
-    arrays = read_triangles(path)
-    if arrays is None:
+    parts = read_mesh(path, (input_format or os.path.splitext(path)[1].lstrip(".")).lower())
+    if parts is None:
         return None
-    surface = Surface([_checked_geometry(path, *arrays, path)], [Instance(os.path.basename(path), 0)], path)
+    if len(parts) == 1:
+        surface = Surface([_checked_geometry(path, *parts[0], path)], [Instance(os.path.basename(path), 0)], path)
+    else:
+        base = os.path.basename(path)
+        names = [base] + [f"{base}_{k}" for k in range(1, len(parts))]
+        geometries = [_checked_geometry(n, *arrays, path) for n, arrays in zip(names, parts)]
+        surface = Surface(geometries, [Instance(n, k) for k, n in enumerate(names)], path, is_scene=True)
     if surface.face_count == 0:
         raise ScatterError(f"{path}: the mesh has no faces")
     return surface
