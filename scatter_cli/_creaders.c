@@ -14,6 +14,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <math.h>
 
 #define MAX_INDEX 2147483647LL
 #define MAX_CORNERS 255
@@ -106,6 +107,51 @@ static inline int at_token_end(const cursor *c)
 static const double POW10[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,  1e8,  1e9,  1e10, 1e11,
                                  1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
 
+static const uint64_t POW10_INT[20] = {1ULL, 10ULL, 100ULL, 1000ULL, 10000ULL, 100000ULL, 1000000ULL,
+                                       10000000ULL, 100000000ULL, 1000000000ULL, 10000000000ULL,
+                                       100000000000ULL, 1000000000000ULL, 10000000000000ULL,
+                                       100000000000000ULL, 1000000000000000ULL, 10000000000000000ULL,
+                                       100000000000000000ULL, 1000000000000000000ULL,
+                                       10000000000000000000ULL};
+
+static int bits128(unsigned __int128 x)
+{
+    uint64_t hi = (uint64_t)(x >> 64), lo = (uint64_t)x;
+    return hi ? 128 - __builtin_clzll(hi) : lo ? 64 - __builtin_clzll(lo) : 0;
+}
+
+/* m * 10^e10 rounded to the nearest double (ties to even), for 0 < m < 2^64 and
+ * |e10| <= 19, with exact 128-bit integers: a product, or a quotient with at least 62
+ * bits and a remainder for the sticky bit. */
+static double exact_decimal(uint64_t m, int e10)
+{
+    unsigned __int128 q;
+    int shift = 0, inexact = 0;
+    if (e10 >= 0) {
+        q = (unsigned __int128)m * POW10_INT[e10];
+    } else {
+        unsigned __int128 d = POW10_INT[-e10];
+        shift = 127 - (64 - __builtin_clzll(m));
+        unsigned __int128 n = (unsigned __int128)m << shift;
+        q = n / d;
+        inexact = n % d != 0;
+    }
+    int drop = bits128(q) - 53;
+    if (drop > 0) {
+        unsigned __int128 low = q & ((((unsigned __int128)1) << drop) - 1), half = ((unsigned __int128)1) << (drop - 1);
+        q >>= drop;
+        if (low > half || (low == half && (inexact || (q & 1))))
+            q++;
+        if (q >> 53) {
+            q >>= 1;
+            drop++;
+        }
+    } else {
+        drop = 0;
+    }
+    return ldexp((double)(uint64_t)q, drop - shift);
+}
+
 /* A decimal number at c->p ([+-]? digits [. digits] [e [+-] digits], a digit somewhere
  * before the exponent), ending at whitespace, a line break or the end. 0 and the value
  * in *out, or -1 (not such a number; c->p then undefined). */
@@ -173,6 +219,11 @@ static int parse_double(cursor *c, double *out)
     if (significant <= 19 && mantissa <= (1ULL << 53) && e10 >= -22 && e10 <= 22) {
         double m = (double)mantissa; /* exact */
         double v = e10 < 0 ? m / POW10[-e10] : m * POW10[e10];
+        *out = negative ? -v : v;
+        return 0;
+    }
+    if (significant <= 19 && e10 >= -19 && e10 <= 19) {
+        double v = exact_decimal(mantissa, (int)e10);
         *out = negative ? -v : v;
         return 0;
     }
@@ -439,6 +490,30 @@ static int obj_lines(cursor *c, obj_state *s)
         }
         if (is_space(ch)) { /* a blank line, or content trimesh would not see */
             skip_spaces(c);
+            if (end_line(c) < 0)
+                return 1;
+            continue;
+        }
+        if (ch == 'v' && c->end - c->p > 2 && c->p[1] == ' ') { /* the common lines first */
+            c->p += 2;
+            double xyz[3];
+            if (grow_room(&s->v, 3 * sizeof(double)) < 0)
+                return -1;
+            int n = numbers(c, xyz);
+            if (n < 3 || (s->v_cols && n != s->v_cols))
+                return 1;
+            s->v_cols = n;
+            memcpy(s->v.data + s->v.len, xyz, sizeof xyz);
+            s->v.len += sizeof xyz;
+            if (end_line(c) < 0)
+                return 1;
+            continue;
+        }
+        if (ch == 'f' && c->end - c->p > 2 && c->p[1] == ' ') {
+            c->p += 2;
+            int status = face_line(c, s, line++);
+            if (status)
+                return status;
             if (end_line(c) < 0)
                 return 1;
             continue;
@@ -914,6 +989,9 @@ static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
         }
         for (int64_t i = 0; i < nf && !status; i++)
             status = face_record(&c, &q, nv, 1, 4);
+        while (!status && c.p < c.end) /* trimesh reads every line left as numbers */
+            if (!is_space(*c.p) && !is_break(*c.p++))
+                status = 1;
     }
     Py_END_ALLOW_THREADS
     PyBuffer_Release(&buf);

@@ -46,8 +46,8 @@ def read_triangles_from(data):
         order, vertex, n_vertex, face, n_face = layout
         vertex, face = vertex.newbyteorder(order), face.newbyteorder(order)
         sizes = (vertex.itemsize * n_vertex, face.itemsize * n_face)
-        if body_at + sum(sizes) > len(data):
-            return None  # truncated, or counts that do not fit: trimesh says which
+        if body_at + sum(sizes) != len(data):
+            return None  # truncated, trailing bytes or counts that do not fit: trimesh says which
     except (ValueError, UnicodeDecodeError, TypeError):
         return None
     v = np.frombuffer(data, dtype=vertex, count=n_vertex, offset=body_at)

@@ -66,7 +66,8 @@ def _stl(data):
             if count == 0:
                 return None
             corners = np.frombuffer(data, dtype=_STL_RECORD, count=count, offset=84)["corners"]
-            vertices = corners.reshape(-1, 3).astype(np.float64)
+            vertices = np.empty((3 * count, 3))
+            vertices.reshape(count, 3, 3)[...] = corners  # one pass from the strided records
             return [(vertices, np.arange(3 * count, dtype=np.int64).reshape(-1, 3))]
     c = kernel("_creaders")
     vertices = c and c.read_stl_ascii(data)

@@ -209,3 +209,20 @@ def run_python(code):
     import sys
 
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=dict(os.environ))
+
+
+def test_numbers_convert_as_python_floats_do():
+    """Every path of the number parser (exact small, exact 128-bit, strtod) rounds correctly."""
+    from scatter_cli import _creaders
+
+    rng = np.random.default_rng(1)
+    x = rng.standard_normal(6000) * 10.0 ** rng.integers(-30, 30, 6000)
+    toks = ["9007199254740993", "9007199254740993e-19", "0.1", "1" * 19, "1" * 19 + "e-19", "18446744073709551615",
+            "2.2250738585072011e-308", "4.9e-324", "1" * 300, "-0", "0.000", "1e22", "1e23", "123456789012345678901e-40"]
+    toks += [repr(float(v)) for v in x] + ["%.17g" % v for v in x] + ["%.19f" % v for v in x[:2000]]
+    toks += ["%.3e" % v for v in x[:2000]] + ["%.20g" % v for v in x[:2000]]
+    toks = toks[: len(toks) // 9 * 9]
+    text = "solid\n" + "".join(f"vertex {toks[i]} {toks[i + 1]} {toks[i + 2]}\n" for i in range(0, len(toks), 3))
+    got = _creaders.read_stl_ascii((text + "endsolid\n").encode()).ravel()
+    want = np.array([float(t) for t in toks])
+    assert got.view(np.int64).tolist() == want.view(np.int64).tolist()
