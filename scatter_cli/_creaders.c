@@ -807,7 +807,8 @@ static int64_t *triangulate(polys *q, int64_t *nf)
     int64_t *out = malloc((size_t)*nf * 24 + 1), *o = out;
     if (!out)
         return NULL;
-    memcpy(o, q->tri.data, q->tri.len);
+    if (q->tri.len) /* no memcpy from NULL, even of 0 bytes (UBSan finding) */
+        memcpy(o, q->tri.data, q->tri.len);
     o += 3 * nt;
     const int64_t *qd = (const int64_t *)q->quad.data;
     for (int64_t i = 0; i < nq; i++, o += 3)
