@@ -6,7 +6,7 @@ so a reader that handed everything to trimesh would fail.
 """
 
 import functools
-import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +17,7 @@ import scatter_cli
 from scatter_cli.readers import read_mesh
 from scatter_cli.surface import load_surface
 
-from .conftest import SAMPLES, run_scatter
+from .conftest import SAMPLES, run_scatter, run_user
 from .fuzz_inputs import SEEDS
 
 SHARED = Path("/work/shared/meshes")
@@ -198,17 +198,9 @@ def test_a_plain_text_job_never_imports_trimesh(suffix, tmp_path):
     path.write_bytes((OBJ_CASES["materials"] if suffix == "obj" else OFF_CASES["triangles and quads"] if suffix == "off"
                       else STL_CASES["named"]).encode())
     args = ["sample", str(path), "-n", "100", "-a", "face", "-o", str(tmp_path / "o.ply")]
-    code = (f"import sys\nfrom scatter_cli import cli\ntry:\n    cli.main({args!r})\nexcept SystemExit as e:\n"
-            "    assert e.code == 0\nprint('trimesh' in sys.modules)")
-    proc = run_python(code)
+    code = f"import sys\nfrom scatter_cli import cli\nassert cli.main({args!r}) == 0\nprint('trimesh' in sys.modules)"
+    proc = run_user([sys.executable, "-c", code], text=True)
     assert proc.stdout.strip() == "False", proc.stderr
-
-
-def run_python(code):
-    import subprocess
-    import sys
-
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=dict(os.environ))
 
 
 def test_numbers_convert_as_python_floats_do():
