@@ -43,6 +43,12 @@ class Run:
         self.info = info
         self.layout = column_layout({ATTRIBUTES[a][0] for a in attributes}, self.dtype)
         self.kept = None  # RawChunk of the thinned set, when thinning
+        self.start, self.stop = 0, count  # the points this run writes (a shard: part of them)
+
+    @property
+    def size(self) -> int:
+        """How many points ``chunks()`` yields: ``count``, or a shard's share of it."""
+        return self.stop - self.start
 
     def _job(self, start, stop):
         if self.kept is not None:
@@ -74,6 +80,7 @@ class Run:
             index, d_min = thinning.thin_to_count(points, self.count, self.info["area"])
         self.kept = _take(blocks, index)
         self.count = len(index)
+        self.start, self.stop = 0, self.count
         self.info.update(count=self.count, candidates=candidates, radius=radius)
         if d_min is not None:
             self.info.update(d_min=d_min, rho=thinning.relative_radius(d_min, self.info["area"], self.count))
@@ -86,12 +93,13 @@ class Run:
         return spacing_stats(self.kept.points, self.info["area"])
 
     def chunks(self, threads=None):
-        """Samples chunks in output order."""
-        yield from run_chunks(self._job, chunk_ranges(self.count, self.chunk_size), threads)
+        """Samples chunks in output order: points ``start .. stop - 1`` of the run."""
+        ranges = [(a + self.start, b + self.start) for a, b in chunk_ranges(self.size, self.chunk_size)]
+        yield from run_chunks(self._job, ranges, threads)
 
     def collect(self) -> Samples:
         """All points in one :class:`Samples` (memory grows with the count)."""
-        n = self.count
+        n = self.size
         points = np.empty((n, 3), dtype=self.dtype)
         attributes = {}
         # Fill preallocated arrays chunk by chunk: no concatenation copy at the end. The
@@ -114,15 +122,18 @@ class Run:
 
 def prepare(mesh, count=None, *, density=None, seed=0, method="random", attributes=(), poisson=False,
             radius=None, weight=None, objects=None, precision="auto", chunk_size=None, input_format=None,
-            warn=None, oversampling=None) -> Run:
+            warn=None, oversampling=None, shard=None) -> Run:
     """Load (if needed) and plan a sampling job; see :func:`sample` for the arguments.
 
+    ``shard``: ``(K, M)``, the run keeps points floor(K*N/M) .. floor((K+1)*N/M) - 1 of
+    the run without it, and draws only those.
     ``oversampling``: candidates per output point for Poisson thinning (default: 8, or
     15 for sets of up to 5,000 points); more buys a larger rho for more time.
     """
     t0 = time.perf_counter()
     names = parse_attributes(attributes)
     _check_options(count, density, seed, method, precision, chunk_size, radius)
+    shard = check_shard(shard, poisson, radius)
     # vertices and faces are all a job needs unless an attribute or weight reads the file's
     # colours, UVs or normals
     plain = not weight and set(names) <= PLAIN_ATTRIBUTES
@@ -167,6 +178,10 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     if sampler is not None:
         info["weight"] = weight
     run = Run(surface, plan, count, seed, names, dtype, chunk_size or plan.default_chunk, info, sampler, method)
+    if shard is not None:
+        k, m = shard
+        run.start, run.stop = k * count // m, (k + 1) * count // m
+        info["shard"] = [k, m]
     if poisson or radius is not None:
         run.thin(candidate_count(area, count, radius, surface.source, oversampling), radius)
     return run
@@ -212,7 +227,7 @@ def candidate_count(area, count, radius, source, oversampling=None):
 
 
 def sample(mesh, count=10000, *, density=None, seed=0, method="random", attributes=(), poisson=False,
-           radius=None, weight=None, objects=None, precision="auto", chunk_size=None) -> Samples:
+           radius=None, weight=None, objects=None, precision="auto", chunk_size=None, shard=None) -> Samples:
     """Sample points uniformly over the surface of ``mesh``.
 
     mesh: a path, a ``trimesh.Trimesh`` or a ``trimesh.Scene``. Returns :class:`Samples`
@@ -221,7 +236,7 @@ def sample(mesh, count=10000, *, density=None, seed=0, method="random", attribut
     """
     run = prepare(mesh, count, density=density, seed=seed, method=method, attributes=attributes,
                   poisson=poisson, radius=radius, weight=weight, objects=objects, precision=precision,
-                  chunk_size=chunk_size)
+                  chunk_size=chunk_size, shard=shard)
     t = time.perf_counter()
     samples = run.collect()
     samples.info["timings"]["sample"] = time.perf_counter() - t
@@ -245,6 +260,21 @@ def _check_options(count, density, seed, method, precision, chunk_size, radius):
         raise ScatterUsageError(f"--chunk-size must be a positive integer, not {chunk_size!r}")
     if radius is not None and not (math.isfinite(radius) and radius > 0):
         raise ScatterUsageError(f"--radius must be a positive number, not {radius!r}")
+
+
+def check_shard(shard, poisson=False, radius=None):
+    """``(K, M)`` or ``"K/M"`` -> ``(K, M)`` ints with 0 <= K < M; None stays None."""
+    if shard is None:
+        return None
+    try:
+        k, m = (int(x) for x in (shard.split("/") if isinstance(shard, str) else shard))
+    except (TypeError, ValueError):
+        raise ScatterUsageError(f"--shard must be K/M (shard K of M, 0-based), not {shard!r}") from None
+    if not 0 <= k < m:
+        raise ScatterUsageError(f"--shard K/M needs 0 <= K < M, not {k}/{m}")
+    if poisson or radius is not None:
+        raise ScatterUsageError("--shard does not combine with --poisson or --radius (thinning is global)")
+    return k, m
 
 
 def sampled_bounds(plan: SamplePlan):
