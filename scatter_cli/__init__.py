@@ -7,7 +7,10 @@
 """
 
 __version__ = "0.1.0"
-__all__ = ["sample", "prepare", "load_surface", "Samples", "ScatterError"]
+__all__ = ["sample", "prepare", "batch", "load_surface", "Samples", "ScatterError"]
+
+# The function, not the module of the same name (which imports only the standard library).
+from .batch import batch  # noqa: E402
 
 
 def __getattr__(name):
