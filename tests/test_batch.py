@@ -3,10 +3,7 @@
 import json
 import os
 import shutil
-import signal
-import stat
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -14,65 +11,8 @@ import pytest
 import scatter_cli
 from scatter_cli.errors import ScatterUsageError
 
-from .conftest import SAMPLES, run_scatter, triangles_mesh
-
-GOOD = ["icosahedron_binary.stl", "moebius-160-10.ply", "hemisphere.off", "narrow_triangles.obj",
-        "boxvertexcolors.glb"]
-# the output format of each good mesh: its stem ends with it ({stem} drops only the mesh suffix)
-FORMAT_OF = dict(zip(GOOD, ["ply", "csv", "xyz", "npy", "ply"]))
-OPTIONS = ["-n", "300", "-a", "normal,face"]
-
-
-def collection(folder):
-    """The good meshes copied to ``folder`` as NAME.FORMAT.SUFFIX: returns their paths."""
-    folder.mkdir(exist_ok=True)
-    paths = []
-    for name in GOOD:
-        stem, suffix = os.path.splitext(name)
-        paths.append(folder / f"{stem}.{FORMAT_OF[name]}{suffix}")
-        shutil.copy(SAMPLES / name, paths[-1])
-    return paths
-
-
-def reference(tmp_path, paths, *extra):
-    """What `scatter sample MESH -o OUT` writes for each mesh: {output name: bytes}.
-
-    The first through a subprocess, the others through the command's own entry point in
-    this process (the same code, without paying Python's start-up for each).
-    """
-    out = {}
-    for i, p in enumerate(paths):
-        name = os.path.splitext(p.name)[0]
-        target = tmp_path / "ref" / name
-        target.parent.mkdir(exist_ok=True)
-        argv = ["sample", str(p), *OPTIONS, *extra, "-o", str(target)]
-        if i == 0:
-            run_scatter(*argv, check=True)
-        else:
-            sample_in_process(argv)
-        out[name] = target.read_bytes()
-    return out
-
-
-def sample_in_process(argv):
-    from scatter_cli.cli import main
-
-    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        main(argv)
-    except SystemExit as exc:
-        assert exc.code == 0, argv
-    finally:
-        for s, h in handlers.items():
-            signal.signal(s, h)
-
-
-def outputs(folder):
-    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
-
-
-def no_temporary_files(folder):
-    return not [p for p in folder.rglob("*") if p.name.endswith(".part")]
+from .batchtools import collection, no_temporary_files, outputs, reader_fd, reference, wait_for_reader
+from .conftest import SAMPLES, triangles_mesh
 
 
 @pytest.fixture(scope="module")
@@ -124,17 +64,15 @@ def bad_meshes(folder):
     """{path: what its error says} for meshes that must fail, written into ``folder``."""
     folder.mkdir(exist_ok=True)
     bad = {}
-    (folder / "garbage.stl").write_bytes(os.urandom(300))
+    (folder / "garbage.stl").write_bytes(np.random.default_rng(1).bytes(300))
     bad["garbage.stl"] = "garbage.stl"
     (folder / "empty.obj").write_bytes(b"")
     bad["empty.obj"] = "empty"
     flat = triangles_mesh([[[0, 0, 0], [1, 1, 1], [2, 2, 2]]] * 3)
     flat.export(folder / "zero-area.ply")
     bad["zero-area.ply"] = "area"
-    nan = triangles_mesh(np.full((2, 3, 3), np.nan))
-    (folder / "non-finite.obj").write_text("".join(f"v nan nan nan\n" for _ in range(3)) + "f 1 2 3\n")
+    (folder / "non-finite.obj").write_text("v nan nan nan\n" * 3 + "f 1 2 3\n")
     bad["non-finite.obj"] = "non-finite|no area|no faces"
-    del nan
     os.symlink(folder / "nowhere.ply", folder / "dangling.ply")
     bad["dangling.ply"] = "no such file"
     return bad
@@ -187,35 +125,3 @@ def test_a_worker_killed_mid_batch_fails_its_mesh_alone(tmp_path, meshes):
     assert "fifo.csv.ply" in records[1]["error"] and "SIGKILL" in records[1]["error"]
     assert outputs(tmp_path / "out") == ref
     assert no_temporary_files(tmp_path)
-
-
-reader_fd = []
-
-
-def wait_for_reader(fifo, timeout=30):
-    """The pid of the process that opened ``fifo`` to read it (we open its writing end)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            reader_fd.append(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
-            break
-        except OSError:
-            time.sleep(0.02)
-    else:
-        raise AssertionError("nobody opened the FIFO")
-    while time.monotonic() < deadline:
-        for pid in filter(str.isdigit, os.listdir("/proc")):
-            if int(pid) == os.getpid():
-                continue
-            try:
-                fds = os.listdir(f"/proc/{pid}/fd")
-            except OSError:
-                continue
-            for fd in fds:
-                try:
-                    if os.readlink(f"/proc/{pid}/fd/{fd}") == str(fifo):
-                        return int(pid)
-                except OSError:
-                    pass
-        time.sleep(0.02)
-    raise AssertionError("no reader of the FIFO found")
