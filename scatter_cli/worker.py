@@ -96,24 +96,9 @@ def name_the_file(message, input, output=None):
 
 def _warm_up():
     from . import api, writers  # noqa: F401  (NumPy, the sampler and the writers)
-    from . import surface
+    from .process import import_trimesh_lean
 
-    if "trimesh" not in sys.modules:
-        surface.import_trimesh = _import_trimesh_lean
-        surface.import_trimesh()
-
-
-def _import_trimesh_lean():
-    """trimesh with SciPy hidden, as the command line imports it (see cli.py)."""
-    if "trimesh" in sys.modules or "scipy" in sys.modules:
-        return
-    sys.modules["scipy"] = None
-    try:
-        import trimesh  # noqa: F401
-    except Exception:
-        pass
-    finally:
-        del sys.modules["scipy"]
+    import_trimesh_lean()  # as the command line imports it: SciPy hidden
 
 
 def _die_with_parent():
