@@ -154,6 +154,10 @@ def check_sample_options(options, fmt, ascii):
         options["shard"] = list(api.check_shard(options["shard"], options.get("poisson"), options.get("radius")))
     if options.get("poisson") and options.get("radius") is not None:
         raise ScatterUsageError("give either --poisson (an exact count) or --radius, not both")
+    if options.get("weight"):
+        from .weighting import parse_weight
+
+        parse_weight(options["weight"])
     if ascii and fmt not in (None, "ply"):
         raise ScatterUsageError("--ascii applies to PLY output only")
     if isinstance(options.get("attributes"), tuple):

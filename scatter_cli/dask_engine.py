@@ -78,9 +78,10 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
             index, input, output = futures.pop(future)
             try:
                 rec = future.result()
-            except Exception as exc:  # KilledWorker: the task took down every worker it ran on
-                rec = record(input, output, "failed",
-                             name_the_file(f"its Dask worker was lost while sampling it ({type(exc).__name__})", input))
+            except distributed.KilledWorker:  # the task took down every worker it ran on
+                rec = record(input, output, "failed", name_the_file("every Dask worker that sampled it was lost", input))
+            except Exception as exc:  # the task could not run there (scatter_cli missing on a worker?)
+                rec = record(input, output, "failed", name_the_file(f"the Dask task failed: {type(exc).__name__}: {exc}", input))
             done(index, rec)
             submit()
     except BaseException:

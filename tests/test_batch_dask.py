@@ -13,7 +13,7 @@ import pytest
 
 import scatter_cli
 
-from .conftest import SAMPLES
+from .conftest import SAMPLES, popen_user
 from .batchtools import collection, outputs, reference, reader_fd, wait_for_reader
 
 distributed = pytest.importorskip("distributed")
@@ -30,11 +30,11 @@ def cluster():
     dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
-    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL)
-    procs = [subprocess.Popen([*dask, "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], **quiet)]
+    quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    procs = [popen_user([*dask, "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], **quiet)]
     worker = [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--no-nanny",
               "--no-dashboard", "--host", "127.0.0.1"]
-    procs += [subprocess.Popen(worker, **quiet) for _ in range(2)]
+    procs += [popen_user(worker, **quiet) for _ in range(2)]
     client = distributed.Client(address, timeout=60, set_as_default=False)
     try:
         client.wait_for_workers(2, timeout=60)
