@@ -176,3 +176,127 @@ def test_no_point_inside_the_other_sphere_by_winding_number(occluder, fails, mon
     assert (inside > 0) == fails
     if not fails:  # and each sphere keeps about its exterior share (the same for both)
         assert abs(np.mean(s.attributes["object"]) - 0.5) < 4 * 0.5 / np.sqrt(10000)
+
+
+@pytest.fixture(scope="module")
+def box_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("exterior") / "box_in_box.glb"
+    es.box_in_box()[0].export(path)
+    return path
+
+
+def test_same_bytes_whatever_chunk_size_and_threads(box_file, tmp_path):
+    outs = []
+    for chunk, threads in [(None, "1"), ("777", "2"), ("5000", "3")]:
+        out = tmp_path / f"o{len(outs)}.ply"
+        extra = ["--chunk-size", chunk] if chunk else []
+        run_scatter("sample", box_file, "--exterior", "-n", "40000", "--seed", "5", "-a", "face,object", "-o", out,
+                    *extra, env={"SCATTER_THREADS": threads}, check=True)
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1] == outs[2]
+
+
+def test_ranges_are_a_pure_function_of_start_and_stop():
+    scene, _ = es.car()
+    run = scatter_cli.prepare(scene, 50000, seed=9, exterior=True, attributes=["face"])
+    whole = run.source.draw(0, 50000)
+    for a, b in [(0, 1), (123, 40000), (16383, 16385), (49999, 50000)]:
+        part = run.source.draw(a, b)
+        assert part.start == a and np.array_equal(part.points, whole.points[a:b])
+        assert np.array_equal(part.face, whole.face[a:b])
+
+
+def test_density_keeps_the_exterior_points_of_the_plain_run():
+    scene, _ = es.overlapping_boxes()
+    plain = scatter_cli.prepare(scene, density=200.0, seed=2, precision="float64")
+    ext = scatter_cli.prepare(scene, density=200.0, seed=2, exterior=True, precision="float64")
+    candidates = plain.draw(0, plain.count)
+    kept, _ = classify(ext.source.occluder, candidates, 2)
+    assert ext.count == kept.sum() < plain.count
+    assert np.array_equal(ext.collect().points, candidates.points[kept])
+
+
+def test_exterior_area_estimate_and_face_counts(box_file):
+    """Exact exterior area 54 of 60 (the inner box's 6 is hidden): within 4 standard errors."""
+    from scatter_cli.info import describe
+
+    report = describe(box_file, exterior=True)["exterior"]
+    assert abs(report["area"] - 54.0) < 4 * report["area_se"]
+    assert (report["faces_exterior"], report["faces_mixed"], report["faces_hidden"]) == (108, 0, 12)
+    proc = run_scatter("sample", box_file, "--exterior", "-n", "10", "-f", "csv", "-o", "/dev/null", "--stats", "-", check=True)
+    stats_ = json.loads(proc.stderr)["exterior"]
+    assert abs(stats_["exterior_area"] - 54.0) < 4 * stats_["exterior_area_se"]
+    assert stats_["faces_seen_hidden_only"] == 12
+
+
+def test_poisson_thins_exterior_candidates():
+    scene, cells = es.box_in_box()
+    s = scatter_cli.sample(scene, 300, seed=1, exterior=True, poisson=True, attributes=["object"])
+    inner = [k for k, inst in enumerate(load_surface(scene).instances) if inst.name == "inner"][0]
+    assert len(s.points) == 300 and not np.any(s.attributes["object"] == inner)
+    r = scatter_cli.sample(scene, seed=1, exterior=True, radius=0.4, attributes=["object"])
+    assert len(r.points) > 100 and not np.any(r.attributes["object"] == inner)
+    d = np.linalg.norm(r.points[:, None] - r.points[None], axis=2)
+    assert d[np.triu_indices(len(d), 1)].min() >= 0.4 * (1 - 1e-6)
+
+
+def test_stratified_is_a_usage_error():
+    from scatter_cli.errors import ScatterUsageError
+
+    with pytest.raises(ScatterUsageError, match="stratified"):
+        scatter_cli.sample(es.box_in_box()[0], 10, exterior=True, method="stratified")
+
+
+def test_sobol_keeps_no_hidden_point():
+    scene, _ = es.box_in_box()
+    s = scatter_cli.sample(scene, 2000, exterior=True, method="sobol", attributes=["object"])
+    inner = [k for k, inst in enumerate(load_surface(scene).instances) if inst.name == "inner"][0]
+    assert len(s.points) == 2000 and not np.any(s.attributes["object"] == inner)
+
+
+def test_without_embreex_one_line_and_exit_1(box_file, tmp_path):
+    fake = tmp_path / "embreex"
+    fake.mkdir()
+    (fake / "__init__.py").write_text("raise ImportError('no embree here')\n")
+    import os
+
+    env = {"PYTHONPATH": os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")])}
+    for args in (["sample", box_file, "--exterior", "-n", "5"], ["info", box_file, "--exterior"]):
+        proc = run_scatter(*args, env=env)
+        lines = proc.stderr.decode().strip().splitlines()
+        assert proc.returncode == 1 and len(lines) == 1 and "pip install 'scatter-cli[exterior]'" in lines[0]
+    assert run_scatter("sample", box_file, "-n", "5", env=env).returncode == 0  # only --exterior needs it
+
+
+@pytest.mark.parametrize("name", ["skull.ply", "hemisphere.off"])
+def test_real_mesh_all_exterior_and_uniform(name):
+    """A scan with holes and an open surface: every point is exterior (checked with 16x more
+    directions), the counts over 50 bins of faces follow the face areas."""
+    path = SAMPLES / name
+    n = 20000
+    s = scatter_cli.sample(path, n, seed=3, exterior=True, attributes=["face"], precision="float64")
+    surface = load_surface(path)
+    g = surface.geometries[0]
+    tri = g.vertices[g.faces]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    bins = np.minimum(np.arange(len(area)) * 50 // len(area), 49)
+    counts = np.bincount(bins[s.attributes["face"]], minlength=50)
+    expected = n * np.bincount(bins, weights=area, minlength=50) / area.sum()
+    assert stats.chisquare(counts, expected).pvalue > LEVEL
+    many = visibility.Occluder(surface, design_size=1024)
+    from scatter_cli.sampling import RawChunk
+
+    chunk = RawChunk(0, s.points, s.attributes["face"], np.zeros(n, np.int64), None)
+    assert classify(many, chunk, 77)[0].all()
+
+
+def test_cad_part_points_all_exterior_by_many_more_rays():
+    """A CAD part whose pieces overlap (2 % of its area is hidden): every point kept is
+    exterior for a classifier with 16x more directions."""
+    from scatter_cli.sampling import RawChunk
+
+    path = SAMPLES / "pediment_join_plate_12.stl"
+    s = scatter_cli.sample(path, 10000, seed=3, exterior=True, attributes=["face"], precision="float64")
+    surface = load_surface(path)
+    chunk = RawChunk(0, s.points, s.attributes["face"], np.zeros(len(s.points), np.int64), None)
+    assert classify(visibility.Occluder(surface, design_size=1024), chunk, 77)[0].all()
