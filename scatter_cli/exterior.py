@@ -66,6 +66,8 @@ class ExteriorSource:
                 group = [b for b in range(block, block + self._blocks_to_go(count, kept[-1], block, threads))
                          if b * BLOCK < limit]
                 for mask, chunk_rays, faces in pool.map(lambda b: self._classify_block(b, limit), group):
+                    if count is not None and kept[-1] >= count:
+                        break  # blocks past the N-th exterior candidate: the thread count's, not the run's
                     self._bits.append(np.packbits(mask))
                     self._sizes.append(len(mask))
                     kept.append(kept[-1] + int(np.count_nonzero(mask)))
@@ -76,7 +78,7 @@ class ExteriorSource:
                 if kept[-1] == 0 and block * BLOCK >= GIVE_UP:
                     raise ScatterError(f"no exterior surface found: the first {block * BLOCK:,} candidates are all hidden")
         self._kept = np.asarray(kept, dtype=np.int64)
-        tried = min(block * BLOCK, limit)
+        tried = sum(self._sizes)
         self.count = int(self._kept[-1]) if count is None else count
         p = self._kept[-1] / tried if tried else 0.0
         self.area = float(total_area * p)
@@ -99,7 +101,7 @@ class ExteriorSource:
         (a few more), in multiples of the thread count, at most 16 rounds' worth a time."""
         if count is None or not kept:
             return threads
-        need = (count - kept) * done / kept * 1.05 / BLOCK + 1
+        need = (count - kept) * done / kept * 1.05 + 1
         return threads * max(1, min(16, math.ceil(need / threads)))
 
     def _classify_block(self, b, limit):

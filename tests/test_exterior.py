@@ -185,15 +185,18 @@ def box_file(tmp_path_factory):
     return path
 
 
-def test_same_bytes_whatever_chunk_size_and_threads(box_file, tmp_path):
-    outs = []
+@pytest.mark.parametrize("options", [["-n", "40000"], ["--poisson", "-n", "300"]])
+def test_same_bytes_and_stats_whatever_chunk_size_and_threads(box_file, tmp_path, options):
+    outs, found = [], []
     for chunk, threads in [(None, "1"), ("777", "2"), ("5000", "3")]:
-        out = tmp_path / f"o{len(outs)}.ply"
+        out, st = tmp_path / f"o{len(outs)}.ply", tmp_path / f"s{len(outs)}.json"
         extra = ["--chunk-size", chunk] if chunk else []
-        run_scatter("sample", box_file, "--exterior", "-n", "40000", "--seed", "5", "-a", "face,object", "-o", out,
-                    *extra, env={"SCATTER_THREADS": threads}, check=True)
+        run_scatter("sample", box_file, "--exterior", *options, "--seed", "5", "-a", "face,object", "-o", out,
+                    "--stats", st, *extra, env={"SCATTER_THREADS": threads}, check=True)
         outs.append(out.read_bytes())
+        found.append({k: v for k, v in json.loads(st.read_text())["exterior"].items() if k != "seconds"})
     assert outs[0] == outs[1] == outs[2]
+    assert found[0] == found[1] == found[2]
 
 
 def test_ranges_are_a_pure_function_of_start_and_stop():
