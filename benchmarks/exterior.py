@@ -12,11 +12,13 @@ For each scene and count, ``scatter sample MESH -n N -o out.ply`` with and witho
     PYTHONPATH=. python benchmarks/exterior.py [--repeats 3] [--counts 100000,1000000] \
         [--mesh-to-sdf /path/to/python]
 
-``--mesh-to-sdf PYTHON``: also time mesh_to_sdf's scan sampler (``get_surface_point_cloud``,
-100 depth renders of 400 x 400, its defaults) with that interpreter (an environment with
-``pip install mesh-to-sdf``; headless: PYOPENGL_PLATFORM=egl), and measure how uneven its
-points are: the coefficient of variation of the counts over 100 equal-area latitude-longitude
-cells of the outer sphere (a uniform sample of n points: about sqrt(100 / n)).
+``--mesh-to-sdf PYTHON``: also, on the same two scenes at 5 subdivisions (its renders
+cost about the same on small meshes), time mesh_to_sdf's scan sampler
+(``get_surface_point_cloud``: 100 depth renders of 400 x 400, its defaults) with that
+interpreter (an environment with ``pip install mesh-to-sdf``; headless:
+PYOPENGL_PLATFORM=egl), and measure how uneven its points are: the coefficient of
+variation of the counts over 100 equal-area cells of the outer sphere (about
+sqrt(100 / n) for n uniform points).
 """
 
 from __future__ import annotations
@@ -32,17 +34,17 @@ import time
 from pathlib import Path
 
 
-def scenes(folder: Path):
+def scenes(folder: Path, subdivisions=8, tag=""):
     import numpy as np
     import trimesh
 
-    ball = trimesh.creation.icosphere(subdivisions=8)
-    paths = {"icosphere": folder / "icosphere8.ply", "hidden20": folder / "hidden20.ply"}
-    ball.export(paths["icosphere"])
-    inner = trimesh.creation.icosphere(subdivisions=7, radius=0.5)
+    ball = trimesh.creation.icosphere(subdivisions=subdivisions)
+    paths = {"icosphere" + tag: folder / f"icosphere{tag}.ply", "hidden20" + tag: folder / f"hidden20{tag}.ply"}
+    ball.export(paths["icosphere" + tag])
+    inner = trimesh.creation.icosphere(subdivisions=subdivisions - 1, radius=0.5)
     both = trimesh.Trimesh(np.vstack([ball.vertices, inner.vertices]),
                            np.vstack([ball.faces, inner.faces + len(ball.vertices)]), process=False)
-    both.export(paths["hidden20"])
+    both.export(paths["hidden20" + tag])
     return paths
 
 
@@ -93,9 +95,11 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         m2s = []
+        if opts.mesh_to_sdf:  # its renders cost the same on small meshes: 5 subdivisions (10,240 faces)
+            for name, mesh in scenes(tmp, 5, "5").items():
+                wall, st = run(mesh, 100000, tmp / "o.ply", True, tmp / "s.json")
+                m2s.append((name, mesh_to_sdf(opts.mesh_to_sdf, mesh), wall))
         for name, mesh in scenes(tmp).items():
-            if opts.mesh_to_sdf:
-                m2s.append((name, mesh_to_sdf(opts.mesh_to_sdf, mesh)))
             for n in counts:
                 plain, ext, build, passes, rays, frac = [], [], [], [], [], []
                 for _ in range(opts.repeats):  # alternate, so that load drifts hit both alike
@@ -119,10 +123,12 @@ def main():
               f"{rate / 1e6:.2f} M | {f:.4f} |")
     if m2s:
         print("\nmesh_to_sdf scan (100 renders of 400 x 400):\n")
-        print("| mesh | seconds | points | points on the hidden sphere | CV of outer-sphere cell counts |")
-        print("|---|---:|---:|---:|---:|")
-        for name, r in m2s:
-            print(f"| {name} | {r['seconds']:.1f} | {r['points']:,} | {r['inner_points']:,} | {r['cv']:.3f} |")
+        print("| mesh | mesh_to_sdf s | points | points on the hidden sphere | CV of outer cell counts "
+              "| CV if uniform | scatter --exterior -n 100000 s |")
+        print("|---|---:|---:|---:|---:|---:|---:|")
+        for name, r, wall in m2s:
+            print(f"| {name} | {r['seconds']:.1f} | {r['points']:,} | {r['inner_points']:,} | {r['cv']:.3f} "
+                  f"| {(100 / r['points']) ** 0.5:.3f} | {wall:.2f} |")
 
 
 if __name__ == "__main__":

@@ -28,6 +28,11 @@ _TAG = 0x4558_5452  # key of the rotation stream: independent of the sampling st
 GIVE_UP = 1 << 20
 
 
+class ShortStream(ScatterError):
+    """A bounded underlying source (``candidates`` given with ``count``) held fewer than
+    ``count`` exterior points: ask again with more candidates."""
+
+
 def rotation_uniforms(seed: int, start: int, stop: int):
     """(n, 3) uniforms in [0, 1) for candidates ``start .. stop - 1``: their ray rotations."""
     bits = np.random.PCG64DXSM(np.random.SeedSequence([_TAG, seed]))
@@ -46,8 +51,9 @@ class ExteriorSource:
     """The exterior candidates of ``base`` (anything with ``draw(start, stop) -> RawChunk``
     over an unbounded stream of candidates), in stream order.
 
-    ``count``: exactly this many points; or ``candidates``: keep the exterior ones among
-    the first ``candidates`` (a ``--density`` run: every plain point that is exterior).
+    ``count``: exactly this many points; ``candidates``: look no further than the first
+    ``candidates`` (alone: keep every exterior one among them, a ``--density`` run; with
+    ``count``, over a bounded source: :class:`ShortStream` when they hold fewer).
     ``area`` is the estimated exterior area, ``stats`` what the pass found.
     """
 
@@ -78,6 +84,8 @@ class ExteriorSource:
                 if kept[-1] == 0 and block * BLOCK >= GIVE_UP:
                     raise ScatterError(f"no exterior surface found: the first {block * BLOCK:,} candidates are all hidden")
         self._kept = np.asarray(kept, dtype=np.int64)
+        if count is not None and kept[-1] < count:
+            raise ShortStream(f"{kept[-1]:,} exterior points among {limit:,} candidates, not {count:,}")
         tried = sum(self._sizes)
         self.count = int(self._kept[-1]) if count is None else count
         p = self._kept[-1] / tried if tried else 0.0

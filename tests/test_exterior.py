@@ -303,3 +303,14 @@ def test_cad_part_points_all_exterior_by_many_more_rays():
     surface = load_surface(path)
     chunk = RawChunk(0, s.points, s.attributes["face"], np.zeros(len(s.points), np.int64), None)
     assert classify(visibility.Occluder(surface, design_size=1024), chunk, 77)[0].all()
+
+
+def test_bounded_source_short_of_exterior_points_says_so():
+    from scatter_cli.api import _Candidates
+    from scatter_cli.exterior import ExteriorSource, ShortStream
+
+    run = scatter_cli.prepare(es.box_in_box()[0], 10, exterior=True)
+    occluder = run.source.occluder
+    assert ExteriorSource(_Candidates(run), occluder, 0, 60.0, count=15000, candidates=20000).count == 15000
+    with pytest.raises(ShortStream):  # 90 % of 20,000 candidates are exterior
+        ExteriorSource(_Candidates(run), occluder, 0, 60.0, count=20000, candidates=20000)
