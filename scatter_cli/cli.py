@@ -38,6 +38,7 @@ def _warner(quiet):
 MeshArg = Annotated[str, typer.Argument(metavar="MESH", help="Mesh file (PLY, OBJ, STL, OFF, GLB/GLTF, ...); '-' reads standard input.")]
 InputFormat = Annotated[Optional[str], typer.Option("--input-format", metavar="FORMAT", help="Mesh format when reading standard input or a pipe (ply, obj, stl, off, glb).")]
 Seed = Annotated[int, typer.Option("--seed", metavar="S", help="Random seed: same input, options and seed give the same bytes.")]
+Exterior = Annotated[bool, typer.Option("--exterior", help="Only the exterior surface: what can be seen from outside the mesh (needs embreex).")]
 Shard = Annotated[Optional[str], typer.Option("--shard", metavar="K/M", help="Write only shard K (0-based) of M of the run's points; join shards with 'scatter merge'.")]
 
 
@@ -55,6 +56,7 @@ def sample(
     objects: Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable).")] = None,
     poisson: Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached.")] = False,
     radius: Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance.")] = None,
+    exterior: Exterior = False,
     method: Annotated[str, typer.Option("--method", metavar="METHOD", help="random (i.i.d., square-root warp) | stratified | sobol.")] = "random",
     precision: Annotated[str, typer.Option("--precision", metavar="PRECISION", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal.")] = "auto",
     stats: Annotated[Optional[str], typer.Option("--stats", metavar="PATH", help="Write a JSON summary to this file ('-': standard error).")] = None,
@@ -92,7 +94,7 @@ def sample(
     run = api.prepare(
         mesh, count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,
         radius=radius, weight=weight, objects=objects, precision=precision, chunk_size=chunk_size,
-        input_format=input_format, warn=_warner(quiet), shard=shard,
+        input_format=input_format, warn=_warner(quiet), exterior=exterior, shard=shard,
     )
     t = time.perf_counter()
     show = not quiet and sys.stderr.isatty()
@@ -121,12 +123,13 @@ def info(
     mesh: Annotated[str, typer.Argument(metavar="MESH", help="Mesh file; '-' reads standard input.")],
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable JSON.")] = False,
     input_format: InputFormat = None,
+    exterior: Annotated[bool, typer.Option("--exterior", help="Also the exterior area (estimate and standard error) and faces seen from outside (needs embreex).")] = False,
 ):
     """Faces, vertices, area, bounding box, degenerate faces, attributes and objects of MESH."""
     process.lean_trimesh()
     from .info import describe, format_text
 
-    report = describe(mesh, input_format=input_format)
+    report = describe(mesh, input_format=input_format, exterior=exterior)
     process.echo(json.dumps(report, indent=2) if as_json else format_text(report))
 
 
@@ -209,6 +212,7 @@ def batch(
     method: Annotated[str, typer.Option("--method", metavar="METHOD", help="random | stratified | sobol.")] = "random",
     precision: Annotated[str, typer.Option("--precision", metavar="PRECISION", help="auto|float32|float64.")] = "auto",
     chunk_size: Annotated[Optional[int], typer.Option("--chunk-size", metavar="K", help="Points generated per chunk (never changes the output).")] = None,
+    exterior: Exterior = False,
     shard: Shard = None,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress, warnings, error lines or summary (the exit status and report still tell).")] = False,
 ):
@@ -229,7 +233,7 @@ def batch(
 
     options = dict(count=count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,
                    radius=radius, weight=weight, objects=objects, precision=precision, chunk_size=chunk_size,
-                   shard=shard)
+                   exterior=exterior or None, shard=shard)
     options = {k: v for k, v in options.items() if v is not None}
     result = run_batch(inputs or [], output, from_list=from_list, jobs=jobs, skip_existing=skip_existing,
                        timeout=timeout, max_memory=max_memory, report=report, engine=engine, scheduler=scheduler,
