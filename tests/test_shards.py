@@ -115,3 +115,12 @@ def test_merge_refuses_other_formats_and_truncated_parts(tmp_path):
     with pytest.raises(ScatterError, match="d.npy"):
         merge([tmp_path / "c.npy", tmp_path / "d.npy"], tmp_path / "out.npy")
     assert not (tmp_path / "out.npy").exists()
+
+
+def test_exterior_shards_are_the_slice_of_the_whole():
+    pytest.importorskip("embreex")
+    mesh = str(SAMPLES / "boxtextured.glb")
+    whole = api.sample(mesh, 500, exterior=True)
+    parts = [api.sample(mesh, 500, exterior=True, shard=(k, 3)) for k in range(3)]
+    assert [len(p) for p in parts] == [166, 167, 167]
+    np.testing.assert_array_equal(np.concatenate([p.points for p in parts]), whole.points)
