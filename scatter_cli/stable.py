@@ -459,6 +459,7 @@ class StableSource:
             raise ScatterUsageError(f"--radius {radius:g} is too small for {self.surface.source} (area "
                                     f"{self.area:.6g}): thinning would need {expected:,.0f} candidates, more than "
                                     f"{max_candidates:,}")
+        self.horizon = tau
         _, face, ctr = self._candidates(tau)
         points = self._place(face, ctr).points
         i, j, _ = thinning._pairs(points, radius)
