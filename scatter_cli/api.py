@@ -11,7 +11,7 @@ from .attributes import AttributeMaker
 from .errors import ScatterError, ScatterUsageError
 from .methods import DRAWS, SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
-from .sampling import RawChunk, SamplePlan, chunk_ranges, in_blocks, run_chunks
+from .sampling import DEFAULT_CHUNK, RawChunk, SamplePlan, chunk_ranges, in_blocks, run_chunks
 from .surface import Surface, apply_matrix, load_surface
 
 METHODS = ("random", "stratified", "sobol")
@@ -43,9 +43,12 @@ class Run:
         self.info = info
         self.layout = column_layout({ATTRIBUTES[a][0] for a in attributes}, self.dtype)
         self.kept = None  # RawChunk of the thinned set, when thinning
+        self.source = None  # a point source with draw(start, stop), when it is not the plan
 
     def _job(self, start, stop):
-        if self.kept is not None:
+        if self.source is not None:
+            raw = self.source.draw(start, stop)
+        elif self.kept is not None:
             raw = self.kept.slice(start, stop)
         elif self.method == "random":
             raw = self.sampler.draw(start, stop, self.seed, self.maker.needs_bary)
@@ -114,7 +117,7 @@ class Run:
 
 def prepare(mesh, count=None, *, density=None, seed=0, method="random", attributes=(), poisson=False,
             radius=None, weight=None, objects=None, precision="auto", chunk_size=None, input_format=None,
-            warn=None, oversampling=None) -> Run:
+            warn=None, oversampling=None, stable=False) -> Run:
     """Load (if needed) and plan a sampling job; see :func:`sample` for the arguments.
 
     ``oversampling``: candidates per output point for Poisson thinning (default: 8, or
@@ -123,6 +126,11 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     t0 = time.perf_counter()
     names = parse_attributes(attributes)
     _check_options(count, density, seed, method, precision, chunk_size, radius)
+    if stable and method != "random":
+        raise ScatterUsageError(f"--stable does not combine with --method {method} (it is a random placement)")
+    if stable and poisson:
+        raise ScatterUsageError("--stable does not combine with --poisson (--radius gives a Poisson-disk set that "
+                                "stays put)")
     # vertices and faces are all a job needs unless an attribute or weight reads the file's
     # colours, UVs or normals
     plain = not weight and set(names) <= PLAIN_ATTRIBUTES
@@ -130,6 +138,8 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
                                                                   plain=plain)
     t1 = time.perf_counter()
     sampler = None
+    if stable:
+        return _stable_run(surface, count, density, seed, names, weight, precision, chunk_size, radius, warn, t0, t1)
     if weight:
         from .weighting import weighted_plan
 
@@ -169,6 +179,42 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     run = Run(surface, plan, count, seed, names, dtype, chunk_size or plan.default_chunk, info, sampler, method)
     if poisson or radius is not None:
         run.thin(candidate_count(area, count, radius, surface.source, oversampling), radius)
+    return run
+
+
+def _stable_run(surface, count, density, seed, names, weight, precision, chunk_size, radius, warn, t0, t1):
+    """The Run of ``--stable``: the plan only measures the surface, the points come from
+    :class:`scatter_cli.stable.StableSource`."""
+    from .stable import StableSource, stable_weight
+
+    plan = SamplePlan(surface)
+    if plan.non_finite and warn:
+        warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
+    if radius is not None and density is not None:
+        raise ScatterUsageError("with --radius the count follows from R: drop --density")
+    maker_needs_bary = AttributeMaker(surface, names).needs_bary
+    source = StableSource(surface, seed, count=None if density is not None or radius is not None else (
+        10000 if count is None else count), density=density, radius=radius, want_bary=maker_needs_bary,
+        weight=stable_weight(surface, weight) if weight else None, max_candidates=MAX_CANDIDATES)
+    dtype = choose_precision(plan, precision, warn)
+    info = {
+        "source": surface.source,
+        "count": source.count,
+        "area": plan.area,
+        "faces": surface.face_count,
+        "faces_used": plan.faces_used,
+        "seed": seed,
+        "method": "random",
+        "stable": True,
+        "precision": np.dtype(dtype).name,
+        "timings": {"load": t1 - t0, "plan": time.perf_counter() - t1},
+    }
+    if weight:
+        info["weight"] = weight
+    if radius is not None:
+        info["radius"] = radius
+    run = Run(surface, plan, source.count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info)
+    run.source = source
     return run
 
 
@@ -212,7 +258,7 @@ def candidate_count(area, count, radius, source, oversampling=None):
 
 
 def sample(mesh, count=10000, *, density=None, seed=0, method="random", attributes=(), poisson=False,
-           radius=None, weight=None, objects=None, precision="auto", chunk_size=None) -> Samples:
+           radius=None, weight=None, objects=None, precision="auto", chunk_size=None, stable=False) -> Samples:
     """Sample points uniformly over the surface of ``mesh``.
 
     mesh: a path, a ``trimesh.Trimesh`` or a ``trimesh.Scene``. Returns :class:`Samples`
@@ -221,7 +267,7 @@ def sample(mesh, count=10000, *, density=None, seed=0, method="random", attribut
     """
     run = prepare(mesh, count, density=density, seed=seed, method=method, attributes=attributes,
                   poisson=poisson, radius=radius, weight=weight, objects=objects, precision=precision,
-                  chunk_size=chunk_size)
+                  chunk_size=chunk_size, stable=stable)
     t = time.perf_counter()
     samples = run.collect()
     samples.info["timings"]["sample"] = time.perf_counter() - t

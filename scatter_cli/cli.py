@@ -47,6 +47,7 @@ def sample(
     objects: Optional[List[str]] = typer.Option(None, "--object", metavar="NAME", help="Sample only this scene object (repeatable)."),
     poisson: bool = typer.Option(False, "--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached."),
     radius: Optional[float] = typer.Option(None, "--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance."),
+    stable: bool = typer.Option(False, "--stable", help="Placement keyed to the faces themselves: points stay put when the mesh is edited elsewhere, renumbered or re-exported."),
     method: str = typer.Option("random", "--method", metavar="METHOD", help="random (i.i.d., square-root warp) | stratified | sobol."),
     precision: str = typer.Option("auto", "--precision", metavar="PRECISION", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal."),
     stats: Optional[str] = typer.Option(None, "--stats", metavar="PATH", help="Write a JSON summary to this file ('-': standard error)."),
@@ -80,7 +81,7 @@ def sample(
     run = api.prepare(
         mesh, count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,
         radius=radius, weight=weight, objects=objects, precision=precision, chunk_size=chunk_size,
-        input_format=input_format, warn=_warner(quiet),
+        input_format=input_format, warn=_warner(quiet), stable=stable,
     )
     t = time.perf_counter()
     show = not quiet and sys.stderr.isatty()

@@ -29,8 +29,8 @@ import numpy as np
 
 from . import native
 from .errors import ScatterError, ScatterUsageError
-from .sampling import RawChunk
-from .surface import apply_matrix, doubled_areas
+from .sampling import RawChunk, in_blocks
+from .surface import apply_matrix
 from .warps import square_to_triangle
 
 MASK = (1 << 64) - 1
@@ -44,6 +44,7 @@ BLOCK_MEAN = 2.0
 COUNT_BITS = 5  # a block's arrival number j fits in 5 bits: counts are capped at 31
 LANES = 4  # per arrival: time, then up to three warp inputs
 FACE_BLOCK = 1 << 16  # faces keyed at a time
+_kernel = native.kernel("_cstable")
 ARRIVAL_BLOCK = 1 << 20  # time blocks expanded at a time
 
 
@@ -107,39 +108,47 @@ def _mix_int(z):
     return z ^ (z >> 31)
 
 
-def canonical(tri):
-    """Rotate each face to start at its smallest corner (x, then y, then z).
+def canonical(cols):
+    """Rotate faces to start at their smallest corner (x, then y, then z).
 
-    tri: (n, 9) float64 world corners -> (rotation (n,) int64 in 0..2, corners (n, 9)
-    float64 starting at corner ``rotation``; -0.0 written as 0.0).
+    cols: 9 (n,) float64 columns of world corners (corner 0 x y z, corner 1, corner 2)
+    -> (rotation (n,) int64 in 0..2, 9 canonical columns starting at corner ``rotation``,
+    -0.0 written as 0.0).
     """
-    c = [tri[:, 3 * k : 3 * k + 3] + 0.0 for k in range(3)]
-    rot = np.zeros(len(tri), dtype=np.int64)
+    c = [[cols[3 * k + a] + 0.0 for a in range(3)] for k in range(3)]
+    rot = np.zeros(len(cols[0]), dtype=np.int64)
     best = c[0]
     for k in (1, 2):
         x = c[k]
-        less = (x[:, 0] < best[:, 0]) | ((x[:, 0] == best[:, 0]) & (
-            (x[:, 1] < best[:, 1]) | ((x[:, 1] == best[:, 1]) & (x[:, 2] < best[:, 2]))))
+        less = (x[0] < best[0]) | ((x[0] == best[0]) & ((x[1] < best[1]) | ((x[1] == best[1]) & (x[2] < best[2]))))
         rot[less] = k
-        best = np.where(less[:, None], x, best)
-    out = np.empty_like(tri)
-    for k in range(3):
-        src = (rot + k) % 3
-        for axis in range(3):
-            out[:, 3 * k + axis] = np.choose(src, [c[0][:, axis], c[1][:, axis], c[2][:, axis]])
+        best = [np.where(less, x[a], best[a]) for a in range(3)]
+    one, two = rot == 1, rot == 2
+    out = list(best)
+    for k in (1, 2):
+        for a in range(3):
+            out.append(np.where(one, c[(1 + k) % 3][a], np.where(two, c[(2 + k) % 3][a], c[k][a])))
     return rot, out
 
 
-def face_keys(corners, seed, extra=None):
-    """(n,) uint64 keys of canonical corners (n, 9) float64 (and ``extra`` (n,) float64,
-    the weight, when given): one hash over their bytes, seeded."""
-    words = np.ascontiguousarray(corners).view(np.uint64)
-    h = np.full(len(corners), seed_word(seed), dtype=np.uint64)
-    columns = [words[:, k] for k in range(9)]
-    if extra is not None:
-        columns.append(np.ascontiguousarray(extra, dtype=np.float64).view(np.uint64))
-    for w in columns:
-        h ^= w
+def doubled_areas(cols):
+    """(n,) float64 twice the areas of faces given as 9 corner columns (n,), computed as
+    :func:`scatter_cli.surface.doubled_areas` computes them from (n, 9) rows."""
+    e1 = [cols[3 + c] - cols[c] for c in range(3)]
+    e2 = [cols[6 + c] - cols[c] for c in range(3)]
+    n = [e1[(c + 1) % 3] * e2[(c + 2) % 3] - e1[(c + 2) % 3] * e2[(c + 1) % 3] for c in range(3)]
+    s = n[0] * n[0]
+    s += n[1] * n[1]
+    s += n[2] * n[2]
+    return np.sqrt(s, out=s)
+
+
+def face_keys(cols, seed, extra=None):
+    """(n,) uint64 keys of 9 canonical corner columns (n,) float64 (and ``extra`` (n,)
+    float64, the weight, when given): one hash over their bytes, seeded."""
+    h = np.full(len(cols[0]), seed_word(seed), dtype=np.uint64)
+    for w in list(cols) + ([] if extra is None else [extra]):
+        h ^= np.ascontiguousarray(w, dtype=np.float64).view(np.uint64)
         h += _G
         mix(h)
     return h
@@ -157,19 +166,24 @@ class FaceTable:
 
     def __init__(self, surface, seed, weight=None):
         self.surface = surface
+        self._columns = {}
         parts, faces, rots, keys, rates, areas = [], [], [], [], [], []
         self.non_finite = 0
         for k, inst in enumerate(surface.instances):
             g = surface.geometries[inst.geometry]
             w_faces = None if weight is None else weight.face_weights_of(k, inst)
-            for i in range(0, len(g.faces), FACE_BLOCK):
+            world = self.world_columns(k) if _kernel is None or weight is not None else None
+            if world is None:
+                for got in self._kernel_faces(k, seed):
+                    self._keep(k, *got, parts, faces, rots, keys, rates, areas)
+            for i in range(0, len(g.faces) if world is not None else 0, FACE_BLOCK):
                 j = min(i + FACE_BLOCK, len(g.faces))
-                rot, tri = canonical(self._world(inst, g.faces[i:j]))
+                rot, cols = canonical([np.take(world[a], g.faces[i:j, c]) for c in range(3) for a in range(3)])
                 w = None
                 if w_faces is not None:
                     w = _rotated_mean(w_faces[i:j], rot) if w_faces.ndim == 2 else w_faces[i:j]
                 with np.errstate(invalid="ignore", over="ignore"):
-                    area = 0.5 * doubled_areas(tri)
+                    area = 0.5 * doubled_areas(cols)
                     rate = area if w is None else area * w
                 good = area[np.isfinite(area) & (area > 0)]
                 areas.append(float(np.sum(good)))
@@ -181,8 +195,11 @@ class FaceTable:
                 parts.append(np.full(len(ok), k, dtype=np.int32))
                 faces.append(ok + i)
                 rots.append(rot[ok].astype(np.uint8))
-                keys.append(face_keys(tri[ok], seed, None if w is None else w[ok]))
+                keys.append(face_keys([x[ok] for x in cols], seed, None if w is None else w[ok]))
                 rates.append(rate[ok])
+            if inst.matrix is not None and len(surface.instances) > 1:
+                self._columns.pop(k, None)  # moved vertices are made again for the few faces drawn
+                self._columns.pop(("v", k), None)
         cat = lambda xs, dt: np.concatenate(xs) if xs else np.empty(0, dtype=dt)  # noqa: E731
         self.part, self.face, self.rot = cat(parts, np.int32), cat(faces, np.int64), cat(rots, np.uint8)
         self.key, self.rate = cat(keys, np.uint64), cat(rates, np.float64)
@@ -196,44 +213,87 @@ class FaceTable:
     def __len__(self):
         return len(self.key)
 
-    def _world(self, inst, faces):
-        """(n, 9) float64 world corners of ``faces`` (n, 3) of instance ``inst``."""
+    def _kernel_faces(self, k, seed):
+        """[(first face, rot, key, area)] of instance ``k`` by the kernel, in blocks on
+        the worker threads."""
+        vertices = self.world_vertices(k)
+        g = self.surface.geometries[self.surface.instances[k].geometry]
+        word = seed_word(seed)
+
+        def block(i, j):
+            rot, key, area = np.empty(j - i, np.uint8), np.empty(j - i, np.uint64), np.empty(j - i)
+            _kernel.faces(vertices, g.faces[i:j], 0, j - i, word, rot, key, area)
+            return i, rot, key, area
+
+        return in_blocks(block, len(g.faces))
+
+    def _keep(self, k, i, rot, key, area, parts, faces, rots, keys, rates, areas):
+        """Append the usable faces of a kernel block (unweighted: rate = area)."""
+        ok = np.isfinite(area) & (area > 0)
+        self.non_finite += int(len(area) - np.count_nonzero(np.isfinite(area)))
+        if ok.all():
+            good = slice(None)
+        else:
+            good = np.flatnonzero(ok)
+        areas.append(float(np.sum(area[good])))
+        if not ok.any():
+            return
+        parts.append(np.full(len(area[good]), k, dtype=np.int32))
+        faces.append(np.arange(i, i + len(area)) if ok.all() else good + i)
+        rots.append(rot[good])
+        keys.append(key[good])
+        rates.append(area[good])
+
+    def world_vertices(self, k):
+        """(V, 3) float64 world vertices of instance ``k`` (the rows apply_matrix gives)."""
+        inst = self.surface.instances[k]
         v = self.surface.geometries[inst.geometry].vertices
-        tri = np.take(v, faces, axis=0).reshape(len(faces), 9)
-        if inst.matrix is not None:
-            m = inst.matrix[:3]
-            for c in range(3):
-                block = tri[:, 3 * c : 3 * c + 3]
-                block[:] = apply_matrix(m, np.ascontiguousarray(block))
-        return tri
+        if inst.matrix is None:
+            return v
+        key = ("v", k)
+        if key not in self._columns:
+            self._columns[key] = apply_matrix(inst.matrix[:3], v)
+        return self._columns[key]
+
+    def world_columns(self, k):
+        """[x, y, z] (V,) float64 world vertex columns of instance ``k``: an unmoved
+        geometry's are kept (shared by its instances), a moved one's made when asked."""
+        inst = self.surface.instances[k]
+        key = ("g", inst.geometry) if inst.matrix is None else k
+        if key not in self._columns:
+            v = self.surface.geometries[inst.geometry].vertices
+            if inst.matrix is not None:
+                v = apply_matrix(inst.matrix[:3], v)
+            self._columns[key] = [np.ascontiguousarray(v[:, a]) for a in range(3)]
+        return self._columns[key]
 
     def corner_columns(self, used):
         """The canonical world corners of used faces ``used`` (n,): a list of 9 (n,)
         float64 columns, corner 0 x y z, corner 1, corner 2."""
         n = len(used)
-        cols = [np.empty(n) for _ in range(9)]
         part = self.part[used]
         one = len(self.surface.instances) == 1
+        cols = None if one else [np.empty(n) for _ in range(9)]
         for k in (range(1) if one else np.unique(part)):
             rows = None if one else np.flatnonzero(part == k)
             mine = used if one else used[rows]
             inst = self.surface.instances[k]
             g = self.surface.geometries[inst.geometry]
-            flat = g.faces.reshape(-1)
             base = 3 * self.face[mine]
             rot = self.rot[mine].astype(np.int64)
-            for c in range(3):
-                vi = np.take(flat, base + (rot + c) % 3)
-                if inst.matrix is None:
-                    xyz = [np.take(g.vertices[:, a], vi) for a in range(3)]
-                else:
-                    w = apply_matrix(inst.matrix[:3], np.take(g.vertices, vi, axis=0))
-                    xyz = [w[:, a] for a in range(3)]
-                for a in range(3):
-                    if one:
-                        cols[3 * c + a] = xyz[a]
-                    else:
-                        cols[3 * c + a][rows] = xyz[a]
+            vi = [np.take(g.faces.reshape(-1), base + (rot + c) % 3) for c in range(3)]
+            if inst.matrix is None:
+                world = self.world_columns(k)
+                got = [np.take(world[a], vi[c]) for c in range(3) for a in range(3)]
+            else:  # the rows apply_matrix gives for all vertices, made for these only
+                got = []
+                for c in range(3):
+                    w = apply_matrix(inst.matrix[:3], np.take(g.vertices, vi[c], axis=0))
+                    got += [w[:, a] for a in range(3)]
+            if one:
+                return got
+            for c in range(9):
+                cols[c][rows] = got[c]
         return cols
 
     def rekey_duplicates(self, seed):
@@ -301,6 +361,8 @@ def arrivals(table, tau, first=0, last=None):
     Returns (time (m,) float64, used face (m,) int64, counter (m,) uint64 = block << 5 | j).
     """
     last = len(table) if last is None else last
+    if _kernel is not None:
+        return _kernel.arrivals(table.key, table.rate, float(tau), BLOCK_MEAN, POISSON_CDF, first, last)
     rate = table.rate[first:last]
     length = BLOCK_MEAN / rate
     nb = _blocks_before(tau, length)
@@ -480,6 +542,13 @@ class StableSource:
     def _place(self, face, ctr, start=0, bary=None):
         """The RawChunk of arrivals (used face (n,), counter (n,))."""
         want_bary = self.want_bary if bary is None else bary
+        t = self.table
+        if _kernel is not None and not self._barycentric and len(self.surface.instances) == 1:
+            points, b = np.empty((len(face), 3)), np.empty((len(face), 2))
+            inst = self.surface.instances[0]
+            _kernel.place(np.ascontiguousarray(face, dtype=np.int64), np.ascontiguousarray(ctr), t.key, t.rot, t.face,
+                          self.surface.geometries[inst.geometry].faces, t.world_vertices(0), points, b)
+            return self._finish(start, face, b, points, want_bary)
         state = self._state(face, ctr)
         j = (ctr & np.uint64((1 << COUNT_BITS) - 1)) * np.uint64(LANES)
         u = np.empty((len(face), 3 if self._barycentric else 2))
@@ -491,8 +560,11 @@ class StableSource:
             b = self.weight.barycentric(w, u)
         else:
             b = square_to_triangle(u)
-        t = self.table
         points = _interpolate(t.corner_columns(face), b)
+        return self._finish(start, face, b, points, want_bary)
+
+    def _finish(self, start, face, b, points, want_bary):
+        t = self.table
         out_bary = None
         if want_bary:
             canon = np.empty((len(face), 3))
@@ -503,7 +575,11 @@ class StableSource:
             rows = np.arange(len(face))
             for k in range(3):  # canonical corner k is the face's corner (k + rot) % 3
                 out_bary[rows, (k + rot) % 3] = canon[:, k]
-        return RawChunk(start, points, t.face[face], t.part[face].astype(np.int64), out_bary)
+        if len(self.surface.instances) == 1:
+            instance = np.broadcast_to(np.int64(0), (len(face),))  # one value, no memory
+        else:
+            instance = t.part[face].astype(np.int64)
+        return RawChunk(start, points, t.face[face], instance, out_bary)
 
     @property
     def _barycentric(self):
