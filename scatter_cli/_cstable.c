@@ -145,18 +145,23 @@ static inline int poisson(double u, const double *cdf, int m)
     return c;
 }
 
-PyDoc_STRVAR(arrivals_doc, "arrivals(key (F,) u8, rate (F,) f8, tau, block_mean, cdf (K,) f8, first, last) -> "
-                           "(t f8, face i8, ctr u8): stable.arrivals of faces first..last-1.");
+PyDoc_STRVAR(arrivals_doc, "arrivals(key (F,) u8, rate (F,) f8, tau, block_mean, cdf (K,) f8, first, last, t, face, ctr)"
+                           " -> count: stable.arrivals of faces first..last-1 written to t (f8), face (i8), ctr (u8) "
+                           "(None: only counted).");
 
 static PyObject *arrivals(PyObject *self, PyObject *args)
 {
-    PyObject *okey, *orate, *ocdf;
-    PyArrayObject *key_a, *rate_a, *cdf_a;
+    PyObject *okey, *orate, *ocdf, *ot, *oface, *octr;
+    PyArrayObject *key_a, *rate_a, *cdf_a, *t_a = NULL, *face_a = NULL, *ctr_a = NULL;
     double tau, mean;
     Py_ssize_t first, last;
-    if (!PyArg_ParseTuple(args, "OOddOnn", &okey, &orate, &tau, &mean, &ocdf, &first, &last) ||
+    if (!PyArg_ParseTuple(args, "OOddOnnOOO", &okey, &orate, &tau, &mean, &ocdf, &first, &last, &ot, &oface, &octr) ||
         !get(okey, NPY_UINT64, -1, &key_a, "key") || !get(orate, NPY_FLOAT64, PyArray_SIZE(key_a), &rate_a, "rate") ||
         !get(ocdf, NPY_FLOAT64, -1, &cdf_a, "cdf"))
+        return NULL;
+    int fill = ot != Py_None;
+    if (fill && (!get(ot, NPY_FLOAT64, -1, &t_a, "t") || !get(oface, NPY_INT64, PyArray_SIZE(t_a), &face_a, "face") ||
+                 !get(octr, NPY_UINT64, PyArray_SIZE(t_a), &ctr_a, "ctr")))
         return NULL;
     if (first < 0 || last > PyArray_SIZE(key_a) || first > last || PyArray_SIZE(cdf_a) >= (1 << COUNT_BITS)) {
         PyErr_SetString(PyExc_ValueError, "arrivals: bad range or table");
@@ -165,25 +170,13 @@ static PyObject *arrivals(PyObject *self, PyObject *args)
     const uint64_t *key = PyArray_DATA(key_a);
     const double *rate = PyArray_DATA(rate_a), *cdf = PyArray_DATA(cdf_a);
     int m = (int)PyArray_SIZE(cdf_a);
-    size_t cap = 0, n = 0;
-    double *t = NULL;
-    int64_t *face = NULL;
-    uint64_t *ctr = NULL;
-    int ok = 1;
+    npy_intp cap = fill ? PyArray_SIZE(t_a) : 0, n = 0;
+    double *t = fill ? PyArray_DATA(t_a) : NULL;
+    int64_t *face = fill ? PyArray_DATA(face_a) : NULL;
+    uint64_t *ctr = fill ? PyArray_DATA(ctr_a) : NULL;
+    int over = 0;
     Py_BEGIN_ALLOW_THREADS
-    /* capacity: every arrival of every block (an upper bound on those before tau) */
-    for (npy_intp i = first; i < last; i++) {
-        double length = mean / rate[i];
-        int64_t nb = blocks_before(tau, length);
-        for (int64_t b = 0; b < nb; b++)
-            cap += poisson(to_unit(lane(lane(key[i], (uint64_t)(b + 1)), 0)), cdf, m);
-    }
-    t = malloc((cap ? cap : 1) * sizeof(double));
-    face = malloc((cap ? cap : 1) * sizeof(int64_t));
-    ctr = malloc((cap ? cap : 1) * sizeof(uint64_t));
-    if (!t || !face || !ctr)
-        ok = 0;
-    for (npy_intp i = first; ok && i < last; i++) {
+    for (npy_intp i = first; i < last && !over; i++) {
         double length = mean / rate[i];
         int64_t nb = blocks_before(tau, length);
         for (int64_t b = 0; b < nb; b++) {
@@ -192,36 +185,26 @@ static PyObject *arrivals(PyObject *self, PyObject *args)
             for (int j = 0; j < c; j++) {
                 double time = ((double)b + to_unit(lane(state, (uint64_t)(1 + LANES * j)))) * length;
                 if (time < tau) {
-                    t[n] = time;
-                    face[n] = i;
-                    ctr[n] = ((uint64_t)b << COUNT_BITS) | (uint64_t)j;
+                    if (fill) {
+                        if (n >= cap) {
+                            over = 1;
+                            break;
+                        }
+                        t[n] = time;
+                        face[n] = i;
+                        ctr[n] = ((uint64_t)b << COUNT_BITS) | (uint64_t)j;
+                    }
                     n++;
                 }
             }
         }
     }
     Py_END_ALLOW_THREADS
-    PyObject *result = NULL;
-    if (ok) {
-        npy_intp dims[1] = {(npy_intp)n};
-        PyObject *at = PyArray_SimpleNew(1, dims, NPY_FLOAT64), *af = PyArray_SimpleNew(1, dims, NPY_INT64),
-                 *ac = PyArray_SimpleNew(1, dims, NPY_UINT64);
-        if (at && af && ac) {
-            memcpy(PyArray_DATA((PyArrayObject *)at), t, n * sizeof(double));
-            memcpy(PyArray_DATA((PyArrayObject *)af), face, n * sizeof(int64_t));
-            memcpy(PyArray_DATA((PyArrayObject *)ac), ctr, n * sizeof(uint64_t));
-            result = PyTuple_Pack(3, at, af, ac);
-        }
-        Py_XDECREF(at);
-        Py_XDECREF(af);
-        Py_XDECREF(ac);
-    } else {
-        PyErr_NoMemory();
+    if (over || (fill && n != cap)) {
+        PyErr_SetString(PyExc_ValueError, "arrivals: output size differs from the count");
+        return NULL;
     }
-    free(t);
-    free(face);
-    free(ctr);
-    return result;
+    return PyLong_FromSsize_t(n);
 }
 
 PyDoc_STRVAR(place_doc, "place(used (n,) i8, ctr (n,) u8, key (U,) u8, rot (U,) u1, face (U,) i8, faces (F,3) i8, "

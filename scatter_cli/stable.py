@@ -361,8 +361,6 @@ def arrivals(table, tau, first=0, last=None):
     Returns (time (m,) float64, used face (m,) int64, counter (m,) uint64 = block << 5 | j).
     """
     last = len(table) if last is None else last
-    if _kernel is not None:
-        return _kernel.arrivals(table.key, table.rate, float(tau), BLOCK_MEAN, POISSON_CDF, first, last)
     rate = table.rate[first:last]
     length = BLOCK_MEAN / rate
     nb = _blocks_before(tau, length)
@@ -394,15 +392,31 @@ def arrivals(table, tau, first=0, last=None):
 
 
 def all_arrivals(table, tau):
-    """:func:`arrivals` of every used face, in face ranges on the worker threads."""
+    """:func:`arrivals` of every used face, in face ranges on the worker threads.
+
+    The kernel counts each range's arrivals, then writes them into arrays of exactly
+    that size: no concatenated copy.
+    """
     n = len(table)
     threads = native.worker_count()
-    if threads == 1 or n < 2 * FACE_BLOCK:
-        return arrivals(table, tau)
-    cuts = np.linspace(0, n, 4 * threads + 1).astype(np.int64)
+    pieces = 1 if threads == 1 or n < 2 * FACE_BLOCK else 4 * threads
+    cuts = np.linspace(0, n, pieces + 1).astype(np.int64).tolist()
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        parts = list(pool.map(lambda a, b: arrivals(table, tau, a, b), cuts[:-1], cuts[1:]))
-    return tuple(np.concatenate(x) for x in zip(*parts))
+        if _kernel is None:
+            parts = list(pool.map(lambda a, b: arrivals(table, tau, a, b), cuts[:-1], cuts[1:]))
+            return tuple(np.concatenate(x) for x in zip(*parts)) if len(parts) > 1 else parts[0]
+        tau = float(tau)
+        args = (table.key, table.rate, tau, BLOCK_MEAN, POISSON_CDF)
+        sizes = list(pool.map(lambda a, b: _kernel.arrivals(*args, a, b, None, None, None), cuts[:-1], cuts[1:]))
+        ends = np.cumsum(sizes).tolist()
+        t, face, ctr = np.empty(ends[-1]), np.empty(ends[-1], np.int64), np.empty(ends[-1], np.uint64)
+
+        def fill(k):
+            s = slice(ends[k] - sizes[k], ends[k])
+            _kernel.arrivals(*args, cuts[k], cuts[k + 1], t[s], face[s], ctr[s])
+
+        list(pool.map(fill, range(pieces)))
+    return t, face, ctr
 
 
 def arrival_order(t, face, ctr, key):
@@ -482,7 +496,10 @@ class StableSource:
                 keep = self._accept(face, ctr)
                 t, face, ctr = t[keep], face[keep], ctr[keep]
             order = arrival_order(t, face, ctr, self.table.key)
-            t, face, ctr = t[order], face[order], ctr[order]
+            t = t[order]  # one array at a time: peak memory 40 bytes an arrival
+            face = face[order]
+            ctr = ctr[order]
+            del order
             if not (_duplicates(t, face, ctr, self.table.key) and self.table.rekey_duplicates(self.seed)):
                 return t, face, ctr
         raise ScatterError(f"{self.surface.source}: --stable could not tell duplicate faces apart")
@@ -503,7 +520,7 @@ class StableSource:
         for _ in range(64):
             t, face, ctr = self._candidates(tau)
             if len(t) >= n:
-                self.used, self.ctr = face[:n].copy(), ctr[:n].copy()
+                self.used, self.ctr = face[:n], ctr[:n]  # views: the few past n stay
                 self.threshold = float(t[n - 1])
                 return
             tau *= max(1.25, 1.1 * n / max(len(t), 1))

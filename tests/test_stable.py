@@ -472,3 +472,23 @@ def test_cli_stable_with_another_method_or_poisson_is_a_usage_error_before_readi
     assert proc.returncode == 2
     err = proc.stderr.decode().strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: --stable") and "Traceback" not in proc.stderr.decode()
+
+
+def test_texture_weight_thins_to_area_times_weight():
+    """The texture-masked quad of test_attributes: u-histogram against the exact weighted
+    mass; the unweighted stable points must fail it."""
+    import scatter_cli
+
+    from .test_attributes import chi_p, exact_u_bins, texture_mask_quad
+
+    mesh = texture_mask_quad()
+    n = 20_000
+    edges = np.linspace(0, 1, 33)
+    expect = exact_u_bins(mesh, 0, edges)
+    expect = expect / expect.sum() * n
+    s = scatter_cli.sample(mesh, n, stable=True, weight="texture:r", attributes=("uv",), precision="float64", seed=9)
+    assert len(s.points) == n
+    assert chi_p(np.histogram(s.uv[:, 0], edges)[0], expect) > ALPHA
+    assert not np.any((s.uv[:, 0] > 1 / 16) & (s.uv[:, 0] < 7 / 16))
+    u = scatter_cli.sample(mesh, n, stable=True, attributes=("uv",), precision="float64", seed=9)
+    assert chi_p(np.histogram(u.uv[:, 0], edges)[0], expect) < ALPHA
