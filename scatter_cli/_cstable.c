@@ -17,6 +17,7 @@
 #define GOLDEN 0x9E3779B97F4A7C15ULL
 #define COUNT_BITS 5
 #define LANES 4
+#define PASS 128
 
 static int get(PyObject *obj, int type, npy_intp size, PyArrayObject **out, const char *name)
 {
@@ -208,20 +209,22 @@ static PyObject *arrivals(PyObject *self, PyObject *args)
 }
 
 PyDoc_STRVAR(place_doc, "place(used (n,) i8, ctr (n,) u8, key (U,) u8, rot (U,) u1, face (U,) i8, faces (F,3) i8, "
-                        "vertices (V,3) f8, points (n,3) f8, b (n,2) f8): points of arrivals on one instance "
-                        "(stable.StableSource._place, square-root warp).");
+                        "vertices (V,3) f8, points (n,3) f8, b (n,2) f8, order (n,) i8): points of arrivals on one "
+                        "instance (stable.StableSource._place, square-root warp), taken in the given order.");
 
 static PyObject *place(PyObject *self, PyObject *args)
 {
-    PyObject *oused, *octr, *okey, *orot, *oface, *ofaces, *overts, *opts, *ob;
-    PyArrayObject *used_a, *ctr_a, *key_a, *rot_a, *face_a, *faces_a, *verts_a, *pts_a, *b_a;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOO", &oused, &octr, &okey, &orot, &oface, &ofaces, &overts, &opts, &ob) ||
+    PyObject *oused, *octr, *okey, *orot, *oface, *ofaces, *overts, *opts, *ob, *oorder;
+    PyArrayObject *used_a, *ctr_a, *key_a, *rot_a, *face_a, *faces_a, *verts_a, *pts_a, *b_a, *order_a;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOO", &oused, &octr, &okey, &orot, &oface, &ofaces, &overts, &opts, &ob,
+                          &oorder) ||
         !get(oused, NPY_INT64, -1, &used_a, "used") || !get(octr, NPY_UINT64, PyArray_SIZE(used_a), &ctr_a, "ctr") ||
         !get(okey, NPY_UINT64, -1, &key_a, "key") || !get(orot, NPY_UINT8, PyArray_SIZE(key_a), &rot_a, "rot") ||
         !get(oface, NPY_INT64, PyArray_SIZE(key_a), &face_a, "face") || !get(ofaces, NPY_INT64, -1, &faces_a, "faces") ||
         !get(overts, NPY_FLOAT64, -1, &verts_a, "vertices") ||
         !get(opts, NPY_FLOAT64, 3 * PyArray_SIZE(used_a), &pts_a, "points") ||
-        !get(ob, NPY_FLOAT64, 2 * PyArray_SIZE(used_a), &b_a, "b"))
+        !get(ob, NPY_FLOAT64, 2 * PyArray_SIZE(used_a), &b_a, "b") ||
+        !get(oorder, NPY_INT64, PyArray_SIZE(used_a), &order_a, "order"))
         return NULL;
     npy_intp n = PyArray_SIZE(used_a), nu = PyArray_SIZE(key_a), nf = PyArray_SIZE(faces_a) / 3,
              nv = PyArray_SIZE(verts_a) / 3;
@@ -230,37 +233,56 @@ static PyObject *place(PyObject *self, PyObject *args)
     const uint8_t *rot = PyArray_DATA(rot_a);
     const double *v = PyArray_DATA(verts_a);
     double *pts = PyArray_DATA(pts_a), *bo = PyArray_DATA(b_a);
+    const int64_t *order = PyArray_DATA(order_a);
     int bad = 0;
     Py_BEGIN_ALLOW_THREADS
-    for (npy_intp i = 0; i < n; i++) {
-        int64_t u = used[i];
-        if (u < 0 || u >= nu || face[u] < 0 || face[u] >= nf) {
-            bad = 1;
-            break;
-        }
-        uint64_t state = lane(key[u], (ctr[i] >> COUNT_BITS) + 1);
-        uint64_t j = (ctr[i] & ((1u << COUNT_BITS) - 1)) * LANES;
-        double u1 = to_unit(lane(state, j + 2)), u2 = to_unit(lane(state, j + 3));
-        double s = sqrt(u1);
-        double b1 = 1.0 - s;
-        double b2 = (1.0 - b1) * u2;
-        const double *c[3];
-        for (int k = 0; k < 3; k++) {
-            int64_t vi = fa[3 * face[u] + (rot[u] + k) % 3];
-            if (vi < 0 || vi >= nv) {
+    /* In passes over blocks of points, so that the cache misses of a pass (face tables,
+     * then face corners, then vertices) are independent of each other and overlap. */
+    for (npy_intp i0 = 0; i0 < n && !bad; i0 += PASS) {
+        npy_intp m = n - i0 < PASS ? n - i0 : PASS;
+        int64_t vi[PASS][3], fi[PASS], at[PASS];
+        uint8_t r[PASS];
+        for (npy_intp k = 0; k < m; k++) {
+            int64_t o = order[i0 + k];
+            if (o < 0 || o >= n) {
                 bad = 1;
-                vi = 0;
+                o = 0;
             }
-            c[k] = v + 3 * vi;
+            at[k] = o;
+            int64_t u = used[o];
+            if (u < 0 || u >= nu || face[u] < 0 || face[u] >= nf) {
+                bad = 1;
+                u = 0;
+            }
+            uint64_t c = ctr[o];
+            uint64_t state = lane(key[u], (c >> COUNT_BITS) + 1);
+            uint64_t j = (c & ((1u << COUNT_BITS) - 1)) * LANES;
+            double s = sqrt(to_unit(lane(state, j + 2)));
+            double b1 = 1.0 - s;
+            bo[2 * o] = b1;
+            bo[2 * o + 1] = (1.0 - b1) * to_unit(lane(state, j + 3));
+            fi[k] = face[u];
+            r[k] = rot[u];
         }
-        for (int a = 0; a < 3; a++) {
-            double col = (c[1][a] - c[0][a]) * b1;
-            col += (c[2][a] - c[0][a]) * b2;
-            col += c[0][a];
-            pts[3 * i + a] = col;
+        for (npy_intp k = 0; k < m; k++)
+            for (int c = 0; c < 3; c++) {
+                int64_t x = fa[3 * fi[k] + (r[k] + c) % 3];
+                if (x < 0 || x >= nv) {
+                    bad = 1;
+                    x = 0;
+                }
+                vi[k][c] = x;
+            }
+        for (npy_intp k = 0; k < m; k++) {
+            const double *c0 = v + 3 * vi[k][0], *c1 = v + 3 * vi[k][1], *c2 = v + 3 * vi[k][2];
+            double b1 = bo[2 * at[k]], b2 = bo[2 * at[k] + 1];
+            for (int a = 0; a < 3; a++) {
+                double col = (c1[a] - c0[a]) * b1;
+                col += (c2[a] - c0[a]) * b2;
+                col += c0[a];
+                pts[3 * at[k] + a] = col;
+            }
         }
-        bo[2 * i] = b1;
-        bo[2 * i + 1] = b2;
     }
     Py_END_ALLOW_THREADS
     if (bad) {

@@ -451,6 +451,19 @@ def arrival_order(t, face, ctr, key):
     return order
 
 
+def _face_order(face):
+    """(n,) int64 permutation sorting ``face`` (n,) int64 >= 0: one value sort of packed
+    (face, position) words, several times faster than argsort."""
+    n = len(face)
+    bits = max(1, (n - 1).bit_length())
+    if n < 2 or int(face.max()) >= 1 << (64 - bits):
+        return np.argsort(face, kind="stable")
+    packed = face.astype(np.uint64) << np.uint64(bits)
+    packed |= np.arange(n, dtype=np.uint64)
+    packed.sort()
+    return (packed & np.uint64((1 << bits) - 1)).astype(np.int64)
+
+
 def _duplicates(t, face, ctr, key):
     """Whether two consecutive arrivals (sorted arrays) are the same arrival of two faces
     with one key."""
@@ -563,8 +576,11 @@ class StableSource:
         if _kernel is not None and not self._barycentric and len(self.surface.instances) == 1:
             points, b = np.empty((len(face), 3)), np.empty((len(face), 2))
             inst = self.surface.instances[0]
-            _kernel.place(np.ascontiguousarray(face, dtype=np.int64), np.ascontiguousarray(ctr), t.key, t.rot, t.face,
-                          self.surface.geometries[inst.geometry].faces, t.world_vertices(0), points, b)
+            # in face order: arrival order reads the face and vertex tables at random (on
+            # the skull, 10^6 points: 0.64 s in arrival order, 0.14 s sorted)
+            face, ctr = np.ascontiguousarray(face, dtype=np.int64), np.ascontiguousarray(ctr)
+            _kernel.place(face, ctr, t.key, t.rot, t.face, self.surface.geometries[inst.geometry].faces,
+                          t.world_vertices(0), points, b, _face_order(face))
             return self._finish(start, face, b, points, want_bary)
         state = self._state(face, ctr)
         j = (ctr & np.uint64((1 << COUNT_BITS) - 1)) * np.uint64(LANES)
