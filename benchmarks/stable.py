@@ -50,6 +50,12 @@ def in_process(surface, n, stable, repeats):
     return statistics.median(times)
 
 
+# Runs the command and prints its peak RSS: a small parent, so that the fork's copy of
+# this benchmark's memory does not count in the child's maximum.
+WRAPPER = ("import resource, subprocess, sys; rc = subprocess.run(sys.argv[1:], stdin=subprocess.DEVNULL).returncode; "
+           "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); sys.exit(rc)")
+
+
 def end_to_end(mesh, n, stable, out):
     """(seconds, peak RSS MB) of one run of the command."""
     cmd = [sys.executable, "-m", "scatter_cli", "sample", str(mesh), "-n", str(n), "-o", str(out), "-q"]
@@ -58,12 +64,12 @@ def end_to_end(mesh, n, stable, out):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     env.pop("PYTHONUNBUFFERED", None)
     t = time.perf_counter()
-    proc = subprocess.Popen(cmd, env=env, stdin=subprocess.DEVNULL)
-    _, status, usage = os.wait4(proc.pid, 0)
+    proc = subprocess.run([sys.executable, "-c", WRAPPER, *cmd], env=env, stdin=subprocess.DEVNULL,
+                          capture_output=True, text=True)
     seconds = time.perf_counter() - t
-    if status != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed ({status})")
-    return seconds, usage.ru_maxrss / 1024.0
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed: {proc.stderr}")
+    return seconds, int(proc.stdout.split()[-1]) / 1024.0
 
 
 def edit_fraction(path, share, n, seed=0):
