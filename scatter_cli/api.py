@@ -187,22 +187,22 @@ def _stable_run(surface, count, density, seed, names, weight, precision, chunk_s
     :class:`scatter_cli.stable.StableSource`."""
     from .stable import StableSource, stable_weight
 
-    plan = SamplePlan(surface)
-    if plan.non_finite and warn:
-        warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
     if radius is not None and density is not None:
         raise ScatterUsageError("with --radius the count follows from R: drop --density")
-    maker_needs_bary = AttributeMaker(surface, names).needs_bary
+    run = Run(surface, None, 0, seed, names, np.float64, chunk_size or DEFAULT_CHUNK, None)
     source = StableSource(surface, seed, count=None if density is not None or radius is not None else (
-        10000 if count is None else count), density=density, radius=radius, want_bary=maker_needs_bary,
+        10000 if count is None else count), density=density, radius=radius, want_bary=run.maker.needs_bary,
         weight=stable_weight(surface, weight) if weight else None, max_candidates=MAX_CANDIDATES)
+    plan = source.table  # the used faces, for the bounds that choose the precision
+    if plan.non_finite and warn:
+        warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
     dtype = choose_precision(plan, precision, warn)
     info = {
         "source": surface.source,
         "count": source.count,
-        "area": plan.area,
+        "area": source.area,
         "faces": surface.face_count,
-        "faces_used": plan.faces_used,
+        "faces_used": len(plan),
         "seed": seed,
         "method": "random",
         "stable": True,
@@ -213,8 +213,9 @@ def _stable_run(surface, count, density, seed, names, weight, precision, chunk_s
         info["weight"] = weight
     if radius is not None:
         info["radius"] = radius
-    run = Run(surface, plan, source.count, seed, names, dtype, chunk_size or DEFAULT_CHUNK, info)
-    run.source = source
+    run.plan, run.count, run.info, run.source = plan, source.count, info, source
+    run.dtype = np.dtype(dtype)
+    run.layout = column_layout({ATTRIBUTES[a][0] for a in names}, run.dtype)
     return run
 
 

@@ -244,6 +244,20 @@ class FaceTable:
         keys.append(key[good])
         rates.append(area[good])
 
+    @property
+    def parts(self):
+        """[sampling.Part] of the used faces, instance by instance: what
+        api.sampled_bounds reads (so a stable run builds no SamplePlan)."""
+        from .sampling import Part
+
+        out = []
+        bounds = np.searchsorted(self.part, np.arange(len(self.surface.instances) + 1))
+        for k, inst in enumerate(self.surface.instances):
+            g = self.surface.geometries[inst.geometry]
+            faces = self.face[bounds[k] : bounds[k + 1]]
+            out.append(Part(k, None if len(faces) == len(g.faces) else faces, None, inst.matrix, g))
+        return out
+
     def world_vertices(self, k):
         """(V, 3) float64 world vertices of instance ``k`` (the rows apply_matrix gives)."""
         inst = self.surface.instances[k]
