@@ -183,6 +183,10 @@ static PyObject *arrivals(PyObject *self, PyObject *args)
         for (int64_t b = 0; b < nb; b++) {
             uint64_t state = lane(key[i], (uint64_t)(b + 1));
             int c = poisson(to_unit(lane(state, 0)), cdf, m);
+            if (!fill && (double)(b + 1) * length < tau) {
+                n += c; /* every time (b + u) length is at most (b + 1) length, rounded too */
+                continue;
+            }
             for (int j = 0; j < c; j++) {
                 double time = ((double)b + to_unit(lane(state, (uint64_t)(1 + LANES * j)))) * length;
                 if (time < tau) {
