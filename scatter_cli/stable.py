@@ -642,9 +642,12 @@ class VertexColorRates:
     weight, positions by the weighting's exact in-face mixture warp."""
 
     def __init__(self, weight):
-        self._w = weight._corner_w  # {geometry: (F, 3) corner weights}
+        from . import weighting
+
+        # {geometry: (F, 3) corner weights}, and the mixture warp (w (n, 3), u (n, 3)) -> (n, 2)
+        self._w = weight.corner_w if hasattr(weight, "corner_w") else weight._corner_w
+        self.barycentric = getattr(weighting, "barycentric", None) or weight.barycentric
         self.surface = weight.surface
-        self.barycentric = weight.barycentric
 
     def face_weights_of(self, k, inst):
         return self._w[inst.geometry]
