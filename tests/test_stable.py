@@ -492,3 +492,15 @@ def test_texture_weight_thins_to_area_times_weight():
     assert not np.any((s.uv[:, 0] > 1 / 16) & (s.uv[:, 0] < 7 / 16))
     u = scatter_cli.sample(mesh, n, stable=True, attributes=("uv",), precision="float64", seed=9)
     assert chi_p(np.histogram(u.uv[:, 0], edges)[0], expect) < ALPHA
+
+
+@pytest.mark.parametrize("kw", [dict(count=3000), dict(count=None, density=400.0), dict(count=None, radius=0.05)])
+def test_api_output_is_the_same_for_any_chunk_size_and_threads(kw, monkeypatch):
+    import scatter_cli
+
+    mesh = str(SAMPLES / "spot_triangulated.obj")
+    ref = scatter_cli.sample(mesh, stable=True, attributes=("face", "bary"), **kw)
+    monkeypatch.setenv("SCATTER_THREADS", "1")
+    for size in (97, 1000):
+        got = scatter_cli.sample(mesh, stable=True, attributes=("face", "bary"), chunk_size=size, **kw)
+        assert _all_bytes(got) == _all_bytes(ref)
