@@ -100,6 +100,7 @@ def test_uniform_test_catches_a_rate_not_proportional_to_area(name, monkeypatch)
     """Broken variant: every face arrives at rate sqrt(area)."""
     v, f = UNIFORM_MESHES[name]()
     true_areas = stable.doubled_areas
+    monkeypatch.setattr(stable, "_kernel", None)  # the broken variant is made on the NumPy path
     monkeypatch.setattr(stable, "doubled_areas", lambda cols: np.sqrt(2 * true_areas(cols)))
     _, raw = run(_mesh(v, f), seed=3, count=40_000)
     assert region_pvalue(v, f, raw) < ALPHA
@@ -272,6 +273,7 @@ def test_the_edit_test_catches_a_source_keyed_by_face_index(monkeypatch):
     v, f = _load("hemisphere.off")
     v2, f2 = edit_delete(v, f)
     same_old, same_new, *_ = split_faces(v, f, v2, f2)
+    monkeypatch.setattr(stable, "_kernel", None)  # the broken variant is made on the NumPy path
     monkeypatch.setattr(stable, "face_keys", by_index)
     _, before = run(_mesh(v, f), seed=4, count=6000)
     counter["next"] = 0
