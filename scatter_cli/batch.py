@@ -21,7 +21,7 @@ TEMPLATE_FIELDS = ("stem", "name", "rel", "index")
 ENGINES = ("local", "dask")
 # sample options that a batch passes to api.prepare as they are
 SAMPLE_OPTIONS = ("count", "density", "seed", "method", "attributes", "poisson", "radius", "weight", "objects",
-                  "precision", "chunk_size", "shard", "oversampling", "exterior")
+                  "precision", "chunk_size", "shard", "oversampling", "exterior", "stable")
 
 
 class Inputs:

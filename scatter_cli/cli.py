@@ -39,6 +39,7 @@ MeshArg = Annotated[str, typer.Argument(metavar="MESH", help="Mesh file (PLY, OB
 InputFormat = Annotated[Optional[str], typer.Option("--input-format", metavar="FORMAT", help="Mesh format when reading standard input or a pipe (ply, obj, stl, off, glb).")]
 Seed = Annotated[int, typer.Option("--seed", metavar="S", help="Random seed: same input, options and seed give the same bytes.")]
 Exterior = Annotated[bool, typer.Option("--exterior", help="Only the exterior surface: what can be seen from outside the mesh (needs embreex).")]
+Stable = Annotated[bool, typer.Option("--stable", help="Placement keyed to the faces themselves: points stay put when the mesh is edited elsewhere, renumbered or re-exported.")]
 Shard = Annotated[Optional[str], typer.Option("--shard", metavar="K/M", help="Write only shard K (0-based) of M of the run's points; join shards with 'scatter merge'.")]
 
 
@@ -63,6 +64,7 @@ def sample(
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress and no warnings.")] = False,
     chunk_size: Annotated[Optional[int], typer.Option("--chunk-size", metavar="K", help="Points generated per chunk (memory/speed knob; never changes the output).")] = None,
     input_format: InputFormat = None,
+    stable: Stable = False,
     shard: Shard = None,
 ):
     """Sample points on the surface of MESH.
@@ -94,7 +96,7 @@ def sample(
     run = api.prepare(
         mesh, count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,
         radius=radius, weight=weight, objects=objects, precision=precision, chunk_size=chunk_size,
-        input_format=input_format, warn=_warner(quiet), exterior=exterior, shard=shard,
+        input_format=input_format, warn=_warner(quiet), exterior=exterior, stable=stable, shard=shard,
     )
     t = time.perf_counter()
     show = not quiet and sys.stderr.isatty()
@@ -213,6 +215,7 @@ def batch(
     precision: Annotated[str, typer.Option("--precision", metavar="PRECISION", help="auto|float32|float64.")] = "auto",
     chunk_size: Annotated[Optional[int], typer.Option("--chunk-size", metavar="K", help="Points generated per chunk (never changes the output).")] = None,
     exterior: Exterior = False,
+    stable: Stable = False,
     shard: Shard = None,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress, warnings, error lines or summary (the exit status and report still tell).")] = False,
 ):
@@ -233,7 +236,7 @@ def batch(
 
     options = dict(count=count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,
                    radius=radius, weight=weight, objects=objects, precision=precision, chunk_size=chunk_size,
-                   exterior=exterior or None, shard=shard)
+                   exterior=exterior or None, stable=stable or None, shard=shard)
     options = {k: v for k, v in options.items() if v is not None}
     result = run_batch(inputs or [], output, from_list=from_list, jobs=jobs, skip_existing=skip_existing,
                        timeout=timeout, max_memory=max_memory, report=report, engine=engine, scheduler=scheduler,

@@ -124,3 +124,9 @@ def test_exterior_shards_are_the_slice_of_the_whole():
     parts = [api.sample(mesh, 500, exterior=True, shard=(k, 3)) for k in range(3)]
     assert [len(p) for p in parts] == [166, 167, 167]
     np.testing.assert_array_equal(np.concatenate([p.points for p in parts]), whole.points)
+
+
+def test_stable_shards_are_the_slice_of_the_whole():
+    whole = api.sample(str(MESH), 1000, stable=True)
+    parts = [api.sample(str(MESH), 1000, stable=True, shard=(k, 3)) for k in range(3)]
+    np.testing.assert_array_equal(np.concatenate([p.points for p in parts]), whole.points)
