@@ -15,7 +15,7 @@ from .sampling import RawChunk, SamplePlan, chunk_ranges, in_blocks, run_chunks
 from .surface import Surface, apply_matrix, load_surface
 
 METHODS = ("random", "stratified", "sobol")
-PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object"}
+PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object", "orient"}
 PRECISIONS = ("auto", "float32", "float64")
 # --precision auto keeps float32 while its rounding moves no point by more than this
 # fraction of the bounding-box diagonal.
@@ -38,7 +38,7 @@ class Run:
         self.count = count
         self.seed = seed
         self.dtype = np.dtype(dtype)
-        self.maker = AttributeMaker(surface, attributes)
+        self.maker = AttributeMaker(surface, attributes, seed)
         self.chunk_size = chunk_size
         self.info = info
         self.layout = column_layout({ATTRIBUTES[a][0] for a in attributes}, self.dtype)

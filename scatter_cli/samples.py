@@ -14,9 +14,10 @@ ATTRIBUTES = {
     "color": ("color", ("red", "green", "blue", "alpha"), "u1"),
     "uv": ("uv", ("u", "v"), "real"),
     "object": ("object", ("object_index",), "<i4"),
+    "orient": ("orient", ("qx", "qy", "qz", "qw"), "real"),
 }
 # Columns always come in this order, whatever the order of -a.
-KEY_ORDER = ("normal", "face", "bary", "color", "uv", "object")
+KEY_ORDER = ("normal", "orient", "face", "bary", "color", "uv", "object")
 
 
 def column_layout(keys, real_dtype):
@@ -51,7 +52,7 @@ class Samples:
 
     ``samples.points``, ``samples.normal`` (n, 3), ``samples.face`` (n,) int32,
     ``samples.bary`` (n, 3), ``samples.color`` (n, 4) uint8, ``samples.uv`` (n, 2),
-    ``samples.object`` (n,) int32. ``info`` holds run statistics (area, radius, ...).
+    ``samples.object`` (n,) int32, ``samples.orient`` (n, 4) quaternions ``qx qy qz qw``. ``info`` holds run statistics (area, radius, ...).
     """
 
     def __init__(self, points, attributes=None, info=None):
