@@ -16,7 +16,7 @@ import numpy as np
 
 from .errors import OutputClosed, ScatterError, ScatterUsageError
 
-FORMATS = ("ply", "csv", "xyz", "npy")
+FORMATS = ("ply", "csv", "xyz", "npy", "pcd")
 PLY_TYPES = {"f4": "float", "f8": "double", "i4": "int", "u1": "uchar"}
 
 
@@ -134,6 +134,10 @@ class _TextEncoder:
 
 
 def make_writer(stream, fmt, layout, count, ascii=False):
+    if fmt == "pcd":
+        from .pcd import PcdWriter
+
+        return PcdWriter(stream, layout, count, ascii)
     if fmt == "ply":
         return PlyWriter(stream, layout, count, ascii)
     if fmt == "npy":
@@ -151,6 +155,22 @@ def write_samples(chunks, path, fmt, layout, count, ascii=False):
         for chunk in chunks:
             writer.write(chunk)
         writer.finish()
+
+
+def copy_tail(path, offset, stream, block=1 << 22):
+    """Copy the bytes of file ``path`` from ``offset`` to its end into ``stream`` (for merging)."""
+    with _reading(path), open(path, "rb") as f:
+        f.seek(offset)
+        for data in iter(lambda: f.read(block), b""):
+            stream.write(data)
+
+
+@contextlib.contextmanager
+def _reading(path):
+    try:
+        yield
+    except OSError as exc:
+        raise ScatterError(f"{path}: cannot read: {exc.strerror or exc}") from None
 
 
 @contextlib.contextmanager
