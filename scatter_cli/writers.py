@@ -16,7 +16,7 @@ import numpy as np
 
 from .errors import OutputClosed, ScatterError, ScatterUsageError
 
-FORMATS = ("ply", "csv", "xyz", "npy", "pcd")
+FORMATS = ("ply", "csv", "xyz", "npy", "pcd", "las", "laz")
 PLY_TYPES = {"f4": "float", "f8": "double", "i4": "int", "u1": "uchar"}
 
 
@@ -37,6 +37,11 @@ def infer_format(path, fmt=None) -> str:
     return suffix
 
 
+def run_precision(fmt, precision):
+    """The coordinate precision a run needs for ``fmt``: LAS quantises float64 points itself."""
+    return "float64" if fmt in ("las", "laz") else precision
+
+
 def _structured_dtype(layout):
     return np.dtype([(c, dt) for _, cols, dt in layout for c in cols])
 
@@ -47,6 +52,7 @@ class _Writer:
         self.layout = layout
         self.count = count
         self.written = 0
+        self.report = {}
 
     def header(self):
         pass
@@ -133,7 +139,12 @@ class _TextEncoder:
         return ((self.row * n) % tuple(flat)).encode("ascii")
 
 
-def make_writer(stream, fmt, layout, count, ascii=False):
+def make_writer(stream, fmt, layout, count, ascii=False, bounds=None):
+    """The writer of ``fmt``; ``bounds`` (2, 3): the sampled bounding box (LAS scale and offset)."""
+    if fmt in ("las", "laz"):
+        from .las import LasWriter
+
+        return LasWriter(stream, layout, count, bounds, compress=fmt == "laz")
     if fmt == "pcd":
         from .pcd import PcdWriter
 
@@ -147,14 +158,18 @@ def make_writer(stream, fmt, layout, count, ascii=False):
     return TextWriter(stream, layout, count, " ", False)
 
 
-def write_samples(chunks, path, fmt, layout, count, ascii=False):
-    """Write an iterable of Samples chunks (``count`` points in all) to ``path`` or stdout."""
+def write_samples(chunks, path, fmt, layout, count, ascii=False, bounds=None):
+    """Write an iterable of Samples chunks (``count`` points in all) to ``path`` or stdout.
+
+    Returns what the writer reports for ``--stats`` (LAS: the quantisation), a dict.
+    """
     with open_output(path) as stream:
-        writer = make_writer(stream, fmt, layout, count, ascii)
+        writer = make_writer(stream, fmt, layout, count, ascii, bounds)
         writer.header()
         for chunk in chunks:
             writer.write(chunk)
         writer.finish()
+    return writer.report
 
 
 def copy_tail(path, offset, stream, block=1 << 22):
