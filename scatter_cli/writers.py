@@ -16,7 +16,8 @@ import numpy as np
 
 from .errors import OutputClosed, ScatterError, ScatterUsageError
 
-FORMATS = ("ply", "csv", "xyz", "npy", "pcd", "las", "laz")
+FORMATS = ("ply", "csv", "xyz", "npy", "pcd", "las", "laz", "usd")
+SUFFIX_FORMATS = {"txt": "xyz", "usda": "usd", "usdc": "usd"}
 PLY_TYPES = {"f4": "float", "f8": "double", "i4": "int", "u1": "uchar"}
 
 
@@ -30,10 +31,9 @@ def infer_format(path, fmt=None) -> str:
     if path is None or str(path) == "-":
         return "csv"
     suffix = os.path.splitext(str(path))[1].lstrip(".").lower()
-    if suffix == "txt":
-        return "xyz"
+    suffix = SUFFIX_FORMATS.get(suffix, suffix)
     if suffix not in FORMATS:
-        raise ScatterUsageError(f"cannot tell the format of '{path}' from its suffix: pass -f ply|csv|xyz|npy")
+        raise ScatterUsageError(f"cannot tell the format of '{path}' from its suffix: pass -f {'|'.join(FORMATS)}")
     return suffix
 
 
@@ -139,8 +139,16 @@ class _TextEncoder:
         return ((self.row * n) % tuple(flat)).encode("ascii")
 
 
-def make_writer(stream, fmt, layout, count, ascii=False, bounds=None):
-    """The writer of ``fmt``; ``bounds`` (2, 3): the sampled bounding box (LAS scale and offset)."""
+def make_writer(stream, fmt, layout, count, ascii=False, bounds=None, **options):
+    """The writer of ``fmt``; ``bounds`` (2, 3): the sampled bounding box (LAS scale and offset).
+
+    ``options`` for USD: ``path`` (its suffix picks .usda text or .usdc crate), ``up_axis``,
+    ``meters_per_unit`` (from the input when it has them), ``spacing`` (placeholder size).
+    """
+    if fmt == "usd":
+        from .usdwrite import UsdWriter
+
+        return UsdWriter(stream, layout, count, **options)
     if fmt in ("las", "laz"):
         from .las import LasWriter
 
@@ -158,13 +166,15 @@ def make_writer(stream, fmt, layout, count, ascii=False, bounds=None):
     return TextWriter(stream, layout, count, " ", False)
 
 
-def write_samples(chunks, path, fmt, layout, count, ascii=False, bounds=None):
+def write_samples(chunks, path, fmt, layout, count, ascii=False, bounds=None, **options):
     """Write an iterable of Samples chunks (``count`` points in all) to ``path`` or stdout.
 
     Returns what the writer reports for ``--stats`` (LAS: the quantisation), a dict.
     """
     with open_output(path) as stream:
-        writer = make_writer(stream, fmt, layout, count, ascii, bounds)
+        if fmt == "usd":
+            options["path"] = path
+        writer = make_writer(stream, fmt, layout, count, ascii, bounds, **options)
         writer.header()
         for chunk in chunks:
             writer.write(chunk)
