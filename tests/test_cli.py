@@ -127,7 +127,7 @@ def test_all_vertices_non_finite(tmp_path):
         (["-a", "normal,smooth-normal"], ["normal"]),
         (["--method", "magic"], ["magic"]),
         (["--precision", "float16"], ["float16"]),
-        (["-f", "las"], ["las"]),
+        (["-f", "e57"], ["e57"]),
         (["--seed", "-1"], ["seed"]),
         (["--chunk-size", "0"], ["chunk"]),
         (["--density", "-2"], ["density"]),
