@@ -247,6 +247,20 @@ def _check_options(count, density, seed, method, precision, chunk_size, radius):
         raise ScatterUsageError(f"--radius must be a positive number, not {radius!r}")
 
 
+def output_options(run: Run, fmt: str) -> dict:
+    """What the writer of ``fmt`` needs from the run besides its points (keywords of
+    :func:`~scatter_cli.writers.write_samples`): LAS the sampled bounding box, USD the
+    input's up axis and units (when the surface carries them) and the point spacing."""
+    if fmt in ("las", "laz"):
+        return {"bounds": sampled_bounds(run.plan)}
+    if fmt == "usd":
+        area = run.info["area"]
+        return {"up_axis": getattr(run.surface, "up_axis", None),
+                "meters_per_unit": getattr(run.surface, "meters_per_unit", None),
+                "spacing": math.sqrt(area / run.count) if run.count and area > 0 else None}
+    return {}
+
+
 def sampled_bounds(plan: SamplePlan):
     """(2, 3) float64 min and max over the world-space vertices of the faces that get points."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)

@@ -179,8 +179,3 @@ def export_crate(stage):
             return f.read()
     finally:
         os.unlink(tmp)
-
-
-def point_spacing(area, count):
-    """The mean spacing of ``count`` points uniform over ``area``: the placeholder's size."""
-    return math.sqrt(area / count) if count and area > 0 else None
