@@ -2,13 +2,13 @@
 
     PYTHONPATH=. python benchmarks/write_formats.py [--count 10000000] [--runs 3] [--out benchmarks/write-formats-results.md]
 
-1. Time: N points of samples/boxvertexcolors.glb are sampled once and held as chunks
+1. Time (printed first): N points of samples/boxvertexcolors.glb are sampled once and held as chunks
    (2^17 points each); each format then writes the same chunks to a file in a temporary
    folder (on the same disk as the repo), alternating formats, --runs rounds; medians,
    and the ratio to binary PLY of the same round. Two layouts: xyz only, and xyz +
    normal + color. float32 coordinates for PLY/PCD/USD (what auto picks here); LAS/LAZ
    quantise float64 points (what the run gives them).
-2. Memory: peak RSS of a fresh process that samples and writes N/10 and N points
+2. Memory (measured first): peak RSS (VmHWM) of a fresh process that samples and writes N/10 and N points
    (streamed, the whole pipeline): flat in the count means the same peak for both.
    USD holds every point by design (it cannot stream) and is measured for the record.
 """
@@ -32,7 +32,7 @@ FORMATS = [("ply", "ply"), ("pcd", "pcd"), ("las", "las"), ("laz", "laz"), ("usd
 LAYOUTS = {"xyz": "", "xyz+normal+color": "normal,color"}
 
 CHILD = r"""
-import resource, sys, json
+import sys, json
 sys.path.insert(0, {root!r})
 import scatter_cli.api as api
 from scatter_cli.api import sampled_bounds
@@ -40,7 +40,10 @@ from scatter_cli.writers import run_precision, write_samples
 fmt, suffix, count, attrs, out = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5]
 run = api.prepare({mesh!r}, count, attributes=attrs, seed=1, precision=run_precision(fmt, "auto"))
 write_samples(run.chunks(), out, fmt, run.layout, run.count, bounds=sampled_bounds(run.plan))
-print(json.dumps(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024))
+# VmHWM, not ru_maxrss: Linux keeps ru_maxrss across exec, so a child would report the
+# peak of the (large) parent it was forked from
+hwm = next(l for l in open("/proc/self/status") if l.startswith("VmHWM:"))
+print(json.dumps(int(hwm.split()[1]) / 1024))
 """
 
 
@@ -118,8 +121,8 @@ def main():
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "write-formats-results.md"))
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(dir=ROOT) as folder:
-        timing = time_formats(args.count, args.runs, folder)
         memory = peak_memory(args.count, folder)
+        timing = time_formats(args.count, args.runs, folder)
     text = markdown(args.count, args.runs, timing, memory)
     with open(args.out, "w") as f:
         f.write(text)
