@@ -180,38 +180,51 @@ def clear_creation_date(stream):
 
 # -- merge ------------------------------------------------------------------------------
 
+def read_header(path):
+    """The laspy header of the LAS/LAZ file ``path``; a one-line error when it is not one."""
+    laspy = _laspy()
+    try:
+        with laspy.open(path) as f:
+            return f.header
+    except FileNotFoundError:
+        raise ScatterError(f"{path}: no such file") from None
+    except Exception as exc:  # laspy raises its own error types for bad files
+        raise ScatterError(f"{path}: not a LAS/LAZ file ({exc})") from None
+
+
+def layout_of(header):
+    """What parts must share to be joined: point format, extra bytes, scale and offset."""
+    return (header.point_format.id, tuple(header.point_format.extra_dimension_names),
+            tuple(header.scales.tolist()), tuple(header.offsets.tolist()))
+
+
 def merge_las(paths, out, chunk=1 << 20):
     """Join LAS or LAZ files of one point layout, scale and offset into ``out``, in order.
 
     Parts of one run (``--shard``) share the run's scale and offset, so the result is
     the run's output byte for byte; the compression follows ``out``'s suffix.
     """
-    laspy = _laspy()
-    heads = []
-    for p in paths:
-        try:
-            with laspy.open(p) as f:
-                heads.append(f.header)
-        except Exception as exc:  # laspy raises its own error types for bad files
-            raise ScatterError(f"{p}: not a LAS/LAZ file ({exc})") from None
-    first = heads[0]
+    heads = [read_header(p) for p in paths]
     for p, h in zip(paths, heads):
-        if (h.point_format != first.point_format or list(h.point_format.extra_dimension_names)
-                != list(first.point_format.extra_dimension_names) or not np.array_equal(h.scales, first.scales)
-                or not np.array_equal(h.offsets, first.offsets)):
+        if layout_of(h) != layout_of(heads[0]):
             raise ScatterError(f"{p}: LAS point format, extra bytes, scale or offset differ from {paths[0]}")
+    with open_output(out) as stream:
+        write_joined(paths, heads[0], stream, str(out).lower().endswith(".laz"), chunk)
+
+
+def write_joined(paths, first, stream, compress, chunk=1 << 20):
+    """Write the points of ``paths`` in order to ``stream`` under a header like ``first``'s."""
+    laspy = _laspy()
     header = laspy.LasHeader(point_format=first.point_format, version=first.version)
     header.scales, header.offsets = first.scales, first.offsets
     header.generating_software = first.generating_software
     header.system_identifier = first.system_identifier
     _no_extra_statistics(header)
-    compress = str(out).lower().endswith(".laz")
-    with open_output(out) as stream:
-        backend = laspy.LazBackend.LazrsParallel if compress else None
-        with laspy.open(stream, mode="w", header=header, do_compress=compress, laz_backend=backend,
-                        closefd=False) as writer:
-            for p in paths:
-                with laspy.open(p) as f:
-                    for points in f.chunk_iterator(chunk):
-                        writer.write_points(points)
-        clear_creation_date(stream)
+    backend = laspy.LazBackend.LazrsParallel if compress else None
+    with laspy.open(stream, mode="w", header=header, do_compress=compress, laz_backend=backend,
+                    closefd=False) as writer:
+        for p in paths:
+            with laspy.open(p) as f:
+                for points in f.chunk_iterator(chunk):
+                    writer.write_points(points)
+    clear_creation_date(stream)
