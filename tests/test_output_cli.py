@@ -5,6 +5,8 @@ import json
 import numpy as np
 import pytest
 
+from scatter_cli.errors import ScatterError
+
 from .conftest import SAMPLES, run_scatter
 from .test_cli import assert_one_line_error
 
@@ -44,3 +46,29 @@ def test_las_into_a_pipe_is_one_line_and_ascii_las_a_usage_error(tmp_path):
     assert proc.stdout == b""
     assert_one_line_error(run_scatter("sample", MESH, "-n", 10, "--ascii", "-o", tmp_path / "x.las"), 2, "--ascii")
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("suffix,ascii", [("pcd", False), ("pcd", True), ("las", False), ("laz", False)])
+def test_merge_joins_shards_into_the_run(tmp_path, suffix, ascii):
+    if suffix != "pcd":
+        pytest.importorskip("laspy")
+    from scatter_cli import api
+    from scatter_cli.merge import merge
+    from scatter_cli.writers import run_precision, write_samples
+
+    def write(path, shard=None):
+        run = api.prepare(str(MESH), 1001, attributes="normal,color,orient", chunk_size=97, shard=shard,
+                          precision=run_precision(suffix, "auto"))
+        write_samples(run.chunks(), str(path), suffix, run.layout, run.size, ascii, **api.output_options(run, suffix))
+
+    write(tmp_path / f"whole.{suffix}")
+    parts = [tmp_path / f"p{k}.{suffix}" for k in range(3)]
+    for k, part in enumerate(parts):
+        write(part, (k, 3))
+    assert merge(parts, tmp_path / f"m.{suffix}") == 1001
+    assert (tmp_path / f"m.{suffix}").read_bytes() == (tmp_path / f"whole.{suffix}").read_bytes()
+    other = tmp_path / f"other.{suffix}"
+    run = api.prepare(str(MESH), 10, precision=run_precision(suffix, "auto"))
+    write_samples(run.chunks(), str(other), suffix, run.layout, run.size, ascii, **api.output_options(run, suffix))
+    with pytest.raises(ScatterError, match="other"):
+        merge([parts[0], other], tmp_path / f"n.{suffix}")
