@@ -6,11 +6,33 @@
     ((1000, 3), (1000, 3))
 """
 
-__version__ = "0.1.0"
-__all__ = ["sample", "prepare", "load_surface", "Samples", "ScatterError"]
+__all__ = ["sample", "prepare", "load_surface", "Samples", "ScatterError", "version"]
+
+
+def version() -> str:
+    """The installed package's version; from pyproject.toml when run from a checkout."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("scatter-cli")
+    except metadata.PackageNotFoundError:
+        return _checkout_version()
+
+
+def _checkout_version():
+    import tomllib
+    from pathlib import Path
+
+    try:
+        with open(Path(__file__).resolve().parent.parent / "pyproject.toml", "rb") as f:
+            return tomllib.load(f)["project"]["version"]
+    except (OSError, KeyError, tomllib.TOMLDecodeError):
+        return "unknown"
 
 
 def __getattr__(name):
+    if name == "__version__":
+        return version()
     # Imported on first use so that `scatter --help` does not pay for numpy and trimesh.
     if name in ("sample", "prepare"):
         from . import api

@@ -1,18 +1,20 @@
-"""The ``scatter`` command line: a thin shell over :mod:`scatter_cli.api`."""
+"""The ``scatter`` command line: a thin typer shell over :mod:`scatter_cli.api`.
+
+How the process runs (signals, exit codes, standard output) is :mod:`scatter_cli.process`.
+"""
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
-import signal
 import sys
 import time
-from typing import List, Optional
+from typing import Annotated, List, Optional
 
 import typer
 
-from .errors import OutputClosed, ScatterError, ScatterUsageError
+from . import process
+from .errors import ScatterUsageError
+from .outputs import ATTRIBUTES, FORMATS
 
 app = typer.Typer(
     add_completion=False,
@@ -33,26 +35,31 @@ def _warner(quiet):
     return lambda message: print(f"warning: {message}", file=sys.stderr)
 
 
+MeshArg = Annotated[str, typer.Argument(metavar="MESH", help="Mesh file (PLY, OBJ, STL, OFF, GLB/GLTF, ...); '-' reads standard input.")]
+InputFormat = Annotated[Optional[str], typer.Option("--input-format", metavar="FORMAT", help="Mesh format when reading standard input or a pipe (ply, obj, stl, off, glb).")]
+Seed = Annotated[int, typer.Option("--seed", metavar="S", help="Random seed: same input, options and seed give the same bytes.")]
+
+
 @app.command(no_args_is_help=True)
 def sample(
-    mesh: str = typer.Argument(..., metavar="MESH", help="Mesh file (PLY, OBJ, STL, OFF, GLB/GLTF, ...); '-' reads standard input."),
-    count: Optional[int] = typer.Option(None, "-n", "--count", metavar="N", help="Number of points [default: 10000]."),
-    density: Optional[float] = typer.Option(None, "--density", metavar="D", help="Points per unit of surface area, instead of -n."),
-    output: Optional[str] = typer.Option(None, "-o", "--output", metavar="PATH", help="Output file; '-' or absent: standard output."),
-    fmt: Optional[str] = typer.Option(None, "-f", "--format", metavar="FORMAT", help="ply|csv|xyz|npy [default: from the suffix of -o; CSV on standard output]."),
-    ascii: bool = typer.Option(False, "--ascii", help="ASCII PLY instead of binary little-endian."),
-    seed: int = typer.Option(0, "--seed", metavar="S", help="Random seed: same input, options and seed give the same bytes."),
-    attributes: Optional[str] = typer.Option(None, "-a", "--attributes", metavar="LIST", help="Comma list of extra columns: normal, smooth-normal, face, bary, color, uv, object."),
-    weight: Optional[str] = typer.Option(None, "--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a."),
-    objects: Optional[List[str]] = typer.Option(None, "--object", metavar="NAME", help="Sample only this scene object (repeatable)."),
-    poisson: bool = typer.Option(False, "--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached."),
-    radius: Optional[float] = typer.Option(None, "--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance."),
-    method: str = typer.Option("random", "--method", metavar="METHOD", help="random (i.i.d., square-root warp) | stratified | sobol."),
-    precision: str = typer.Option("auto", "--precision", metavar="PRECISION", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal."),
-    stats: Optional[str] = typer.Option(None, "--stats", metavar="PATH", help="Write a JSON summary to this file ('-': standard error)."),
-    quiet: bool = typer.Option(False, "-q", "--quiet", help="No progress and no warnings."),
-    chunk_size: Optional[int] = typer.Option(None, "--chunk-size", metavar="K", help="Points generated per chunk (memory/speed knob; never changes the output)."),
-    input_format: Optional[str] = typer.Option(None, "--input-format", metavar="FORMAT", help="Mesh format when reading standard input or a pipe (ply, obj, stl, off, glb)."),
+    mesh: MeshArg,
+    count: Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", help="Number of points [default: 10000].")] = None,
+    density: Annotated[Optional[float], typer.Option("--density", metavar="D", help="Points per unit of surface area, instead of -n.")] = None,
+    output: Annotated[Optional[str], typer.Option("-o", "--output", metavar="PATH", help="Output file; '-' or absent: standard output.")] = None,
+    fmt: Annotated[Optional[str], typer.Option("-f", "--format", metavar="FORMAT", help=f"{'|'.join(FORMATS)} [default: from the suffix of -o; CSV on standard output].")] = None,
+    ascii: Annotated[bool, typer.Option("--ascii", help="ASCII PLY instead of binary little-endian.")] = False,
+    seed: Seed = 0,
+    attributes: Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help=f"Comma list of extra columns: {', '.join(ATTRIBUTES)}.")] = None,
+    weight: Annotated[Optional[str], typer.Option("--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a.")] = None,
+    objects: Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable).")] = None,
+    poisson: Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached.")] = False,
+    radius: Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance.")] = None,
+    method: Annotated[str, typer.Option("--method", metavar="METHOD", help="random (i.i.d., square-root warp) | stratified | sobol.")] = "random",
+    precision: Annotated[str, typer.Option("--precision", metavar="PRECISION", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal.")] = "auto",
+    stats: Annotated[Optional[str], typer.Option("--stats", metavar="PATH", help="Write a JSON summary to this file ('-': standard error).")] = None,
+    quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress and no warnings.")] = False,
+    chunk_size: Annotated[Optional[int], typer.Option("--chunk-size", metavar="K", help="Points generated per chunk (memory/speed knob; never changes the output).")] = None,
+    input_format: InputFormat = None,
 ):
     """Sample points on the surface of MESH.
 
@@ -69,6 +76,7 @@ def sample(
 
       cat mesh.ply | scatter sample - --input-format ply -n 1000 -f xyz
     """
+    process.lean_trimesh()
     from . import api
     from .progress import with_progress
     from .writers import infer_format, write_samples
@@ -106,24 +114,25 @@ def _write_stats(info, path):
 
 @app.command()
 def info(
-    mesh: str = typer.Argument(..., metavar="MESH", help="Mesh file; '-' reads standard input."),
-    as_json: bool = typer.Option(False, "--json", help="Machine-readable JSON."),
-    input_format: Optional[str] = typer.Option(None, "--input-format", metavar="FORMAT", help="Mesh format when reading standard input or a pipe."),
+    mesh: Annotated[str, typer.Argument(metavar="MESH", help="Mesh file; '-' reads standard input.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Machine-readable JSON.")] = False,
+    input_format: InputFormat = None,
 ):
     """Faces, vertices, area, bounding box, degenerate faces, attributes and objects of MESH."""
+    process.lean_trimesh()
     from .info import describe, format_text
 
     report = describe(mesh, input_format=input_format)
-    print(json.dumps(report, indent=2) if as_json else format_text(report))
+    process.echo(json.dumps(report, indent=2) if as_json else format_text(report))
 
 
 @app.command()
 def check(
-    mesh: str = typer.Argument(..., metavar="MESH", help="Mesh file."),
-    count: int = typer.Option(100000, "-n", "--count", metavar="N", help="Points per sampler."),
-    seed: int = typer.Option(0, "--seed", metavar="S", help="Random seed."),
-    poisson: bool = typer.Option(False, "--poisson", help="Compare Poisson-disk sets of exactly N points."),
-    radius: Optional[float] = typer.Option(None, "--radius", metavar="R", help="Compare Poisson-disk sets of minimum distance R."),
+    mesh: Annotated[str, typer.Argument(metavar="MESH", help="Mesh file.")],
+    count: Annotated[int, typer.Option("-n", "--count", metavar="N", help="Points per sampler.")] = 100000,
+    seed: Annotated[int, typer.Option("--seed", metavar="S", help="Random seed.")] = 0,
+    poisson: Annotated[bool, typer.Option("--poisson", help="Compare Poisson-disk sets of exactly N points.")] = False,
+    radius: Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Compare Poisson-disk sets of minimum distance R.")] = None,
 ):
     """Compare this tool's samples of MESH with pymeshlab's against the exact distribution.
 
@@ -132,18 +141,18 @@ def check(
     """
     from .check import run_check
 
-    raise typer.Exit(run_check(mesh, count=count, seed=seed, poisson=poisson, radius=radius))
+    raise typer.Exit(run_check(mesh, count=count, seed=seed, poisson=poisson, radius=radius, out=process.echo))
 
 
 @app.command()
 def bench(
-    meshes: Optional[List[str]] = typer.Argument(None, help="Mesh files [default: an icosphere, samples/skull.ply, the icosphere moved by 1e6]."),
-    out: str = typer.Option("bench-out", "--out", help="Directory for bench.md, bench.json and bench.png."),
-    quick: bool = typer.Option(False, "--quick", help="Counts 1e2..1e4, 3 seeds: a smoke run for CI (under a minute)."),
-    counts: Optional[str] = typer.Option(None, "--counts", help="Comma list of point counts [default: 1e2..1e7 in half decades]."),
-    repeats: Optional[int] = typer.Option(None, "--repeats", help="Seeds per count (errors: RMS; time: median) [default: 5, quick 3]."),
-    seed: int = typer.Option(0, "--seed", help="First seed; the same seed gives the same errors."),
-    no_plot: bool = typer.Option(False, "--no-plot", help="Skip the PNG (no matplotlib needed)."),
+    meshes: Annotated[Optional[List[str]], typer.Argument(metavar="[MESH]...", help="Mesh files [default: an icosphere, samples/skull.ply, the icosphere moved by 1e6].")] = None,
+    out: Annotated[str, typer.Option("--out", metavar="DIR", help="Directory for bench.md, bench.json and bench.png.")] = "bench-out",
+    quick: Annotated[bool, typer.Option("--quick", help="Counts 1e2..1e4, 3 seeds: a smoke run for CI (under a minute).")] = False,
+    counts: Annotated[Optional[str], typer.Option("--counts", metavar="LIST", help="Comma list of point counts [default: 1e2..1e7 in half decades].")] = None,
+    repeats: Annotated[Optional[int], typer.Option("--repeats", metavar="K", help="Seeds per count (errors: RMS; time: median) [default: 5, quick 3].")] = None,
+    seed: Annotated[int, typer.Option("--seed", metavar="S", help="First seed; the same seed gives the same errors.")] = 0,
+    no_plot: Annotated[bool, typer.Option("--no-plot", help="Skip the PNG (no matplotlib needed).")] = False,
 ):
     """What accuracy costs in time: error of exact surface integrals against count and time.
 
@@ -168,114 +177,32 @@ def bench(
         raise ScatterUsageError(f"--repeats must be a positive integer, not {repeats}")
     report = run_bench(meshes or None, out=out, quick=quick, counts=parsed, repeats=repeats, seed=seed,
                        want_plot=not no_plot)
-    print(report["markdown"])
+    process.echo(report["markdown"])
+
+
+def _print_version(value: bool):
+    if value:
+        from . import version
+
+        process.echo(f"scatter {version()}")
+        raise typer.Exit()
 
 
 @app.callback()
-def _root(debug: bool = typer.Option(False, "--debug", help="Show tracebacks on errors.")):
-    pass
+def _root(
+    ctx: typer.Context,
+    debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks on errors.")] = False,
+    version: Annotated[bool, typer.Option("--version", is_eager=True, callback=_print_version, help="Print the version and exit.")] = False,
+):
+    ctx.ensure_object(process.Options).debug = debug
 
 
-class _Terminated(BaseException):
-    pass
-
-
-class _Interrupted(BaseException):
-    """SIGINT, raised instead of KeyboardInterrupt: typer turns that into a silent Exit(130)."""
-
-
-def _on_sigterm(signum, frame):
-    raise _Terminated()
-
-
-def _on_sigint(signum, frame):
-    raise _Interrupted()
-
-
-def _click_error_types():
-    mro = typer.BadParameter.__mro__
-    usage = next(c for c in mro if c.__name__ == "UsageError")
-    base = next(c for c in mro if c.__name__ == "ClickException")
-    return usage, base
-
-
-def _import_trimesh_lean():
-    """Import trimesh with SciPy hidden: trimesh imports SciPy eagerly when it is installed
-    (0.4 s or more on every call) only for features that loading and sampling never use.
-    Only the command line does this; the Python API leaves the user's trimesh alone.
-    """
-    if "trimesh" in sys.modules or "scipy" in sys.modules:
-        return
-    sys.modules["scipy"] = None  # makes `import scipy` raise ImportError
-    try:
-        import trimesh  # noqa: F401
-    except Exception:
-        pass  # a broken trimesh is reported where the mesh is loaded
-    finally:
-        del sys.modules["scipy"]
-
-
-def main(argv=None):
+def main(argv=None) -> int:
+    """Run ``scatter`` on ``argv`` (default: the process's arguments); returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    debug = "--debug" in argv
-    if argv and argv[0] in ("sample", "info"):
-        from . import surface
-
-        surface.import_trimesh = _import_trimesh_lean  # when a mesh needs it, not before
-    signal.signal(signal.SIGTERM, _on_sigterm)
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when started ignoring it (`cmd &`)
-        signal.signal(signal.SIGINT, _on_sigint)
-    usage_error, click_error = _click_error_types()
-    command = typer.main.get_command(app)
-    try:
-        code = command.main(args=argv, prog_name="scatter", standalone_mode=False)
-        code = code if isinstance(code, int) else 0
-    except usage_error as exc:
-        hint = f" (see '{exc.ctx.command_path} --help')" if getattr(exc, "ctx", None) else ""
-        code = _fail(exc.format_message() + hint, 2)
-    except ScatterError as exc:
-        code = _fail(str(exc), exc.exit_code)
-    except click_error as exc:
-        code = _fail(exc.format_message(), exc.exit_code)
-    except (BrokenPipeError, OutputClosed):
-        # The reader went away (`| head`): stop quietly, as Unix tools do.
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        code = 141
-    except (KeyboardInterrupt, _Interrupted):
-        code = _fail("interrupted", 130)
-    except _Terminated:
-        code = _fail("terminated", 143)
-    except MemoryError:
-        code = _fail("out of memory (try a smaller count or --chunk-size)", 1)
-    except Exception as exc:
-        if debug:
-            raise
-        code = _fail(f"internal error: {type(exc).__name__}: {exc} (run with --debug for a traceback)", 1)
-    sys.exit(code)
+    return process.run_command(typer.main.get_command(app), argv)
 
 
 def run():
-    """The ``scatter`` command: :func:`main`, then exit without tearing the interpreter down.
-
-    Freeing every module and array at exit takes about 25 ms after a large job, for
-    nothing: the output is complete and closed by then, so only the standard streams
-    need flushing.
-    """
-    try:
-        main()
-        code = 0
-    except SystemExit as exc:
-        code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-    try:
-        sys.stdout.flush()
-    except (BrokenPipeError, ValueError):
-        code = code or 141
-    with contextlib.suppress(OSError, ValueError):
-        sys.stderr.flush()
-    os._exit(code)
-
-
-def _fail(message, code):
-    print(f"error: {message}", file=sys.stderr)
-    return code
+    """The ``scatter`` console script: :func:`main`, then exit at once."""
+    process.exit_now(main())

@@ -1,4 +1,6 @@
-"""The two kinds of failure the command line reports."""
+"""The two kinds of failure the command line reports, and OS errors on an output turned into them."""
+
+import contextlib
 
 
 class ScatterError(Exception):
@@ -19,3 +21,20 @@ class ScatterUsageError(ScatterError):
     """A bad option or value: printed as one ``error: ...`` line, exit 2."""
 
     exit_code = 2
+
+
+STDOUT = "standard output"
+
+
+@contextlib.contextmanager
+def writing(name):
+    """Turn OS errors while writing ``name`` into one-line ScatterErrors naming it.
+
+    A broken pipe (the reader left: a pipe, a FIFO, /dev/stdout) becomes OutputClosed.
+    """
+    try:
+        yield
+    except OSError as exc:
+        if isinstance(exc, BrokenPipeError):
+            raise OutputClosed() from None
+        raise ScatterError(f"{name}: cannot write: {exc.strerror or exc}") from None

@@ -21,7 +21,12 @@ def kernel(name):
 
 def worker_count() -> int:
     """Threads for sampling and thinning: SCATTER_THREADS, else the cores, at most 4."""
-    env = os.environ.get("SCATTER_THREADS")
-    if env:
+    env = os.environ.get("SCATTER_THREADS", "").strip()
+    if not env:
+        return max(1, min(4, os.cpu_count() or 1))
+    try:
         return max(1, int(env))
-    return max(1, min(4, os.cpu_count() or 1))
+    except ValueError:
+        from .errors import ScatterUsageError
+
+        raise ScatterUsageError(f"SCATTER_THREADS must be a whole number of threads, not {env!r}") from None

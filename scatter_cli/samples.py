@@ -4,19 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-# Attribute name (as given to -a) -> (key in Samples, output columns, dtype kind).
-# "real" columns take the coordinate precision; the others have a fixed type.
-ATTRIBUTES = {
-    "normal": ("normal", ("nx", "ny", "nz"), "real"),
-    "smooth-normal": ("normal", ("nx", "ny", "nz"), "real"),
-    "face": ("face", ("face_index",), "<i4"),
-    "bary": ("bary", ("bary0", "bary1", "bary2"), "real"),
-    "color": ("color", ("red", "green", "blue", "alpha"), "u1"),
-    "uv": ("uv", ("u", "v"), "real"),
-    "object": ("object", ("object_index",), "<i4"),
-}
-# Columns always come in this order, whatever the order of -a.
-KEY_ORDER = ("normal", "face", "bary", "color", "uv", "object")
+from .outputs import ATTRIBUTES, KEY_ORDER
 
 
 def column_layout(keys, real_dtype):

@@ -14,9 +14,8 @@ import tempfile
 
 import numpy as np
 
-from .errors import OutputClosed, ScatterError, ScatterUsageError
-
-FORMATS = ("ply", "csv", "xyz", "npy")
+from .errors import STDOUT, ScatterError, ScatterUsageError, writing
+from .outputs import FORMATS, SUFFIXES
 PLY_TYPES = {"f4": "float", "f8": "double", "i4": "int", "u1": "uchar"}
 
 
@@ -30,11 +29,9 @@ def infer_format(path, fmt=None) -> str:
     if path is None or str(path) == "-":
         return "csv"
     suffix = os.path.splitext(str(path))[1].lstrip(".").lower()
-    if suffix == "txt":
-        return "xyz"
-    if suffix not in FORMATS:
-        raise ScatterUsageError(f"cannot tell the format of '{path}' from its suffix: pass -f ply|csv|xyz|npy")
-    return suffix
+    if suffix not in SUFFIXES:
+        raise ScatterUsageError(f"cannot tell the format of '{path}' from its suffix: pass -f {'|'.join(FORMATS)}")
+    return SUFFIXES[suffix]
 
 
 def _structured_dtype(layout):
@@ -161,29 +158,27 @@ def open_output(path):
     Devices and pipes (``/dev/null``, a FIFO) are written in place.
     """
     if path is None or str(path) == "-":
-        try:
+        with writing(STDOUT):
             yield sys.stdout.buffer
             sys.stdout.buffer.flush()
-        except BrokenPipeError:
-            raise OutputClosed() from None
         return
     path = os.fspath(path)
     if os.path.exists(path) and not os.path.isfile(path):
         if os.path.isdir(path):
             raise ScatterError(f"{path}: is a directory")
-        with _reporting(path), open(path, "wb") as stream:
+        with writing(path), open(path, "wb") as stream:
             yield stream
         return
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise ScatterError(f"{path}: cannot write: folder '{os.path.dirname(path) or '.'}' does not exist")
-    with _reporting(path):
+    with writing(path):
         fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".part", dir=folder)
     try:
-        with _reporting(path), os.fdopen(fd, "wb", buffering=1 << 20) as stream:
+        with writing(path), os.fdopen(fd, "wb", buffering=1 << 20) as stream:
             yield stream
         _set_mode(tmp, path)
-        with _reporting(path):
+        with writing(path):
             os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -200,14 +195,3 @@ def _set_mode(tmp, path):
         os.umask(umask)
         mode = 0o666 & ~umask
     os.chmod(tmp, mode)
-
-
-@contextlib.contextmanager
-def _reporting(path):
-    """Turn OS errors on the output into one-line ScatterErrors naming the file."""
-    try:
-        yield
-    except OSError as exc:
-        if isinstance(exc, BrokenPipeError):  # a FIFO or /dev/stdout whose reader left
-            raise OutputClosed() from None
-        raise ScatterError(f"{path}: cannot write: {exc.strerror or exc}") from None

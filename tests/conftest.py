@@ -39,13 +39,42 @@ def spread_triangles(exponents, rng=None):
     return tri, 10.0**exponents
 
 
-def run_scatter(*args, input=None, check=False, env=None, timeout=120):
-    """Run the real command in a subprocess: returns CompletedProcess (bytes)."""
-    full_env = dict(os.environ, **(env or {}))
-    proc = subprocess.run(
-        [sys.executable, "-m", "scatter_cli", *map(str, args)],
-        input=input, capture_output=True, env=full_env, timeout=timeout,
-    )
+def user_env(env=None):
+    """The environment of a user's shell: this one without PYTHONUNBUFFERED (so standard
+    output is block-buffered, as in a terminal session) and without CI, plus ``env``.
+    PYTHONPATH is kept: it is how the child finds this tree."""
+    full = {k: v for k, v in os.environ.items() if k not in ("PYTHONUNBUFFERED", "CI")}
+    full.update(env or {})
+    return full
+
+
+def scatter_command(*args):
+    """The argv that runs the real command: ``python -m scatter_cli ARGS``."""
+    return [sys.executable, "-m", "scatter_cli", *map(str, args)]
+
+
+def run_user(cmd, *, input=None, env=None, timeout=120, **kwargs):
+    """subprocess.run as a user's shell would run ``cmd``: a user's environment, standard
+    input closed unless ``input`` is given, output captured unless redirected."""
+    if input is None:
+        kwargs.setdefault("stdin", subprocess.DEVNULL)
+    if "stdout" not in kwargs and "stderr" not in kwargs:
+        kwargs["capture_output"] = True
+    return subprocess.run(cmd, input=input, env=user_env(env), timeout=timeout, **kwargs)
+
+
+def popen_user(cmd, *, env=None, **kwargs):
+    """subprocess.Popen with a user's environment and standard input closed."""
+    kwargs.setdefault("stdin", subprocess.DEVNULL)
+    return subprocess.Popen(cmd, env=user_env(env), **kwargs)
+
+
+def run_scatter(*args, input=None, check=False, env=None, timeout=120, stdout=None):
+    """Run the real command in a subprocess: returns CompletedProcess (bytes).
+
+    ``stdout``: a file to write standard output to instead of capturing it."""
+    redirect = {} if stdout is None else {"stdout": stdout, "stderr": subprocess.PIPE}
+    proc = run_user(scatter_command(*args), input=input, env=env, timeout=timeout, **redirect)
     if check and proc.returncode != 0:
         raise AssertionError(f"scatter {' '.join(map(str, args))} failed: {proc.stderr.decode()}")
     return proc

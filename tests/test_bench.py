@@ -9,7 +9,7 @@ from scipy import stats as sps
 from scatter_cli import bench, stats
 from scatter_cli.surface import load_surface
 
-from .conftest import run_scatter
+from .conftest import run_scatter, run_user
 
 ALPHA = 1e-3
 
@@ -145,12 +145,11 @@ def test_quick_bench_command_writes_all_three_outputs(tmp_path):
 
 
 def test_bench_without_matplotlib_says_how_to_install(tmp_path):
-    import subprocess
     import sys
 
     code = ("import sys; sys.modules['matplotlib'] = None; from scatter_cli.cli import main; "
-            f"main(['bench', '--quick', '--out', {str(tmp_path)!r}])")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=120)
+            f"sys.exit(main(['bench', '--quick', '--out', {str(tmp_path)!r}]))")
+    proc = run_user([sys.executable, "-c", code])
     assert proc.returncode == 1
     assert "pip install" in proc.stderr.decode() and "matplotlib" in proc.stderr.decode()
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from .conftest import run_scatter, spread_triangles, triangles_mesh
+from .conftest import popen_user, run_scatter, run_user, scatter_command, spread_triangles, triangles_mesh
 
 
 def assert_one_line_error(proc, code, *words):
@@ -210,10 +210,9 @@ def test_python_dash_m_and_no_args():
 
 def test_closed_pipe_is_quiet(sample_mesh):
     import subprocess
-    import sys
 
-    p = subprocess.Popen([sys.executable, "-m", "scatter_cli", "sample", str(sample_mesh("koala.obj")), "-n", "2000000"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p = popen_user(scatter_command("sample", sample_mesh("koala.obj"), "-n", "2000000"),
+                   stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     p.stdout.readline()
     p.stdout.close()
     err = p.stderr.read()
@@ -225,13 +224,12 @@ def test_progress_on_a_terminal_only(sample_mesh):
     import os
     import pty
     import subprocess
-    import sys
 
     # CSV: formatting text keeps this run well over the half second before the bar shows,
     # however fast the sampling kernel gets
-    args = [sys.executable, "-m", "scatter_cli", "sample", str(sample_mesh("koala.obj")), "-n", "2000000", "-f", "csv", "-o", os.devnull]
+    args = scatter_command("sample", sample_mesh("koala.obj"), "-n", "2000000", "-f", "csv", "-o", os.devnull)
     master, slave = pty.openpty()
-    proc = subprocess.run(args, stderr=slave, stdout=subprocess.DEVNULL, timeout=300)
+    proc = run_user(args, stderr=slave, stdout=subprocess.DEVNULL, timeout=300)
     os.close(slave)
     seen = b""
     while True:
@@ -245,5 +243,86 @@ def test_progress_on_a_terminal_only(sample_mesh):
     os.close(master)
     assert proc.returncode == 0
     assert b"sampling:" in seen and b"100.0%" in seen
-    piped = subprocess.run(args, capture_output=True, timeout=300)
+    piped = run_user(args, timeout=300)
     assert piped.returncode == 0 and piped.stderr == b""
+
+
+FULL = "/dev/full"
+
+
+@pytest.mark.skipif(not __import__("os").path.exists(FULL), reason="no /dev/full on this system")
+@pytest.mark.parametrize("args", [
+    ["sample", "{mesh}", "-n", "10"],
+    ["sample", "{mesh}", "-n", "10", "-f", "ply"],
+    ["sample", "{mesh}", "-n", "10", "-f", "npy"],
+    ["info", "{mesh}"],
+    ["info", "{mesh}", "--json"],
+    ["--version"],
+    ["sample", "--help"],
+])
+def test_standard_output_on_a_full_device(sample_mesh, args):
+    """`scatter ... > /dev/full` with a user's buffered standard output: one line, exit 1."""
+    args = [sample_mesh("icosahedron_binary.stl") if a == "{mesh}" else a for a in args]
+    with open(FULL, "wb") as full:
+        proc = run_scatter(*args, stdout=full)
+    assert_one_line_error(proc, 1, "standard output", "cannot write", "No space left")
+
+
+def test_children_run_in_a_users_environment(monkeypatch):
+    import sys
+
+    monkeypatch.setenv("PYTHONUNBUFFERED", "1")
+    monkeypatch.setenv("CI", "true")
+    code = "import os, sys; print(sorted(k for k in ('PYTHONUNBUFFERED', 'CI') if k in os.environ), repr(sys.stdin.read()))"
+    assert run_user([sys.executable, "-c", code], timeout=30).stdout.decode().split() == ["[]", "''"]
+
+
+def test_tests_start_children_through_conftest():
+    """Every subprocess in tests/ goes through conftest's helpers (a user's environment)."""
+    import re
+    from pathlib import Path
+
+    here = Path(__file__).parent
+    direct = [f"{p.name}:{n}" for p in sorted(here.glob("*.py")) if p.name != "conftest.py"
+              for n, line in enumerate(p.read_text().splitlines(), 1)
+              if re.search(r"subprocess\.(run|Popen|call|check_call|check_output)\(|os\.(system|popen)\(", line)]
+    assert not direct, direct
+
+
+def test_version():
+    from scatter_cli import version
+
+    proc = run_scatter("--version", check=True)
+    assert proc.stdout.decode() == f"scatter {version()}\n"
+    assert version()[0].isdigit()
+
+
+def test_help_lists_every_format_and_attribute():
+    from scatter_cli.outputs import ATTRIBUTES, FORMATS
+
+    text = " ".join(run_scatter("sample", "--help", check=True).stdout.decode().split())
+    assert "|".join(FORMATS) in text
+    assert ", ".join(ATTRIBUTES) in text
+
+
+def test_debug_shows_the_traceback_of_an_internal_error(sample_mesh):
+    import sys
+
+    def run(*args):
+        # sys.argv holds --debug in both runs: the option is read through typer, not sys.argv
+        code = ("import sys\nfrom scatter_cli import api, cli\n"
+                "def broken(*a, **k): raise RuntimeError('broken on purpose')\n"
+                f"api.prepare = broken\nsys.argv = ['scatter', '--debug']\nsys.exit(cli.main({list(args)!r}))")
+        return run_user([sys.executable, "-c", code])
+
+    mesh = str(sample_mesh("icosahedron_binary.stl"))
+    assert_one_line_error(run("sample", mesh), 1, "internal error", "RuntimeError", "--debug")
+    debug = run("--debug", "sample", mesh)
+    err = debug.stderr.decode()
+    assert debug.returncode == 1 and "Traceback" in err and "broken on purpose" in err, err
+
+
+@pytest.mark.parametrize("threads", ["abc", "1.5"])
+def test_bad_thread_count_is_a_usage_error(sample_mesh, threads):
+    proc = run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-n", 10, env={"SCATTER_THREADS": threads})
+    assert_one_line_error(proc, 2, "SCATTER_THREADS", threads)

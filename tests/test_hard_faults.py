@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from .conftest import SAMPLES, run_scatter
+from .conftest import SAMPLES, popen_user, run_scatter, run_user, scatter_command
 from .fuzz_inputs import SEEDS
 
 PRECIOUS = b"precious bytes from an earlier run"
@@ -170,11 +170,11 @@ def _drop_file_capabilities():
 
 
 def run_unprivileged(*args):
-    cmd = [sys.executable, "-m", "scatter_cli", *map(str, args)]
+    cmd = scatter_command(*args)
     if os.geteuid() != 0:
-        return subprocess.run(cmd, capture_output=True, timeout=120)
+        return run_user(cmd)
     try:
-        return subprocess.run(cmd, capture_output=True, timeout=120, preexec_fn=_drop_file_capabilities)
+        return run_user(cmd, preexec_fn=_drop_file_capabilities)
     except subprocess.SubprocessError as exc:  # prctl refused (no CAP_SETPCAP in this container)
         pytest.skip(f"cannot drop root's file capabilities here: {exc}")
 
@@ -233,8 +233,7 @@ def test_disk_full_regular_file(out):
         resource.setrlimit(resource.RLIMIT_FSIZE, (1 << 20, 1 << 20))
 
     for target in (existing, new):
-        proc = subprocess.run([sys.executable, "-m", "scatter_cli", "sample", str(GOOD), "-n", "200000", "-f", "csv", "-o", str(target)],
-                              capture_output=True, timeout=120, preexec_fn=limit)
+        proc = run_user(scatter_command("sample", GOOD, "-n", "200000", "-f", "csv", "-o", target), preexec_fn=limit)
         assert_one_line_error(proc, 1, target.name, "cannot write")
     assert_clean(folder, existing, new)
 
@@ -245,7 +244,7 @@ def test_disk_full_regular_file(out):
 def test_closed_standard_output_is_quiet_141():
     """`scatter sample ... | head -n 5`: no traceback, no message, exit 141 like a tool killed by SIGPIPE."""
     cmd = f"'{sys.executable}' -m scatter_cli sample '{SAMPLES / 'koala.obj'}' -n 3000000 | head -n 5"
-    proc = subprocess.run(["bash", "-c", cmd + "; echo \"status=${PIPESTATUS[0]}\""], capture_output=True, timeout=120)
+    proc = run_user(["bash", "-c", cmd + "; echo \"status=${PIPESTATUS[0]}\""])
     lines = proc.stdout.decode().splitlines()
     assert lines[0] == "x,y,z" and len(lines) == 6 and lines[-1] == "status=141", lines
     assert proc.stderr == b"", proc.stderr
@@ -253,8 +252,8 @@ def test_closed_standard_output_is_quiet_141():
 
 def test_closed_pipe_behind_a_named_path(tmp_path):
     """-o /dev/stdout onto a pipe whose reader leaves: the same quiet 141."""
-    p = subprocess.Popen([sys.executable, "-m", "scatter_cli", "sample", str(SAMPLES / "koala.obj"), "-n", "3000000",
-                          "-f", "xyz", "-o", "/dev/stdout"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p = popen_user(scatter_command("sample", SAMPLES / "koala.obj", "-n", "3000000", "-f", "xyz", "-o", "/dev/stdout"),
+                   stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     p.stdout.readline()
     p.stdout.close()
     err = p.stderr.read()
@@ -266,8 +265,8 @@ def test_closed_pipe_behind_a_named_path(tmp_path):
 def test_signal_in_the_middle_of_a_large_write(out, sig, code, word, target):
     folder, existing, new = out
     path = existing if target == "existing" else new
-    p = subprocess.Popen([sys.executable, "-m", "scatter_cli", "sample", str(SAMPLES / "koala.obj"), "-n", "50000000",
-                          "-f", "csv", "-o", str(path)], stderr=subprocess.PIPE)
+    p = popen_user(scatter_command("sample", SAMPLES / "koala.obj", "-n", "50000000", "-f", "csv", "-o", path),
+                   stderr=subprocess.PIPE)
     # wait (no time limit asserted) until the temporary file holds data, then interrupt
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and p.poll() is None:

@@ -5,7 +5,6 @@ carries those results over to the NumPy path that runs where no C compiler was f
 """
 
 import os
-import subprocess
 import sys
 from pathlib import Path
 
@@ -17,9 +16,16 @@ import scatter_cli
 from scatter_cli import native, sampling, thinning
 from scatter_cli.surface import Geometry, Instance, Surface, load_surface
 
-from .conftest import SAMPLES, spread_triangles, triangles_mesh
+from .conftest import SAMPLES, run_user, spread_triangles, triangles_mesh
 
 REPO = Path(__file__).resolve().parents[1]
+KERNELS_BUILT = sampling._kernel is not None and thinning._kernel is not None
+# Without a C compiler the install runs the NumPy path alone and these tests have nothing to
+# compare; .ci/run sets SCATTER_REQUIRE_KERNELS=1 so that there a missing kernel fails.
+pytestmark = pytest.mark.skipif(
+    not KERNELS_BUILT and os.environ.get("SCATTER_REQUIRE_KERNELS", "") in ("", "0"),
+    reason="compiled kernels not built (SCATTER_REQUIRE_KERNELS=1 makes this a failure)",
+)
 
 
 @pytest.fixture
@@ -36,8 +42,8 @@ def numpy_only(monkeypatch):
 
 
 def test_the_kernels_are_built():
-    # CI must exercise the compiled path; a silent fallback would leave it untested.
-    assert sampling._kernel is not None and thinning._kernel is not None
+    # CI must exercise the compiled path: a silent fallback would leave it untested.
+    assert KERNELS_BUILT
 
 
 def test_scatter_numpy_switches_them_off(monkeypatch):
@@ -226,9 +232,8 @@ def test_the_avx512_loops_keep_the_same_points(tmp_path):
     runs = []
     for plain in ("", "1"):
         out = tmp_path / f"plain{plain}.npz"
-        env = {k: v for k, v in os.environ.items() if k != "SCATTER_NO_AVX512"}
-        env.update({"SCATTER_NO_AVX512": plain} if plain else {})
-        subprocess.run([sys.executable, "-c", _THIN_IN_A_CHILD, str(out)], cwd=REPO, env=env, check=True)
+        env = {"SCATTER_NO_AVX512": plain}  # empty means unset
+        run_user([sys.executable, "-c", _THIN_IN_A_CHILD, str(out)], cwd=REPO, env=env, check=True)
         runs.append(np.load(out))
     assert set(runs[0].files) == set(runs[1].files)
     for key in runs[0].files:

@@ -1,0 +1,23 @@
+"""What an output can hold: the file formats and the per-point attributes a user asks for.
+
+Names and columns only (no NumPy), so that ``--help`` and usage errors list them at no
+start-up cost. A new format or attribute added here appears in ``--help`` by itself.
+"""
+
+# Output formats (-f), and the file suffixes that select them.
+FORMATS = ("ply", "csv", "xyz", "npy")
+SUFFIXES = {"ply": "ply", "csv": "csv", "xyz": "xyz", "txt": "xyz", "npy": "npy"}
+
+# Attribute name (as given to -a) -> (key in Samples, output columns, dtype kind).
+# "real" columns take the coordinate precision; the others have a fixed type.
+ATTRIBUTES = {
+    "normal": ("normal", ("nx", "ny", "nz"), "real"),
+    "smooth-normal": ("normal", ("nx", "ny", "nz"), "real"),
+    "face": ("face", ("face_index",), "<i4"),
+    "bary": ("bary", ("bary0", "bary1", "bary2"), "real"),
+    "color": ("color", ("red", "green", "blue", "alpha"), "u1"),
+    "uv": ("uv", ("u", "v"), "real"),
+    "object": ("object", ("object_index",), "<i4"),
+}
+# Columns always come in this order, whatever the order of -a.
+KEY_ORDER = ("normal", "face", "bary", "color", "uv", "object")

@@ -1,0 +1,158 @@
+"""The ``scatter`` process: signals, exit codes, standard output, and the way out.
+
+:mod:`scatter_cli.cli` describes the commands; this module runs one of them as a Unix
+tool is expected to run: exit 0, 1 or 2 (2 for usage errors), 130 and 143 on SIGINT and
+SIGTERM, a quiet 141 when the reader of standard output goes away, one ``error: ...``
+line on standard error for every other failure, and no traceback unless ``--debug``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import sys
+
+from .errors import STDOUT, OutputClosed, ScatterError, writing
+
+
+class Options:
+    """Settings of the whole process, filled in by the root command (``--debug``)."""
+
+    debug = False
+
+
+class Terminated(BaseException):
+    """SIGTERM."""
+
+
+class Interrupted(BaseException):
+    """SIGINT, raised instead of KeyboardInterrupt: click turns that into a silent exit."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def _on_sigint(signum, frame):
+    raise Interrupted()
+
+
+def install_signal_handlers():
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when started ignoring it (`cmd &`)
+        signal.signal(signal.SIGINT, _on_sigint)
+
+
+def echo(text):
+    """Write a line of text to standard output now, failing as any output does."""
+    with writing(STDOUT):
+        sys.stdout.write(text + "\n")
+        sys.stdout.flush()
+
+
+def import_trimesh_lean():
+    """Import trimesh with SciPy hidden: trimesh imports SciPy eagerly when it is installed
+    (0.4 s or more on every call) only for features that loading and sampling never use.
+    Only the command line does this; the Python API leaves the user's trimesh alone.
+    """
+    if "trimesh" in sys.modules or "scipy" in sys.modules:
+        return
+    sys.modules["scipy"] = None  # makes `import scipy` raise ImportError
+    try:
+        import trimesh  # noqa: F401
+    except Exception:
+        pass  # a broken trimesh is reported where the mesh is loaded
+    finally:
+        del sys.modules["scipy"]
+
+
+def lean_trimesh():
+    """Have the mesh loader import trimesh without SciPy, when a mesh needs it (not before)."""
+    from . import surface
+
+    surface.import_trimesh = import_trimesh_lean
+
+
+def run_command(command, argv):
+    """Run the click ``command`` on ``argv``; returns the exit code (never raises)."""
+    install_signal_handlers()
+    usage_error, click_error = _click_error_types()
+    options = Options()
+    try:
+        code = command.main(args=argv, prog_name="scatter", standalone_mode=False, obj=options)
+        code = code if isinstance(code, int) else 0
+        with writing(STDOUT):
+            sys.stdout.flush()
+    except usage_error as exc:
+        hint = f" (see '{exc.ctx.command_path} --help')" if getattr(exc, "ctx", None) else ""
+        code = fail(exc.format_message() + hint, 2)
+    except ScatterError as exc:
+        code = fail(str(exc), exc.exit_code)
+    except click_error as exc:
+        code = fail(exc.format_message(), exc.exit_code)
+    except (BrokenPipeError, OutputClosed):
+        code = _reader_gone()
+    except (KeyboardInterrupt, Interrupted):
+        code = fail("interrupted", 130)
+    except Terminated:
+        code = fail("terminated", 143)
+    except MemoryError:
+        code = fail("out of memory (try a smaller count or --chunk-size)", 1)
+    except Exception as exc:
+        if options.debug:
+            raise
+        code = fail(_stdout_failure() or f"internal error: {type(exc).__name__}: {exc} (run with --debug for a traceback)", 1)
+    return code
+
+
+def _stdout_failure():
+    """The message for a standard output that cannot take its data (click's own writes, such
+    as --help, flush as they go), or None when standard output is fine."""
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        return None
+    except OSError as exc:
+        return f"{STDOUT}: cannot write: {exc.strerror or exc}"
+    except ValueError:
+        pass
+    return None
+
+
+def _reader_gone():
+    """The reader of standard output went away (`| head`): stop quietly, as Unix tools do."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    return 141
+
+
+def _click_error_types():
+    import typer
+
+    mro = typer.BadParameter.__mro__
+    usage = next(c for c in mro if c.__name__ == "UsageError")
+    base = next(c for c in mro if c.__name__ == "ClickException")
+    return usage, base
+
+
+def exit_now(code):
+    """Flush the standard streams and leave without tearing the interpreter down.
+
+    Freeing every module and array at exit takes tens of milliseconds after a large job,
+    for nothing: the output is complete and closed by then.
+    """
+    try:
+        sys.stdout.flush()
+    except (BrokenPipeError, ValueError):  # the reader left; standard output closed
+        code = code or 141
+    except OSError as exc:
+        code = code or fail(f"{STDOUT}: cannot write: {exc.strerror or exc}", 1)
+    with contextlib.suppress(OSError, ValueError):
+        sys.stderr.flush()
+    os._exit(code)
+
+
+def fail(message, code):
+    print(f"error: {message}", file=sys.stderr)
+    return code
