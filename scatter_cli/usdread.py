@@ -25,6 +25,7 @@ below the prototype's parent (``/World/trees[17]/oak/trunk``).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import tempfile
@@ -48,24 +49,56 @@ def load_usd(path: str, input_format=None, *, objects=None, plain=False) -> Surf
     """
     name = "<stdin>" if path == "-" else path
     _import_pxr(name)
-    if _is_stream(path):  # USD reads files by name: a pipe's bytes go to a file first
-        data = sys.stdin.buffer.read() if path == "-" else open(path, "rb").read()
-        if not data:
-            raise ScatterError(f"{name}: no data to read")
-        suffix = (input_format or os.path.splitext(path)[1].lstrip(".") or "usd").lower()
-        with tempfile.TemporaryDirectory() as tmp:
-            copy = os.path.join(tmp, "stage." + suffix)
-            with open(copy, "wb") as f:
-                f.write(data)
-            surface, aliases = _StageReader(_open(copy, name), name, plain).surface()
-    else:
-        _check_readable(path)
-        surface, aliases = _StageReader(_open(path, name), name, plain).surface()
+    with _diagnostics() as printed:
+        if _is_stream(path):  # USD reads files by name: a pipe's bytes go to a file first
+            data = sys.stdin.buffer.read() if path == "-" else open(path, "rb").read()
+            if not data:
+                raise ScatterError(f"{name}: no data to read")
+            suffix = (input_format or os.path.splitext(path)[1].lstrip(".") or "usd").lower()
+            with tempfile.TemporaryDirectory() as tmp:
+                copy = os.path.join(tmp, "stage." + suffix)
+                with open(copy, "wb") as f:
+                    f.write(data)
+                surface, aliases = _StageReader(_open(copy, name), name, plain).surface()
+        else:
+            _check_readable(path)
+            surface, aliases = _StageReader(_open(path, name), name, plain).surface()
+    # USD's own warnings (a reference that does not resolve, ...) as the run's warnings
+    surface._cache["warnings"] = [f"{name}: {m}" for m in map(_diagnostic, printed) if m]
     if objects:
         surface = select_paths(surface, objects, aliases)
     if surface.face_count == 0:
         raise ScatterError(f"{path}: the stage has no mesh faces")
     return surface
+
+
+@contextlib.contextmanager
+def _diagnostics():
+    """Collect what USD's C++ code prints on file descriptor 2 while the stage is read
+    (its warnings have no Python hook): yields a list, filled with the lines on exit."""
+    lines = []
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            lines += tmp.read().decode("utf-8", "replace").splitlines()
+
+
+def _diagnostic(line):
+    """``Warning: in F at line N of FILE -- MESSAGE (context)`` -> MESSAGE, at most 200
+    characters; other lines as they are."""
+    text = line.strip()
+    if " -- " in text:
+        text = text.split(" -- ", 1)[1]
+    if text.endswith(")") and " (" in text:
+        text = text[: text.rindex(" (")]
+    return text[:200]
 
 
 def _import_pxr(path):
@@ -224,9 +257,10 @@ class _StageReader:
     def _read_mesh(self, prim, path):
         mesh = self.UsdGeom.Mesh(prim)
         t = self.time
-        points = _array(mesh.GetPointsAttr().Get(t), np.float64, 3)
-        counts = _array(mesh.GetFaceVertexCountsAttr().Get(t), np.int64)
-        corners = _array(mesh.GetFaceVertexIndicesAttr().Get(t), np.int64)
+        # unauthored arrays are empty (a mesh without faces), arrays of the wrong shape an error
+        points = _array(mesh.GetPointsAttr().Get(t) or [], np.float64, 3)
+        counts = _array(mesh.GetFaceVertexCountsAttr().Get(t) or [], np.int64)
+        corners = _array(mesh.GetFaceVertexIndicesAttr().Get(t) or [], np.int64)
         holes = _array(mesh.GetHoleIndicesAttr().Get(t), np.int64)
         if points is None or counts is None or corners is None:
             raise ScatterError(f"{self.source}: mesh {path}: malformed points or faces")

@@ -368,3 +368,27 @@ def test_stage_from_standard_input(files, monkeypatch):
     assert [i.name for i in piped.instances] == [i.name for i in direct.instances]
     for g, h in zip(piped.geometries, direct.geometries):
         np.testing.assert_array_equal(g.vertices[g.faces], h.vertices[h.faces])
+
+
+def test_usd_warnings_become_the_runs_warnings(tmp_path, capfd):
+    path = tmp_path / "ref.usda"
+    path.write_text('#usda 1.0\ndef Xform "W" (\n    prepend references = @./missing.usda@\n)\n{\n}\n'
+                    'def Mesh "m"\n{\n    point3f[] points = [(0,0,0),(1,0,0),(0,1,0)]\n'
+                    '    int[] faceVertexCounts = [3]\n    int[] faceVertexIndices = [0,1,2]\n}\n')
+    messages = []
+    run = scatter_cli.prepare(path, 10, warn=messages.append)
+    assert run.count == 10
+    assert len(messages) == 1 and messages[0].startswith(f"{path}: ") and "missing.usda" in messages[0]
+    assert "stage.cpp" not in messages[0]  # USD's source location left out
+    assert capfd.readouterr().err == ""  # nothing printed by USD itself
+    scatter_cli.prepare(path, 10, warn=None)  # quiet: none at all
+    assert capfd.readouterr().err == ""
+
+
+def test_a_mesh_prim_without_arrays_has_no_faces(tmp_path):
+    stage = Usd.Stage.CreateNew(str(tmp_path / "e.usda"))
+    UsdGeom.Mesh.Define(stage, "/empty")
+    define_mesh(stage, "/tri", np.eye(3), [[0, 1, 2]])
+    stage.GetRootLayer().Save()
+    s = load_surface(tmp_path / "e.usda")
+    assert [(i.name, len(s.geometries[i.geometry].faces)) for i in s.instances] == [("/empty", 0), ("/tri", 1)]
