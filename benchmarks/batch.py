@@ -99,15 +99,25 @@ def watch_workers(parent_pid, out_dir, samples):
     from scatter_cli.worker import resident_bytes
 
     while os.path.exists(f"/proc/{parent_pid}"):
-        kids = []
-        try:
-            with open(f"/proc/{parent_pid}/task/{parent_pid}/children") as f:
-                kids = [int(p) for p in f.read().split()]
-        except OSError:
-            pass
+        kids = children(parent_pid)
         done = sum(1 for _ in os.scandir(out_dir)) if out_dir.exists() else 0
         samples.append((done, [resident_bytes(k) / 2**20 for k in kids]))
         time.sleep(0.05)
+
+
+def children(pid):
+    """Pids whose parent is ``pid`` (from /proc/*/stat: /proc/PID/task/PID/children needs
+    a kernel option)."""
+    found = []
+    for name in os.listdir("/proc"):
+        if name.isdigit():
+            try:
+                with open(f"/proc/{name}/stat") as f:
+                    if int(f.read().rsplit(")", 1)[1].split()[1]) == pid:
+                        found.append(int(name))
+            except (OSError, ValueError, IndexError):
+                pass
+    return found
 
 
 def batch_with_memory(src, out):
