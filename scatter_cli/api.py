@@ -182,6 +182,8 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects,
                                                                   plain=plain)
     t1 = time.perf_counter()
+    for message in surface._cache.pop("warnings", ()) if warn else ():
+        warn(message)
     sampler = None
     if stable:
         run = _stable_run(surface, count, density, seed, names, weight, precision, chunk_size, radius, warn, t0, t1)
