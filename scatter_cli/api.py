@@ -15,7 +15,7 @@ from .sampling import DEFAULT_CHUNK, RawChunk, SamplePlan, chunk_ranges, in_bloc
 from .surface import Surface, apply_matrix, load_surface
 
 METHODS = ("random", "stratified", "sobol")
-PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object"}
+PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object", "orient"}
 PRECISIONS = ("auto", "float32", "float64")
 # --precision auto keeps float32 while its rounding moves no point by more than this
 # fraction of the bounding-box diagonal.
@@ -38,7 +38,7 @@ class Run:
         self.count = count
         self.seed = seed
         self.dtype = np.dtype(dtype)
-        self.maker = AttributeMaker(surface, attributes)
+        self.maker = AttributeMaker(surface, attributes, seed)
         self.chunk_size = chunk_size
         self.info = info
         self.layout = column_layout({ATTRIBUTES[a][0] for a in attributes}, self.dtype)
@@ -182,6 +182,8 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects,
                                                                   plain=plain)
     t1 = time.perf_counter()
+    for message in surface._cache.pop("warnings", ()) if warn else ():
+        warn(message)
     sampler = None
     if stable:
         run = _stable_run(surface, count, density, seed, names, weight, precision, chunk_size, radius, warn, t0, t1)
@@ -368,6 +370,20 @@ def _check_options(count, density, seed, method, precision, chunk_size, radius):
         raise ScatterUsageError(f"--chunk-size must be a positive integer, not {chunk_size!r}")
     if radius is not None and not (math.isfinite(radius) and radius > 0):
         raise ScatterUsageError(f"--radius must be a positive number, not {radius!r}")
+
+
+def output_options(run: Run, fmt: str) -> dict:
+    """What the writer of ``fmt`` needs from the run besides its points (keywords of
+    :func:`~scatter_cli.writers.write_samples`): LAS the sampled bounding box, USD the
+    input's up axis and units (when the surface carries them) and the point spacing."""
+    if fmt in ("las", "laz"):
+        return {"bounds": sampled_bounds(run.plan)}
+    if fmt == "usd":
+        area = run.info["area"]
+        return {"up_axis": getattr(run.surface, "up_axis", None),
+                "meters_per_unit": getattr(run.surface, "meters_per_unit", None),
+                "spacing": math.sqrt(area / run.count) if run.count and area > 0 else None}
+    return {}
 
 
 def check_shard(shard, poisson=False, radius=None):

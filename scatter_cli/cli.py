@@ -14,7 +14,7 @@ import typer
 
 from . import process
 from .errors import ScatterUsageError
-from .outputs import ATTRIBUTES, FORMATS
+from .outputs import ASCII_FORMATS, ATTRIBUTES, FORMATS
 
 app = typer.Typer(
     add_completion=False,
@@ -36,7 +36,7 @@ def _warner(quiet):
 
 
 MeshArg = Annotated[str, typer.Argument(metavar="MESH", help="Mesh file (PLY, OBJ, STL, OFF, GLB/GLTF, ...); '-' reads standard input.")]
-InputFormat = Annotated[Optional[str], typer.Option("--input-format", metavar="FORMAT", help="Mesh format when reading standard input or a pipe (ply, obj, stl, off, glb).")]
+InputFormat = Annotated[Optional[str], typer.Option("--input-format", metavar="FORMAT", help="Mesh format when reading standard input or a pipe (ply, obj, stl, off, glb, gltf, usd, usda, usdc, usdz).")]
 Seed = Annotated[int, typer.Option("--seed", metavar="S", help="Random seed: same input, options and seed give the same bytes.")]
 Exterior = Annotated[bool, typer.Option("--exterior", help="Only the exterior surface: what can be seen from outside the mesh (needs embreex).")]
 Stable = Annotated[bool, typer.Option("--stable", help="Placement keyed to the faces themselves: points stay put when the mesh is edited elsewhere, renumbered or re-exported.")]
@@ -50,11 +50,11 @@ def sample(
     density: Annotated[Optional[float], typer.Option("--density", metavar="D", help="Points per unit of surface area, instead of -n.")] = None,
     output: Annotated[Optional[str], typer.Option("-o", "--output", metavar="PATH", help="Output file; '-' or absent: standard output.")] = None,
     fmt: Annotated[Optional[str], typer.Option("-f", "--format", metavar="FORMAT", help=f"{'|'.join(FORMATS)} [default: from the suffix of -o; CSV on standard output].")] = None,
-    ascii: Annotated[bool, typer.Option("--ascii", help="ASCII PLY instead of binary little-endian.")] = False,
+    ascii: Annotated[bool, typer.Option("--ascii", help="ASCII PLY or PCD instead of binary.")] = False,
     seed: Seed = 0,
     attributes: Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help=f"Comma list of extra columns: {', '.join(ATTRIBUTES)}.")] = None,
     weight: Annotated[Optional[str], typer.Option("--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a.")] = None,
-    objects: Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable).")] = None,
+    objects: Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable); for a USD stage, a prim path: the meshes at or below it.")] = None,
     poisson: Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached.")] = False,
     radius: Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance.")] = None,
     exterior: Exterior = False,
@@ -87,20 +87,24 @@ def sample(
     process.lean_trimesh()
     from . import api
     from .progress import with_progress
-    from .writers import infer_format, write_samples
+    from .writers import infer_format, run_precision, write_samples
 
     started = time.perf_counter()
     out_format = infer_format(output, fmt)
-    if ascii and out_format != "ply":
-        raise ScatterUsageError("--ascii applies to PLY output only")
+    if ascii and out_format not in ASCII_FORMATS:
+        raise ScatterUsageError(f"--ascii applies to {' and '.join(f.upper() for f in ASCII_FORMATS)} output only")
     run = api.prepare(
         mesh, count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,
-        radius=radius, weight=weight, objects=objects, precision=precision, chunk_size=chunk_size,
-        input_format=input_format, warn=_warner(quiet), exterior=exterior, stable=stable, shard=shard,
+        radius=radius, weight=weight, objects=objects, precision=run_precision(out_format, precision),
+        chunk_size=chunk_size, input_format=input_format, warn=_warner(quiet), exterior=exterior, stable=stable,
+        shard=shard,
     )
     t = time.perf_counter()
     show = not quiet and sys.stderr.isatty()
-    write_samples(with_progress(run.chunks(), run.size, show), output, out_format, run.layout, run.size, ascii)
+    report = write_samples(with_progress(run.chunks(), run.size, show), output, out_format, run.layout, run.size,
+                           ascii, **api.output_options(run, out_format))
+    if report:
+        run.info["output"] = report
     run.info["timings"]["sample_and_write"] = time.perf_counter() - t
     run.info["timings"]["total"] = time.perf_counter() - started
     if stats and run.kept is not None:

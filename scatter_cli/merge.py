@@ -213,4 +213,34 @@ def npy_part(path):
     return Part(path, ("npy", str(descr)), shape[0], (offset, _size(path)), header)
 
 
-READERS = {"ply": ply_part, "csv": csv_part, "xyz": xyz_part, "npy": npy_part}
+# ---- PCD (binary and ASCII) ----
+
+def pcd_part(path):
+    from .pcd import header_from_lines, read_header
+
+    layout, count, offset = read_header(path)
+    size = _size(path)
+    if "DATA binary" in layout:
+        sizes = next((ln.split()[1:] for ln in layout if ln.startswith("SIZE ")), [])
+        row = sum(int(x) for x in sizes)
+        if size - offset != count * row:
+            raise ScatterError(f"{path}: {size - offset} bytes of points, the header says {count} of {row} bytes")
+    elif _count_lines(path, offset) != count:
+        raise ScatterError(f"{path}: the number of rows differs from the header's count {count}")
+    return Part(path, ("pcd", tuple(layout)), count, (offset, size),
+                lambda parts: header_from_lines(layout, sum(p.count for p in parts)))
+
+
+# ---- LAS / LAZ: re-written through laspy (LAZ points are compressed chunks) ----
+
+def las_part(path):
+    from .las import layout_of, read_header, write_joined
+
+    head = read_header(path)
+    compress = path.lower().endswith(".laz")
+    return Part(path, ("las",) + layout_of(head), head.point_count, (0, 0), None,
+                lambda parts, stream: write_joined([p.path for p in parts], head, stream, compress))
+
+
+READERS = {"ply": ply_part, "csv": csv_part, "xyz": xyz_part, "npy": npy_part, "pcd": pcd_part, "las": las_part,
+           "laz": las_part}
