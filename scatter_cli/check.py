@@ -126,7 +126,7 @@ def _slab_count(n):
 
 
 def _spacing_rows(ours, theirs, area):
-    from .thinning import spacing_stats
+    from .spacing import spacing_stats
 
     a, b = spacing_stats(ours, area), spacing_stats(theirs, area)
     return [
