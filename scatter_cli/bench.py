@@ -212,7 +212,7 @@ def pymeshlab_sampler(tri, kind):
     return run
 
 
-def variants(surface, tri, notes, quick=False):
+def variants(surface, tri, notes):
     """The sampler variants for one mesh: [Variant]."""
     out = []
     for method in ("random", "stratified", "sobol"):
@@ -293,7 +293,7 @@ def fit_slope(rows, key="error"):
 POISSON_OVERSAMPLING = (3, 5, 8, 10, 15)
 
 
-def poisson_hook(surface, area, counts, seed, notes):
+def poisson_hook(surface, counts, seed):
     """Relative radius rho and time of exact-count Poisson thinning against the
     oversampling factor (candidates per output point): the spacing that time buys."""
     from .api import prepare
@@ -400,14 +400,14 @@ def run_bench(meshes=None, out="bench-out", quick=False, counts=None, repeats=No
         exact = exact_values(tri, areas)
         log(f"{name}: {len(tri):,} faces, area {exact.area:.6g}")
         mesh_notes = []
-        for v in variants(surface, tri, mesh_notes, quick):
+        for v in variants(surface, tri, mesh_notes):
             t = time.perf_counter()
             rows = measure(v, exact, counts, repeats, seed)
             res = Result(name, v.name, v.kind, rows, {k: fit_slope(rows, k) for k in ERRORS + ("error",)}, v.note)
             results.append(res)
             log(f"  {v.name:24s} slope {res.slope['error']:+.2f}  error@{rows[-1]['n']:.0e} "
                 f"{rows[-1]['error']:.2e}  ({time.perf_counter() - t:.1f} s)")
-        for row in poisson_hook(surface, exact.area, POISSON_COUNTS_QUICK if quick else POISSON_COUNTS, seed, mesh_notes):
+        for row in poisson_hook(surface, POISSON_COUNTS_QUICK if quick else POISSON_COUNTS, seed):
             poisson.append(dict(row, mesh=name))
         notes += [f"{name}: {n}" for n in dict.fromkeys(mesh_notes)]
     notes += [f"{r.variant}: {r.note}" for r in {r.variant: r for r in results if r.note}.values()]
