@@ -43,15 +43,22 @@ class Run:
         self.info = info
         self.layout = column_layout({ATTRIBUTES[a][0] for a in attributes}, self.dtype)
         self.kept = None  # RawChunk of the thinned set, when thinning
+        self.source = None  # a filter over the candidate stream (the exterior source), if any
+
+    def draw(self, start, stop):
+        """Points ``start .. stop - 1`` of the candidate stream, before any filter or thinning."""
+        if self.method == "random":
+            return self.sampler.draw(start, stop, self.seed, self.maker.needs_bary)
+        used, b = DRAWS[self.method](self.plan, self.count, start, stop, self.seed)
+        return self.plan.place(start, used, b, self.maker.needs_bary)
 
     def _job(self, start, stop):
         if self.kept is not None:
             raw = self.kept.slice(start, stop)
-        elif self.method == "random":
-            raw = self.sampler.draw(start, stop, self.seed, self.maker.needs_bary)
+        elif self.source is not None:
+            raw = self.source.draw(start, stop)
         else:
-            used, b = DRAWS[self.method](self.plan, self.count, start, stop, self.seed)
-            raw = self.plan.place(start, used, b, self.maker.needs_bary)
+            raw = self.draw(start, stop)
         attrs = self.maker.make(raw, self.dtype)
         return Samples(raw.points.astype(self.dtype, copy=False), attrs)
 
@@ -63,27 +70,46 @@ class Run:
         from . import thinning
 
         t = time.perf_counter()
-        want_bary = self.maker.needs_bary  # for the attributes of the points kept, if any
-        blocks = in_blocks(lambda i, j: self.sampler.draw(i, j, self.seed, want_bary), candidates)
+        draw = self.source.draw if self.source is not None else self.draw
+        blocks = in_blocks(draw, candidates)
         points = np.concatenate([b.points for b in blocks]) if len(blocks) > 1 else blocks[0].points
         t1 = time.perf_counter()
         if radius is not None:
             index = thinning.thin_by_radius(points, radius)
             d_min = None
         else:
-            index, d_min = thinning.thin_to_count(points, self.count, self.info["area"])
+            index, d_min = thinning.thin_to_count(points, self.count, self._sampled_area())
         self.kept = _take(blocks, index)
         self.count = len(index)
         self.info.update(count=self.count, candidates=candidates, radius=radius)
         if d_min is not None:
-            self.info.update(d_min=d_min, rho=thinning.relative_radius(d_min, self.info["area"], self.count))
+            self.info.update(d_min=d_min, rho=thinning.relative_radius(d_min, self._sampled_area(), self.count))
         self.info["timings"].update(candidates=t1 - t, thinning=time.perf_counter() - t1)
+
+    def _sampled_area(self):
+        """The area the candidates are uniform over: the exterior area with --exterior."""
+        return self.source.area if self.source is not None else self.info["area"]
+
+    def exterior(self, count=None, candidates=None):
+        """Filter the candidate stream to its exterior points: exactly ``count`` of them, or
+        those among the first ``candidates``."""
+        from .exterior import ExteriorSource
+        from .visibility import Occluder
+
+        t = time.perf_counter()
+        occluder = Occluder(self.surface)
+        t1 = time.perf_counter()
+        self.source = ExteriorSource(_Candidates(self), occluder, self.seed, self.info["area"], count=count,
+                                     candidates=candidates)
+        self.count = self.source.count
+        self.info.update(count=self.count, exterior=self.source.stats)
+        self.info["timings"].update(ray_scene=t1 - t, exterior=time.perf_counter() - t1)
 
     def spacing(self):
         """d_min, mean nearest-neighbour distance and rho of the output (thinning runs)."""
         from .thinning import spacing_stats
 
-        return spacing_stats(self.kept.points, self.info["area"])
+        return spacing_stats(self.kept.points, self._sampled_area())
 
     def chunks(self, threads=None):
         """Samples chunks in output order."""
@@ -114,7 +140,7 @@ class Run:
 
 def prepare(mesh, count=None, *, density=None, seed=0, method="random", attributes=(), poisson=False,
             radius=None, weight=None, objects=None, precision="auto", chunk_size=None, input_format=None,
-            warn=None, oversampling=None) -> Run:
+            warn=None, oversampling=None, exterior=False) -> Run:
     """Load (if needed) and plan a sampling job; see :func:`sample` for the arguments.
 
     ``oversampling``: candidates per output point for Poisson thinning (default: 8, or
@@ -150,6 +176,9 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     if method != "random" and (poisson or radius is not None or sampler is not None):
         raise ScatterUsageError(f"--method {method} does not combine with --poisson, --radius or --weight "
                                 "(they work on the random method)")
+    if exterior and method == "stratified":
+        raise ScatterUsageError("--exterior does not combine with --method stratified (its strata are fixed by N); "
+                                "use random or sobol")
     if method == "sobol" and count > SOBOL_MAX_COUNT:
         raise ScatterUsageError(f"--method sobol gives at most 2^32 = {SOBOL_MAX_COUNT:,} points per run, not {count:,}")
     dtype = choose_precision(plan, precision, warn)
@@ -167,9 +196,26 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     if sampler is not None:
         info["weight"] = weight
     run = Run(surface, plan, count, seed, names, dtype, chunk_size or plan.default_chunk, info, sampler, method)
-    if poisson or radius is not None:
-        run.thin(candidate_count(area, count, radius, surface.source, oversampling), radius)
+    thinning = poisson or radius is not None
+    if exterior and density is not None:  # the exterior points among the plain run's
+        run.exterior(candidates=count)
+        count = run.count
+    candidates = candidate_count(area, count, radius, surface.source, oversampling) if thinning else None
+    if exterior and thinning:  # thinning works on exterior candidates
+        run.exterior(count=candidates)
+        run.count = count
+    elif exterior and density is None:
+        run.exterior(count=count)
+    if thinning:
+        run.thin(candidates, radius)
     return run
+
+
+class _Candidates:
+    """A run's candidate stream as a source: ``draw(start, stop) -> RawChunk``."""
+
+    def __init__(self, run):
+        self.draw = run.draw
 
 
 def _take(blocks, index):
@@ -212,16 +258,17 @@ def candidate_count(area, count, radius, source, oversampling=None):
 
 
 def sample(mesh, count=10000, *, density=None, seed=0, method="random", attributes=(), poisson=False,
-           radius=None, weight=None, objects=None, precision="auto", chunk_size=None) -> Samples:
+           radius=None, weight=None, objects=None, precision="auto", chunk_size=None, exterior=False) -> Samples:
     """Sample points uniformly over the surface of ``mesh``.
 
-    mesh: a path, a ``trimesh.Trimesh`` or a ``trimesh.Scene``. Returns :class:`Samples`
+    mesh: a path, a ``trimesh.Trimesh`` or a ``trimesh.Scene``. ``exterior``: only the
+    surface seen from outside (docs/exterior.md; needs embreex). Returns :class:`Samples`
     with ``.points`` (count, 3) and one array per requested attribute. The result is a
     pure function of the mesh, the options and ``seed``, whatever ``chunk_size``.
     """
     run = prepare(mesh, count, density=density, seed=seed, method=method, attributes=attributes,
                   poisson=poisson, radius=radius, weight=weight, objects=objects, precision=precision,
-                  chunk_size=chunk_size)
+                  chunk_size=chunk_size, exterior=exterior)
     t = time.perf_counter()
     samples = run.collect()
     samples.info["timings"]["sample"] = time.perf_counter() - t

@@ -54,6 +54,7 @@ def sample(
     objects: Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable).")] = None,
     poisson: Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached.")] = False,
     radius: Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance.")] = None,
+    exterior: Annotated[bool, typer.Option("--exterior", help="Only the exterior surface: what can be seen from outside the mesh (needs embreex).")] = False,
     method: Annotated[str, typer.Option("--method", metavar="METHOD", help="random (i.i.d., square-root warp) | stratified | sobol.")] = "random",
     precision: Annotated[str, typer.Option("--precision", metavar="PRECISION", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal.")] = "auto",
     stats: Annotated[Optional[str], typer.Option("--stats", metavar="PATH", help="Write a JSON summary to this file ('-': standard error).")] = None,
@@ -88,7 +89,7 @@ def sample(
     run = api.prepare(
         mesh, count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,
         radius=radius, weight=weight, objects=objects, precision=precision, chunk_size=chunk_size,
-        input_format=input_format, warn=_warner(quiet),
+        input_format=input_format, warn=_warner(quiet), exterior=exterior,
     )
     t = time.perf_counter()
     show = not quiet and sys.stderr.isatty()
@@ -117,12 +118,13 @@ def info(
     mesh: Annotated[str, typer.Argument(metavar="MESH", help="Mesh file; '-' reads standard input.")],
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable JSON.")] = False,
     input_format: InputFormat = None,
+    exterior: Annotated[bool, typer.Option("--exterior", help="Also the exterior area (estimate and standard error) and faces seen from outside (needs embreex).")] = False,
 ):
     """Faces, vertices, area, bounding box, degenerate faces, attributes and objects of MESH."""
     process.lean_trimesh()
     from .info import describe, format_text
 
-    report = describe(mesh, input_format=input_format)
+    report = describe(mesh, input_format=input_format, exterior=exterior)
     process.echo(json.dumps(report, indent=2) if as_json else format_text(report))
 
 
