@@ -20,4 +20,4 @@ def kernel(name):
                      extra_compile_args=FLAGS, optional=True)
 
 
-setup(ext_modules=[kernel("_csampling"), kernel("_cthinning")])
+setup(ext_modules=[kernel("_csampling"), kernel("_cthinning"), kernel("_cstable")])

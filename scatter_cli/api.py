@@ -11,7 +11,7 @@ from .attributes import AttributeMaker
 from .errors import ScatterError, ScatterUsageError
 from .methods import DRAWS, SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
-from .sampling import RawChunk, SamplePlan, chunk_ranges, in_blocks, run_chunks
+from .sampling import DEFAULT_CHUNK, RawChunk, SamplePlan, chunk_ranges, in_blocks, run_chunks
 from .surface import Surface, apply_matrix, load_surface
 
 METHODS = ("random", "stratified", "sobol")
@@ -43,7 +43,7 @@ class Run:
         self.info = info
         self.layout = column_layout({ATTRIBUTES[a][0] for a in attributes}, self.dtype)
         self.kept = None  # RawChunk of the thinned set, when thinning
-        self.source = None  # a filter over the candidate stream (the exterior source), if any
+        self.source = None  # the exterior filter over the candidate stream, or the stable source
 
     def draw(self, start, stop):
         """Points ``start .. stop - 1`` of the candidate stream, before any filter or thinning."""
@@ -140,7 +140,7 @@ class Run:
 
 def prepare(mesh, count=None, *, density=None, seed=0, method="random", attributes=(), poisson=False,
             radius=None, weight=None, objects=None, precision="auto", chunk_size=None, input_format=None,
-            warn=None, oversampling=None, exterior=False) -> Run:
+            warn=None, oversampling=None, exterior=False, stable=False) -> Run:
     """Load (if needed) and plan a sampling job; see :func:`sample` for the arguments.
 
     ``oversampling``: candidates per output point for Poisson thinning (default: 8, or
@@ -149,6 +149,13 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     t0 = time.perf_counter()
     names = parse_attributes(attributes)
     _check_options(count, density, seed, method, precision, chunk_size, radius)
+    if stable and method != "random":
+        raise ScatterUsageError(f"--stable does not combine with --method {method} (it is a random placement)")
+    if stable and poisson:
+        raise ScatterUsageError("--stable does not combine with --poisson (--radius gives a Poisson-disk set that "
+                                "stays put)")
+    if stable and exterior:
+        raise ScatterUsageError("--stable does not combine with --exterior yet")
     # vertices and faces are all a job needs unless an attribute or weight reads the file's
     # colours, UVs or normals
     plain = not weight and set(names) <= PLAIN_ATTRIBUTES
@@ -156,6 +163,8 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
                                                                   plain=plain)
     t1 = time.perf_counter()
     sampler = None
+    if stable:
+        return _stable_run(surface, count, density, seed, names, weight, precision, chunk_size, radius, warn, t0, t1)
     if weight:
         from .weighting import weighted_plan
 
@@ -211,6 +220,43 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     return run
 
 
+def _stable_run(surface, count, density, seed, names, weight, precision, chunk_size, radius, warn, t0, t1):
+    """The Run of ``--stable``: the plan only measures the surface, the points come from
+    :class:`scatter_cli.stable.StableSource`."""
+    from .stable import StableSource, stable_weight
+
+    if radius is not None and density is not None:
+        raise ScatterUsageError("with --radius the count follows from R: drop --density")
+    run = Run(surface, None, 0, seed, names, np.float64, chunk_size or DEFAULT_CHUNK, None)
+    source = StableSource(surface, seed, count=None if density is not None or radius is not None else (
+        10000 if count is None else count), density=density, radius=radius, want_bary=run.maker.needs_bary,
+        weight=stable_weight(surface, weight) if weight else None, max_candidates=MAX_CANDIDATES)
+    plan = source.table  # the used faces, for the bounds that choose the precision
+    if plan.non_finite and warn:
+        warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
+    dtype = choose_precision(plan, precision, warn)
+    info = {
+        "source": surface.source,
+        "count": source.count,
+        "area": source.area,
+        "faces": surface.face_count,
+        "faces_used": len(plan),
+        "seed": seed,
+        "method": "random",
+        "stable": True,
+        "precision": np.dtype(dtype).name,
+        "timings": {"load": t1 - t0, "plan": time.perf_counter() - t1},
+    }
+    if weight:
+        info["weight"] = weight
+    if radius is not None:
+        info["radius"] = radius
+    run.plan, run.count, run.info, run.source = plan, source.count, info, source
+    run.dtype = np.dtype(dtype)
+    run.layout = column_layout({ATTRIBUTES[a][0] for a in names}, run.dtype)
+    return run
+
+
 class _Candidates:
     """A run's candidate stream as a source: ``draw(start, stop) -> RawChunk``."""
 
@@ -258,7 +304,8 @@ def candidate_count(area, count, radius, source, oversampling=None):
 
 
 def sample(mesh, count=10000, *, density=None, seed=0, method="random", attributes=(), poisson=False,
-           radius=None, weight=None, objects=None, precision="auto", chunk_size=None, exterior=False) -> Samples:
+           radius=None, weight=None, objects=None, precision="auto", chunk_size=None, exterior=False,
+           stable=False) -> Samples:
     """Sample points uniformly over the surface of ``mesh``.
 
     mesh: a path, a ``trimesh.Trimesh`` or a ``trimesh.Scene``. ``exterior``: only the
@@ -268,7 +315,7 @@ def sample(mesh, count=10000, *, density=None, seed=0, method="random", attribut
     """
     run = prepare(mesh, count, density=density, seed=seed, method=method, attributes=attributes,
                   poisson=poisson, radius=radius, weight=weight, objects=objects, precision=precision,
-                  chunk_size=chunk_size, exterior=exterior)
+                  chunk_size=chunk_size, exterior=exterior, stable=stable)
     t = time.perf_counter()
     samples = run.collect()
     samples.info["timings"]["sample"] = time.perf_counter() - t

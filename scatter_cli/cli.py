@@ -61,6 +61,7 @@ def sample(
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress and no warnings.")] = False,
     chunk_size: Annotated[Optional[int], typer.Option("--chunk-size", metavar="K", help="Points generated per chunk (memory/speed knob; never changes the output).")] = None,
     input_format: InputFormat = None,
+    stable: Annotated[bool, typer.Option("--stable", help="Placement keyed to the faces themselves: points stay put when the mesh is edited elsewhere, renumbered or re-exported.")] = False,
 ):
     """Sample points on the surface of MESH.
 
@@ -89,7 +90,7 @@ def sample(
     run = api.prepare(
         mesh, count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,
         radius=radius, weight=weight, objects=objects, precision=precision, chunk_size=chunk_size,
-        input_format=input_format, warn=_warner(quiet), exterior=exterior,
+        input_format=input_format, warn=_warner(quiet), exterior=exterior, stable=stable,
     )
     t = time.perf_counter()
     show = not quiet and sys.stderr.isatty()
