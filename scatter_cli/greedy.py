@@ -26,7 +26,7 @@ def _weights(d, radius):
     return np.floor((1.0 - d * (1.0 / (2.0 * radius))) * CROWD_SCALE)
 
 
-def _greedy(n, i, j, priority):
+def in_priority_order(n, i, j, priority):
     """Maximal independent set of the graph (i, j), taken greedily in
     ascending ``priority`` (n,) with ties broken by index.
 
@@ -79,7 +79,7 @@ def least_crowded_first(n, i, j, d, radius):
         if share < left.size:
             take &= crowd <= np.partition(crowd[left], share - 1)[share - 1]
         inside = take[i] & take[j]
-        new = _greedy(n, i[inside], j[inside], crowd) & take
+        new = in_priority_order(n, i[inside], j[inside], crowd) & take
         kept |= new
         undecided &= ~take
         undecided[i[new[j]]] = False
