@@ -155,8 +155,7 @@ def color_source(mesh, faces, source="<mesh>", textures=None):
     image = getattr(material, "baseColorTexture", None) if hasattr(material, "baseColorTexture") else getattr(material, "image", None)
     uv = uv_table(mesh)
     if image is not None and not _placeholder(image) and uv is not None:
-        wrap_s, wrap_t = getattr(material, "_scatter_wrap", (REPEAT, REPEAT))
-        return ColorSource("texture", faces, uv=uv, texture=_shared_texture(textures, image, wrap_s, wrap_t, source), factor=factor)
+        return ColorSource("texture", faces, uv=uv, texture=_shared_texture(textures, image, REPEAT, REPEAT, source), factor=factor)
     if factor is not None:
         return ColorSource("constant", faces, factor=factor)
     return None
