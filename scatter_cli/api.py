@@ -15,7 +15,7 @@ from .sampling import DEFAULT_CHUNK, RawChunk, SamplePlan, chunk_ranges, in_bloc
 from .surface import Surface, apply_matrix, load_surface
 
 METHODS = ("random", "stratified", "sobol")
-PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object"}
+PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object", "orient"}
 PRECISIONS = ("auto", "float32", "float64")
 # --precision auto keeps float32 while its rounding moves no point by more than this
 # fraction of the bounding-box diagonal.
@@ -38,12 +38,27 @@ class Run:
         self.count = count
         self.seed = seed
         self.dtype = np.dtype(dtype)
-        self.maker = AttributeMaker(surface, attributes)
+        self.maker = AttributeMaker(surface, attributes, seed)
         self.chunk_size = chunk_size
         self.info = info
         self.layout = column_layout({ATTRIBUTES[a][0] for a in attributes}, self.dtype)
         self.kept = None  # RawChunk of the thinned set, when thinning
         self.source = None  # the exterior filter over the candidate stream, or the stable source
+        self.shard = None  # (K, M): the run writes only that part of its points
+
+    @property
+    def span(self):
+        """(start, stop): the points ``chunks()`` yields, all or a shard's share."""
+        if self.shard is None:
+            return 0, self.count
+        k, m = self.shard
+        return k * self.count // m, (k + 1) * self.count // m
+
+    @property
+    def size(self) -> int:
+        """How many points ``chunks()`` yields: ``count``, or a shard's share of it."""
+        start, stop = self.span
+        return stop - start
 
     def draw(self, start, stop):
         """Points ``start .. stop - 1`` of the candidate stream, before any filter or thinning."""
@@ -112,12 +127,14 @@ class Run:
         return spacing_stats(self.kept.points, self._sampled_area())
 
     def chunks(self, threads=None):
-        """Samples chunks in output order."""
-        yield from run_chunks(self._job, chunk_ranges(self.count, self.chunk_size), threads)
+        """Samples chunks in output order: points ``start .. stop - 1`` of the run."""
+        start, stop = self.span
+        ranges = [(a + start, b + start) for a, b in chunk_ranges(stop - start, self.chunk_size)]
+        yield from run_chunks(self._job, ranges, threads)
 
     def collect(self) -> Samples:
         """All points in one :class:`Samples` (memory grows with the count)."""
-        n = self.count
+        n = self.size
         points = np.empty((n, 3), dtype=self.dtype)
         attributes = {}
         # Fill preallocated arrays chunk by chunk: no concatenation copy at the end. The
@@ -140,15 +157,18 @@ class Run:
 
 def prepare(mesh, count=None, *, density=None, seed=0, method="random", attributes=(), poisson=False,
             radius=None, weight=None, objects=None, precision="auto", chunk_size=None, input_format=None,
-            warn=None, oversampling=None, exterior=False, stable=False) -> Run:
+            warn=None, oversampling=None, exterior=False, stable=False, shard=None) -> Run:
     """Load (if needed) and plan a sampling job; see :func:`sample` for the arguments.
 
+    ``shard``: ``(K, M)``, the run keeps points floor(K*N/M) .. floor((K+1)*N/M) - 1 of
+    the run without it, and draws only those.
     ``oversampling``: candidates per output point for Poisson thinning (default: 8, or
     15 for sets of up to 5,000 points); more buys a larger rho for more time.
     """
     t0 = time.perf_counter()
     names = parse_attributes(attributes)
     _check_options(count, density, seed, method, precision, chunk_size, radius)
+    shard = check_shard(shard, poisson, radius)
     if stable and method != "random":
         raise ScatterUsageError(f"--stable does not combine with --method {method} (it is a random placement)")
     if stable and poisson:
@@ -162,9 +182,12 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects,
                                                                   plain=plain)
     t1 = time.perf_counter()
+    for message in surface._cache.pop("warnings", ()) if warn else ():
+        warn(message)
     sampler = None
     if stable:
-        return _stable_run(surface, count, density, seed, names, weight, precision, chunk_size, radius, warn, t0, t1)
+        run = _stable_run(surface, count, density, seed, names, weight, precision, chunk_size, radius, warn, t0, t1)
+        return _with_shard(run, shard)
     if weight:
         from .weighting import weighted_plan
 
@@ -217,6 +240,14 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
         run.exterior(count=count)
     if thinning:
         run.thin(candidates, radius)
+    return _with_shard(run, shard)
+
+
+def _with_shard(run, shard):
+    """``run`` writing only shard ``(K, M)`` of its points (None: all of them)."""
+    if shard is not None:
+        run.shard = shard
+        run.info["shard"] = list(shard)
     return run
 
 
@@ -305,7 +336,7 @@ def candidate_count(area, count, radius, source, oversampling=None):
 
 def sample(mesh, count=10000, *, density=None, seed=0, method="random", attributes=(), poisson=False,
            radius=None, weight=None, objects=None, precision="auto", chunk_size=None, exterior=False,
-           stable=False) -> Samples:
+           stable=False, shard=None) -> Samples:
     """Sample points uniformly over the surface of ``mesh``.
 
     mesh: a path, a ``trimesh.Trimesh`` or a ``trimesh.Scene``. ``exterior``: only the
@@ -315,7 +346,7 @@ def sample(mesh, count=10000, *, density=None, seed=0, method="random", attribut
     """
     run = prepare(mesh, count, density=density, seed=seed, method=method, attributes=attributes,
                   poisson=poisson, radius=radius, weight=weight, objects=objects, precision=precision,
-                  chunk_size=chunk_size, exterior=exterior, stable=stable)
+                  chunk_size=chunk_size, exterior=exterior, stable=stable, shard=shard)
     t = time.perf_counter()
     samples = run.collect()
     samples.info["timings"]["sample"] = time.perf_counter() - t
@@ -339,6 +370,35 @@ def _check_options(count, density, seed, method, precision, chunk_size, radius):
         raise ScatterUsageError(f"--chunk-size must be a positive integer, not {chunk_size!r}")
     if radius is not None and not (math.isfinite(radius) and radius > 0):
         raise ScatterUsageError(f"--radius must be a positive number, not {radius!r}")
+
+
+def output_options(run: Run, fmt: str) -> dict:
+    """What the writer of ``fmt`` needs from the run besides its points (keywords of
+    :func:`~scatter_cli.writers.write_samples`): LAS the sampled bounding box, USD the
+    input's up axis and units (when the surface carries them) and the point spacing."""
+    if fmt in ("las", "laz"):
+        return {"bounds": sampled_bounds(run.plan)}
+    if fmt == "usd":
+        area = run.info["area"]
+        return {"up_axis": getattr(run.surface, "up_axis", None),
+                "meters_per_unit": getattr(run.surface, "meters_per_unit", None),
+                "spacing": math.sqrt(area / run.count) if run.count and area > 0 else None}
+    return {}
+
+
+def check_shard(shard, poisson=False, radius=None):
+    """``(K, M)`` or ``"K/M"`` -> ``(K, M)`` ints with 0 <= K < M; None stays None."""
+    if shard is None:
+        return None
+    try:
+        k, m = (int(x) for x in (shard.split("/") if isinstance(shard, str) else shard))
+    except (TypeError, ValueError):
+        raise ScatterUsageError(f"--shard must be K/M (shard K of M, 0-based), not {shard!r}") from None
+    if not 0 <= k < m:
+        raise ScatterUsageError(f"--shard K/M needs 0 <= K < M, not {k}/{m}")
+    if poisson or radius is not None:
+        raise ScatterUsageError("--shard does not combine with --poisson or --radius (thinning is global)")
+    return k, m
 
 
 def sampled_bounds(plan: SamplePlan):

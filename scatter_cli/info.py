@@ -101,10 +101,17 @@ class _Plain:
 
 def _attributes(surface) -> dict:
     """Which per-point attributes the file can provide (without computing any of them)."""
+    from .visuals import VertexTables
+
     has = {"normals": False, "colors": False, "uv": False, "texture": False}
     for g in surface.geometries:
         mesh = g.mesh
         if mesh is None:
+            continue
+        if isinstance(mesh, VertexTables):
+            has["normals"] |= mesh.normals is not None
+            has["colors"] |= any(c is not None for c in (mesh.vertex_colors, mesh.face_colors, mesh.constant_color))
+            has["uv"] |= mesh.uv is not None
             continue
         cache = getattr(mesh, "_cache", None)
         if cache is not None and "vertex_normals" in getattr(cache, "cache", {}):

@@ -554,7 +554,7 @@ class StableSource:
         raise ScatterError(f"{self.surface.source}: --stable found fewer than {n:,} arrivals")
 
     def _select_radius(self, radius, max_candidates):
-        from . import thinning
+        from . import greedy, pairs
         from .api import RADIUS_OVERSAMPLING
 
         # candidates at RADIUS_OVERSAMPLING times the hexagonal density of spacing R: a
@@ -568,8 +568,8 @@ class StableSource:
         self.horizon = tau
         _, face, ctr = self._candidates(tau)
         points = self._place(face, ctr).points
-        i, j, _ = thinning._pairs(points, radius)
-        kept = np.flatnonzero(thinning._greedy(len(face), i, j, np.arange(len(face))))
+        i, j, _ = pairs.all_pairs(points, radius)
+        kept = np.flatnonzero(greedy.in_priority_order(len(face), i, j, np.arange(len(face))))
         self.used, self.ctr = face[kept], ctr[kept]
 
     def _accept(self, face, ctr):
