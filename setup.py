@@ -4,6 +4,8 @@ Everything else lives in pyproject.toml. The extensions are optional: without a 
 compiler the install goes on and scatter runs its NumPy path, which gives the same bytes.
 """
 
+import os
+
 import numpy
 from setuptools import Extension, setup
 
@@ -15,9 +17,16 @@ FLAGS = ["-O3", "-ffp-contract=off", "-fno-fast-math", "-fno-math-errno", "-fno-
          "-Wno-stringop-overflow", "-Werror=implicit-function-declaration"]
 
 
+# SCATTER_SANITIZE=1 builds with AddressSanitizer and UndefinedBehaviorSanitizer, for
+# benchmarks/sanitize_readers.sh (run Python with the ASan runtime preloaded); never for an install.
+SANITIZE = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer", "-fno-sanitize-recover=undefined", "-g"]
+SANITIZED = os.environ.get("SCATTER_SANITIZE", "") not in ("", "0")
+
+
 def kernel(name):
+    flags = FLAGS + SANITIZE if SANITIZED else FLAGS
     return Extension(f"scatter_cli.{name}", [f"scatter_cli/{name}.c"], include_dirs=[numpy.get_include()],
-                     extra_compile_args=FLAGS, optional=True)
+                     extra_compile_args=flags, extra_link_args=SANITIZE if SANITIZED else [], optional=True)
 
 
-setup(ext_modules=[kernel("_csampling"), kernel("_cthinning")])
+setup(ext_modules=[kernel("_csampling"), kernel("_cthinning"), kernel("_cstable"), kernel("_creaders")])

@@ -2,8 +2,10 @@
 
     PYTHONPATH=. python benchmarks/fuzz_loaders.py [--inputs 20000] [--seed 0]
 
-Every input must load and sample, or fail with a ScatterError (one-line `error:`).
-Any other exception is printed with the input that caused it (saved under --save).
+Every input must load and sample, or fail with a ScatterError (one-line `error:`); and
+where the fast readers (scatter_cli/readers.py) answer, trimesh must load the same
+triangles. Any other outcome is printed with the input that caused it (saved under
+--save). benchmarks/sanitize_readers.sh runs this under ASan and UBSan.
 """
 
 import argparse
@@ -18,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from tests.fuzz_inputs import SEEDS, exercise, mutate, random_ops  # noqa: E402
+from tests.fuzz_inputs import SEEDS, differential, exercise, mutate, random_ops  # noqa: E402
 
 
 def main():
@@ -39,6 +41,7 @@ def main():
             data = mutate(seed, random_ops(rng))
             try:
                 outcomes[(name, exercise(data, suffix, work))] += 1
+                outcomes[(name, differential(data, suffix, work))] += 1
             except Exception as exc:  # a crash: would surface as 'internal error'
                 key = f"{name}: {type(exc).__name__}: {str(exc)[:80]}"
                 if not crashes[key]:
@@ -51,7 +54,7 @@ def main():
     dt = time.perf_counter() - t0
     print(f"{args.inputs} inputs in {dt:.0f} s")
     for name in names:
-        print(f"  {name:11s} " + "  ".join(f"{k}={outcomes[(name, k)]}" for k in ("ok", "error", "crash")))
+        print(f"  {name:11s} " + "  ".join(f"{k}={outcomes[(name, k)]}" for k in ("ok", "error", "same", "handed", "crash")))
     print(f"distinct crashes: {len(crashes)}")
     for k, v in crashes.most_common():
         print(f"  {v:6d}  {k}")

@@ -21,17 +21,36 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from scatter_cli.sampling import SamplePlan  # noqa: E402
 from scatter_cli.surface import load_surface  # noqa: E402
-from tests.conftest import spread_triangles, triangles_mesh  # noqa: E402
-from tests.hardcheck import ALPHA, exact_face_errors, pooled_chi2_pvalue, two_sum_le_one  # noqa: E402
-from scatter_cli.sources import RandomSource  # noqa: E402
-from tests.doubles import Float32CdfPlan, UnweightedSource  # noqa: E402
-from tests.test_hard_numeric import area_groups  # noqa: E402
+from benchmarks.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_chi2_pvalue,  # noqa: E402
+                                  spread_triangles, triangles_mesh, two_sum_le_one)
 
 
-def face_counts(source, faces, block=1 << 22):
-    counts = np.zeros(faces)
-    for a in range(0, source.count, block):
-        counts += np.bincount(source.draw(a, min(source.count, a + block)).face, minlength=faces)
+def face_counts(plan, n, seed, block=1 << 22):
+    """Points (n) per face (F,) of scatter's sampling plan."""
+    counts = np.zeros(plan.surface.face_count)
+    for a in range(0, n, block):
+        counts += np.bincount(plan.draw(a, min(n, a + block), seed).face, minlength=len(counts))
+    return counts
+
+
+def unweighted_counts(areas, n, seed, block=1 << 22):
+    """Broken on purpose: every face equally likely whatever its area."""
+    rng = np.random.default_rng(seed)
+    counts = np.zeros(len(areas))
+    for a in range(0, n, block):
+        counts += np.bincount(rng.integers(0, len(areas), min(block, n - a)), minlength=len(areas))
+    return counts
+
+
+def float32_cdf_counts(areas, n, seed, block=1 << 22):
+    """Broken subtly: the area CDF accumulated in float32, so small faces round away."""
+    cdf = np.cumsum(areas.astype(np.float32), dtype=np.float32).astype(np.float64)
+    rng = np.random.default_rng(seed)
+    counts = np.zeros(len(areas))
+    for a in range(0, n, block):
+        u = rng.random(min(block, n - a)) * cdf[-1]
+        face = np.minimum(np.searchsorted(cdf, u, side="right"), len(areas) - 1)
+        counts += np.bincount(face, minlength=len(areas))
     return counts
 
 
@@ -42,11 +61,12 @@ def wide(faces, n):
     surface = load_surface(triangles_mesh(tri))
     del tri
     print(f"[1] {faces:,} faces, areas {areas.min():.3g} .. {areas.max():.3g}; built in {time.perf_counter() - t:.0f} s")
-    for name, kind, must_pass in (("scatter", lambda: RandomSource(SamplePlan(surface), n, 6), True),
-                                  ("unweighted", lambda: UnweightedSource(SamplePlan(surface), n, 6), False),
-                                  ("float32 CDF", lambda: RandomSource(Float32CdfPlan(surface), n, 6), False)):
+    samplers = (("scatter", lambda: face_counts(SamplePlan(surface), n, seed=6), True),
+                ("unweighted", lambda: unweighted_counts(areas, n, seed=6), False),
+                ("float32 CDF", lambda: float32_cdf_counts(areas, n, seed=6), False))
+    for name, counts_of, must_pass in samplers:
         t = time.perf_counter()
-        counts = face_counts(kind(), surface.face_count)
+        counts = counts_of()
         obs, exp = area_groups(areas, counts, n)
         p_dec = pooled_chi2_pvalue(obs, exp)
         p_face = pooled_chi2_pvalue(counts, n * areas / areas.sum())

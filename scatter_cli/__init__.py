@@ -6,7 +6,10 @@
     ((1000, 3), (1000, 3))
 """
 
-__all__ = ["sample", "prepare", "load_surface", "Samples", "ScatterError", "version"]
+__all__ = ["sample", "prepare", "batch", "load_surface", "Samples", "ScatterError", "version"]
+
+# The function, not the module of the same name (which imports only the standard library).
+from .batch import batch  # noqa: E402
 
 
 def version() -> str:

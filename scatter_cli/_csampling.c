@@ -279,6 +279,9 @@ static PyObject *place(PyObject *self, PyObject *args)
  * from the state before the step; Generator.random() is (next >> 11) * 2^-53. The kernel
  * draws the same doubles as sampling.uniforms, without writing them to memory. */
 #define PCG_MULT 0xda942042e4dd58b5ULL
+/* Uniforms a point takes from the stream: face choice, then the warp's two. Exported as
+ * the module's DRAWS_PER_POINT, which tests hold equal to sampling.DRAWS_PER_POINT. */
+#define DRAWS_PER_POINT 3
 
 typedef struct {
     __uint128_t state, inc;
@@ -307,12 +310,12 @@ typedef struct {
     double *pts, *b;
 } Draw;
 
-/* Points at[j] (j < count; base + j when at is NULL) from their draws ub[3 j .. 3 j + 2]. */
+/* Points at[j] (j < count; base + j when at is NULL) from their draws ub[DRAWS_PER_POINT j ..]. */
 static void draw_block(const Draw *d, const double *ub, int64_t base, const int32_t *at, npy_intp count)
 {
     const Corners *c = d->c;
     int64_t face[BLOCK];
-    select_block(d->cdf, d->last, d->guide, d->wide, d->m, ub, 3, count, face);
+    select_block(d->cdf, d->last, d->guide, d->wide, d->m, ub, DRAWS_PER_POINT, count, face);
     /* the face rows of the whole block first: their cache misses overlap, and so do
        the vertex rows' below, instead of each point waiting on its face row */
     int64_t vi[3 * BLOCK];
@@ -321,8 +324,8 @@ static void draw_block(const Draw *d, const double *ub, int64_t base, const int3
             memcpy(vi + 3 * j, c->faces + 3 * (c->rows ? c->rows[face[j]] : face[j]), 3 * sizeof(int64_t));
     for (npy_intp j = 0; j < count; j++) {
         int64_t k = at ? at[j] : base + j;
-        double b1 = 1.0 - sqrt(ub[3 * j + 1]); /* warps.square_to_triangle */
-        double b2 = (1.0 - b1) * ub[3 * j + 2];
+        double b1 = 1.0 - sqrt(ub[DRAWS_PER_POINT * j + 1]); /* warps.square_to_triangle */
+        double b2 = (1.0 - b1) * ub[DRAWS_PER_POINT * j + 2];
         if (d->b) {
             d->b[2 * k] = b1;
             d->b[2 * k + 1] = b2;
@@ -356,20 +359,20 @@ static int draw_sorted(const Draw *d, Pcg *rng, npy_intp n)
         free(order);
         return 0;
     }
-    double *u = d->pts;
-    for (npy_intp j = 0; j < 3 * n; j++)
+    double *u = d->pts; /* room for the draws: DRAWS_PER_POINT is 3, as the coordinates */
+    for (npy_intp j = 0; j < DRAWS_PER_POINT * n; j++)
         u[j] = pcg_double(rng);
     for (npy_intp k = 0; k < n; k++)
-        start[(int64_t)(u[3 * k] * (double)buckets) + 1]++;
+        start[(int64_t)(u[DRAWS_PER_POINT * k] * (double)buckets) + 1]++;
     for (int64_t q = 0; q < buckets; q++)
         start[q + 1] += start[q];
     for (npy_intp k = 0; k < n; k++)
-        order[start[(int64_t)(u[3 * k] * (double)buckets)]++] = (int32_t)k;
+        order[start[(int64_t)(u[DRAWS_PER_POINT * k] * (double)buckets)]++] = (int32_t)k;
     for (npy_intp k0 = 0; k0 < n; k0 += BLOCK) {
         npy_intp count = n - k0 < BLOCK ? n - k0 : BLOCK;
-        double ub[3 * BLOCK];
+        double ub[DRAWS_PER_POINT * BLOCK];
         for (npy_intp j = 0; j < count; j++)
-            memcpy(ub + 3 * j, u + 3 * (int64_t)order[k0 + j], 3 * sizeof(double));
+            memcpy(ub + DRAWS_PER_POINT * j, u + DRAWS_PER_POINT * (int64_t)order[k0 + j], DRAWS_PER_POINT * sizeof(double));
         draw_block(d, ub, 0, order + k0, count);
     }
     free(start);
@@ -417,8 +420,8 @@ static PyObject *draw(PyObject *self, PyObject *args)
     else
         for (npy_intp k0 = 0; k0 < n; k0 += BLOCK) {
             npy_intp count = n - k0 < BLOCK ? n - k0 : BLOCK;
-            double ub[3 * BLOCK]; /* the draws of points k0 .. k0 + count - 1 */
-            for (npy_intp j = 0; j < 3 * count; j++)
+            double ub[DRAWS_PER_POINT * BLOCK]; /* the draws of points k0 .. k0 + count - 1 */
+            for (npy_intp j = 0; j < DRAWS_PER_POINT * count; j++)
                 ub[j] = pcg_double(&rng);
             draw_block(&d, ub, k0, NULL, count);
         }
@@ -445,5 +448,8 @@ static struct PyModuleDef module = {
 PyMODINIT_FUNC PyInit__csampling(void)
 {
     import_array();
-    return PyModule_Create(&module);
+    PyObject *m = PyModule_Create(&module);
+    if (m && PyModule_AddIntConstant(m, "DRAWS_PER_POINT", DRAWS_PER_POINT) < 0)
+        Py_CLEAR(m);
+    return m;
 }

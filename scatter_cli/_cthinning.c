@@ -1,4 +1,4 @@
-/* Compiled pair graph and greedy thinning: the same results as thinning.py's NumPy path.
+/* Compiled pair graph and greedy thinning: the same results as the NumPy path (pairs.py, greedy.py).
  *
  * grid() sorts points by cell (side >= reach) and holds their coordinates axis by axis in
  * cell order. pairs() and greedy() visit the cells in key order. The 27 cells around a
@@ -28,9 +28,11 @@
 #include <pthread.h>
 #include <stdio.h>
 
+/* Shared with the NumPy path: exported as module attributes, which tests/test_native.py
+ * holds equal to pairs.BITS, pairs.MAX_CELLS and greedy.CROWD_SCALE. */
 #define BITS 21
-#define MAX_CELLS ((1 << BITS) - 8) /* thinning._MAX_CELLS */
-#define CROWD_SCALE 65536.0          /* thinning._CROWD_SCALE */
+#define MAX_CELLS ((1 << BITS) - 8)
+#define CROWD_SCALE 65536.0
 
 static uint64_t pack(int64_t x, int64_t y, int64_t z)
 {
@@ -343,7 +345,7 @@ static int get_grid(PyObject *args, Grid *g, double *reach, double *radius, PyOb
     return 1;
 }
 
-/* The fine cell of point p, as thinning._Frame.keys: floor((p - lo) / size) + 2, clipped. */
+/* The fine cell of point p, as pairs.Frame.keys: floor((p - lo) / size) + 2, clipped. */
 static inline void fine_cell(const double *p, const double *lo, double size, int64_t f[3])
 {
     for (int k = 0; k < 3; k++) {
@@ -356,7 +358,7 @@ static inline void fine_cell(const double *p, const double *lo, double size, int
 PyDoc_STRVAR(grid_doc,
 "grid(points, lo, size, cap) -> (active, order, xyz, ukey, cell_start)\n\n"
 "points (n, 3) float64 into cells of two fine cells a side, the fine cells (side size)\n"
-"from corner lo (3,) float64 as thinning._Frame. With cap > 0 only the first cap points\n"
+"from corner lo (3,) float64 as pairs.Frame. With cap > 0 only the first cap points\n"
 "(input order) of each fine cell are active, else all. active (a,) int64: their input\n"
 "indices, ascending, which numbers them 0..a-1. They are held in cell order: position s\n"
 "is active point order[s] (int64) at xyz[:, s] ((3, a) float64); cell c has the positions\n"
@@ -502,7 +504,7 @@ static int64_t hits_in(const Grid *g, int64_t s, int64_t t0, int64_t t1, double 
     int64_t n = t1 - t0;
     for (int64_t l = 0; l < n; l++) {
         double dx = px - x[l], dy = py - y[l], dz = pz - z[l];
-        double e = dx * dx + dy * dy; /* thinning._self_pairs' order of operations */
+        double e = dx * dx + dy * dy; /* pairs.self_pairs' order of operations */
         tmp[l] = e + dz * dz;
     }
     for (int64_t l = 0; l < n; l++) {
@@ -597,7 +599,7 @@ static int64_t most_around(const Grid *g, const int32_t *ranges)
 PyDoc_STRVAR(pairs_doc,
 "pairs(order, xyz, ukey, cell_start, reach) -> (i, j, d)\n\n"
 "Every pair of a grid() closer than reach: i < j (int64) active numbers, d (float64)\n"
-"their distance, as thinning._self_pairs (in another order).");
+"their distance, as pairs.self_pairs (in another order).");
 
 static PyObject *pairs(PyObject *self, PyObject *args)
 {
@@ -1092,7 +1094,7 @@ static int64_t drop(const Rows *r, int32_t *left, int64_t u, char *gone, int64_t
 
 PyDoc_STRVAR(greedy_doc,
 "greedy(order, xyz, ukey, cell_start, reach, radius, kept, share, least, threads)\n\n"
-"thinning._least_crowded_first on the pairs of thinning._self_pairs(..., reach) shorter\n"
+"greedy.least_crowded_first on the pairs of pairs.self_pairs(..., reach) shorter\n"
 "than radius: a maximal independent set taken in rounds. Each round takes the max(least,\n"
 "ceil(u / share)) least crowded of the u undecided points (ties included), crowding being\n"
 "the sum of floor((1 - d * (1 / (2 radius))) * 65536) over undecided neighbours, and keeps\n"
@@ -1167,7 +1169,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, "_cthinning",
-    "Compiled grid, pair search and greedy thinning, with the same results as thinning.py's NumPy path.", -1,
+    "Compiled grid, pair search and greedy thinning, with the same results as the NumPy path (pairs.py, greedy.py).", -1,
     methods,
 };
 
@@ -1181,5 +1183,9 @@ PyMODINIT_FUNC PyInit__cthinning(void)
         !(plain && *plain && strcmp(plain, "0") != 0))
         find_hits = hits_in_avx512;
 #endif
-    return PyModule_Create(&module);
+    PyObject *m = PyModule_Create(&module);
+    if (m && (PyModule_AddIntConstant(m, "BITS", BITS) < 0 || PyModule_AddIntConstant(m, "MAX_CELLS", MAX_CELLS) < 0 ||
+              PyModule_AddObject(m, "CROWD_SCALE", PyFloat_FromDouble(CROWD_SCALE)) < 0))
+        Py_CLEAR(m);
+    return m;
 }

@@ -16,12 +16,12 @@ from .attributes import AttributeMaker
 from .errors import ScatterUsageError
 from .methods import SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
-from .sampling import SamplePlan, chunk_ranges, run_chunks
+from .sampling import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
 from .sources import Source, ThinnedSource, make_source, thinned
 from .surface import Surface, apply_matrix, load_surface
 
 METHODS = ("random", "stratified", "sobol")
-PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object"}
+PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object", "orient"}
 PRECISIONS = ("auto", "float32", "float64")
 # --precision auto keeps float32 while its rounding moves no point by more than this
 # fraction of the bounding-box diagonal.
@@ -41,13 +41,31 @@ class Run:
     order, so a writer can stream any count in flat memory.
     """
 
-    def __init__(self, source: Source, maker: AttributeMaker, dtype, chunk_size: int, info: dict):
+    def __init__(self, source: Source, maker: AttributeMaker, dtype, chunk_size: int, info: dict, plan,
+                 shard=None):
         self.source = source
         self.maker = maker
         self.dtype = np.dtype(dtype)
         self.chunk_size = chunk_size
         self.info = info
         self.layout = column_layout({ATTRIBUTES[a][0] for a in maker.names}, self.dtype)
+        self.plan = plan  # the used faces: bounds for LAS, the surface for USD
+        self.surface = plan.surface
+        self.shard = shard  # (K, M): the run writes only that part of its points
+
+    @property
+    def span(self):
+        """(start, stop): the points ``chunks()`` yields, all or a shard's share."""
+        if self.shard is None:
+            return 0, self.count
+        k, m = self.shard
+        return k * self.count // m, (k + 1) * self.count // m
+
+    @property
+    def size(self) -> int:
+        """How many points ``chunks()`` yields: ``count``, or a shard's share of it."""
+        start, stop = self.span
+        return stop - start
 
     @property
     def count(self) -> int:
@@ -62,13 +80,15 @@ class Run:
         raw = self.source.draw(start, stop)
         return Samples(raw.points.astype(self.dtype, copy=False), self.maker.make(raw, self.dtype))
 
-    def chunks(self, start=0, stop=None, *, threads=None):
-        """Samples chunks of points ``start .. stop - 1`` (default: all) in output order.
+    def chunks(self, start=None, stop=None, *, threads=None):
+        """Samples chunks of points ``start .. stop - 1`` (default: the run's span, all its
+        points or its shard's) in output order.
 
         They are the slice ``start:stop`` of the whole run's points, byte for byte, and
         cost only their share of it.
         """
-        stop = self.count if stop is None else stop
+        start = self.span[0] if start is None else start
+        stop = self.span[1] if stop is None else stop
         if not 0 <= start <= stop <= self.count:
             raise ValueError(f"points {start}..{stop} are outside the run's 0..{self.count}")
         yield from run_chunks(self._job, chunk_ranges(stop, self.chunk_size, start), threads)
@@ -77,11 +97,11 @@ class Run:
         """d_min, mean nearest-neighbour distance and rho of the output (thinning runs)."""
         from .thinning import spacing_stats
 
-        return spacing_stats(self.kept.points, self.info["area"])
+        return spacing_stats(self.kept.points, self.source.area)
 
     def collect(self) -> Samples:
-        """All points in one :class:`Samples` (memory grows with the count)."""
-        n = self.count
+        """All the points of the run's span in one :class:`Samples` (memory grows with the count)."""
+        n = self.size
         points = np.empty((n, 3), dtype=self.dtype)
         attributes = {}
         # Preallocated arrays filled chunk by chunk: no concatenation copy at the end
@@ -103,36 +123,116 @@ class Run:
 
 def prepare(mesh, count=None, *, density=None, seed=0, method="random", attributes=(), poisson=False,
             radius=None, weight=None, objects=None, precision="auto", chunk_size=None, input_format=None,
-            warn=None, oversampling=None) -> Run:
+            warn=None, oversampling=None, exterior=False, stable=False, shard=None) -> Run:
     """Check the options, load ``mesh`` (if a path) and prepare its run; see :func:`sample`.
 
+    ``shard``: ``(K, M)``, the run keeps points floor(K*N/M) .. floor((K+1)*N/M) - 1 of
+    the run without it, and draws only those.
     ``oversampling``: candidates per output point for Poisson thinning (default: 8, or
     15 for sets of up to 5,000 points); more buys a larger rho for more time.
     """
     t0 = time.perf_counter()
     names = parse_attributes(attributes)
-    check_options(count, density, seed, method, precision, chunk_size, radius, poisson, weight, oversampling)
+    check_options(count, density, seed, method, precision, chunk_size, radius, poisson, weight, oversampling,
+                  exterior, stable)
+    shard = check_shard(shard, poisson, radius)
     plain = not weight and set(names) <= PLAIN_ATTRIBUTES  # no colours, UVs or normals to read
     surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects,
                                                                   plain=plain)
     t1 = time.perf_counter()
-    plan, weighting, area = plan_surface(surface, weight, warn)
-    count = point_count(count, density, area, method)
-    dtype = choose_precision(plan, precision, warn)
-    maker = AttributeMaker(surface, names)
-    info = {"source": surface.source, "count": count, "area": area, "faces": surface.face_count,
-            "faces_used": plan.faces_used, "seed": seed, "method": method, "precision": dtype.name,
-            "timings": {"load": t1 - t0, "plan": time.perf_counter() - t1}}
-    if weighting is not None:
-        info["weight"] = weight
+    for message in surface._cache.pop("warnings", ()) if warn else ():
+        warn(message)
+    maker = AttributeMaker(surface, names, seed)
+    if stable:
+        source, plan, dtype, info = _stable_source(surface, count, density, radius, weight, seed, maker, precision,
+                                                   warn, t1 - t0)
+        chunk_size = chunk_size or DEFAULT_CHUNK
+    else:
+        plan, weighting, area = plan_surface(surface, weight, warn)
+        count = point_count(count, density, area, method)
+        dtype = choose_precision(plan, precision, warn)
+        info = {"source": surface.source, "count": count, "area": area, "faces": surface.face_count,
+                "faces_used": plan.faces_used, "seed": seed, "method": method, "precision": dtype.name}
+        if weighting is not None:
+            info["weight"] = weight
+        info["timings"] = {"load": t1 - t0, "plan": time.perf_counter() - t1}
+        def source_of(n):
+            return make_source(plan, n, seed, maker.needs_bary, method=method, weighting=weighting, area=area)
+
+        source = _filtered_source(source_of, surface, area, info, count, density, poisson, radius, exterior, seed,
+                                  oversampling)
+        chunk_size = chunk_size or plan.default_chunk
+    if shard is not None:
+        info["shard"] = list(shard)
+    return Run(source, maker, dtype, chunk_size, info, plan, shard)
+
+
+def _filtered_source(source_of, surface, area, info, count, density, poisson, radius, exterior, seed,
+                     oversampling):
+    """The run's source: ``source_of(n)`` (the method's source of n points), its exterior
+    points (``--exterior``), thinned to a Poisson-disk set (``--poisson``, ``--radius``)."""
     thin = poisson or radius is not None
+    if exterior:
+        occluder = _occluder(surface, info)
+        base = source = source_of(count)
+        if density is not None:  # the exterior points among the plain run's
+            source = _exterior_source(base, occluder, seed, area, info, candidates=count)
+            count = source.count
     n = candidate_count(area, count, radius, surface.source, oversampling) if thin else count
-    source = make_source(plan, n, seed, maker.needs_bary, method=method, weighting=weighting, area=area)
+    if not exterior:
+        source = source_of(n)
+    elif thin or density is None:  # thinning works on exterior candidates
+        source = _exterior_source(base, occluder, seed, area, info, count=n)
     if thin:
         source, thinning = thinned(source, count, radius)
         info["timings"].update(thinning.pop("timings"))
         info.update(thinning)
-    return Run(source, maker, dtype, chunk_size or plan.default_chunk, info)
+    return source
+
+
+def _occluder(surface, info):
+    from .visibility import Occluder
+
+    t = time.perf_counter()
+    occluder = Occluder(surface)
+    info["timings"]["ray_scene"] = time.perf_counter() - t
+    return occluder
+
+
+def _exterior_source(base, occluder, seed, area, info, count=None, candidates=None):
+    """The exterior points of ``base``'s stream: exactly ``count``, or those among its
+    first ``candidates``."""
+    from .exterior import ExteriorSource
+
+    t = time.perf_counter()
+    source = ExteriorSource(base, occluder, seed, area, count=count, candidates=candidates)
+    info.update(count=source.count, exterior=source.stats)
+    info["timings"]["exterior"] = time.perf_counter() - t
+    return source
+
+
+def _stable_source(surface, count, density, radius, weight, seed, maker, precision, warn, load_time):
+    """(source, used faces, dtype, info) of ``--stable``: the points come from
+    :class:`scatter_cli.stable.StableSource`."""
+    from .stable import StableSource, stable_weight
+
+    t = time.perf_counter()
+    exact = density is None and radius is None
+    source = StableSource(surface, seed, count=(10000 if count is None else count) if exact else None,
+                          density=density, radius=radius, want_bary=maker.needs_bary,
+                          weight=stable_weight(surface, weight) if weight else None, max_candidates=MAX_CANDIDATES)
+    plan = source.table  # the used faces, for the bounds that choose the precision
+    if plan.non_finite and warn:
+        warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
+    dtype = choose_precision(plan, precision, warn)
+    info = {"source": surface.source, "count": source.count, "area": source.area, "faces": surface.face_count,
+            "faces_used": len(plan), "seed": seed, "method": "random", "stable": True, "precision": dtype.name,
+            "timings": {"load": load_time, "plan": time.perf_counter() - t}}
+    if weight:
+        info["weight"] = weight
+    if radius is not None:
+        info["radius"] = radius
+    return source, plan, dtype, info
 
 
 def plan_surface(surface: Surface, weight=None, warn=None):
@@ -178,16 +278,18 @@ def candidate_count(area, count, radius, source, oversampling=None):
 
 
 def sample(mesh, count=10000, *, density=None, seed=0, method="random", attributes=(), poisson=False,
-           radius=None, weight=None, objects=None, precision="auto", chunk_size=None) -> Samples:
+           radius=None, weight=None, objects=None, precision="auto", chunk_size=None, exterior=False,
+           stable=False, shard=None) -> Samples:
     """Sample points uniformly over the surface of ``mesh``.
 
-    mesh: a path, a ``trimesh.Trimesh`` or a ``trimesh.Scene``. Returns :class:`Samples`
+    mesh: a path, a ``trimesh.Trimesh`` or a ``trimesh.Scene``. ``exterior``: only the
+    surface seen from outside (docs/exterior.md; needs embreex). Returns :class:`Samples`
     with ``.points`` (count, 3) and one array per requested attribute. The result is a
     pure function of the mesh, the options and ``seed``, whatever ``chunk_size``.
     """
     run = prepare(mesh, count, density=density, seed=seed, method=method, attributes=attributes,
                   poisson=poisson, radius=radius, weight=weight, objects=objects, precision=precision,
-                  chunk_size=chunk_size)
+                  chunk_size=chunk_size, exterior=exterior, stable=stable, shard=shard)
     t = time.perf_counter()
     samples = run.collect()
     samples.info["timings"]["sample"] = time.perf_counter() - t
@@ -195,7 +297,7 @@ def sample(mesh, count=10000, *, density=None, seed=0, method="random", attribut
 
 
 def check_options(count=None, density=None, seed=0, method="random", precision="auto", chunk_size=None,
-                  radius=None, poisson=False, weight=None, oversampling=None):
+                  radius=None, poisson=False, weight=None, oversampling=None, exterior=False, stable=False):
     """Raise ScatterUsageError for any option, or combination, that is wrong whatever the mesh."""
     if count is not None and density is not None:
         raise ScatterUsageError("give either a count (-n) or a --density, not both")
@@ -226,6 +328,16 @@ def check_options(count=None, density=None, seed=0, method="random", precision="
     if method != "random" and (poisson or radius is not None or weight):
         raise ScatterUsageError(f"--method {method} does not combine with --poisson, --radius or --weight "
                                 "(they work on the random method)")
+    if stable and method != "random":
+        raise ScatterUsageError(f"--stable does not combine with --method {method} (it is a random placement)")
+    if stable and poisson:
+        raise ScatterUsageError("--stable does not combine with --poisson (--radius gives a Poisson-disk set that "
+                                "stays put)")
+    if stable and exterior:
+        raise ScatterUsageError("--stable does not combine with --exterior yet")
+    if exterior and method == "stratified":
+        raise ScatterUsageError("--exterior does not combine with --method stratified (its strata are fixed by N); "
+                                "use random or sobol")
     if count is not None:
         _check_sobol_count(method, count)
         if poisson:
@@ -235,6 +347,35 @@ def check_options(count=None, density=None, seed=0, method="random", precision="
 def _check_sobol_count(method, count):
     if method == "sobol" and count > SOBOL_MAX_COUNT:
         raise ScatterUsageError(f"--method sobol gives at most 2^32 = {SOBOL_MAX_COUNT:,} points per run, not {count:,}")
+
+
+def output_options(run: Run, fmt: str) -> dict:
+    """What the writer of ``fmt`` needs from the run besides its points (keywords of
+    :func:`~scatter_cli.writers.write_samples`): LAS the sampled bounding box, USD the
+    input's up axis and units (when the surface carries them) and the point spacing."""
+    if fmt in ("las", "laz"):
+        return {"bounds": sampled_bounds(run.plan)}
+    if fmt == "usd":
+        area = run.info["area"]
+        return {"up_axis": getattr(run.surface, "up_axis", None),
+                "meters_per_unit": getattr(run.surface, "meters_per_unit", None),
+                "spacing": math.sqrt(area / run.count) if run.count and area > 0 else None}
+    return {}
+
+
+def check_shard(shard, poisson=False, radius=None):
+    """``(K, M)`` or ``"K/M"`` -> ``(K, M)`` ints with 0 <= K < M; None stays None."""
+    if shard is None:
+        return None
+    try:
+        k, m = (int(x) for x in (shard.split("/") if isinstance(shard, str) else shard))
+    except (TypeError, ValueError):
+        raise ScatterUsageError(f"--shard must be K/M (shard K of M, 0-based), not {shard!r}") from None
+    if not 0 <= k < m:
+        raise ScatterUsageError(f"--shard K/M needs 0 <= K < M, not {k}/{m}")
+    if poisson or radius is not None:
+        raise ScatterUsageError("--shard does not combine with --poisson or --radius (thinning is global)")
+    return k, m
 
 
 def sampled_bounds(plan: SamplePlan):

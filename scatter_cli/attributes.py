@@ -17,9 +17,13 @@ from .surface import Surface, apply_matrix, cofactor
 from .visuals import color_source, interpolate, uv_table, vertex_normal_table
 
 
+NORMAL_USERS = ("normal", "smooth-normal", "orient")
+
+
 class AttributeMaker:
-    def __init__(self, surface: Surface, names):
+    def __init__(self, surface: Surface, names, seed=0):
         self.surface = surface
+        self.seed = seed  # keys the orient spin stream
         self.names = tuple(names)
         self.needs_bary = any(n in ("bary", "smooth-normal", "uv", "color") for n in self.names)
         self._tables = {}
@@ -39,9 +43,15 @@ class AttributeMaker:
         """dict key -> array for the requested names, from one raw chunk."""
         out = {}
         groups = self._groups(raw) if len(self.surface.instances) > 1 else None
+        normals = None  # float64, shared by normal/smooth-normal and orient
         for name in self.names:
             key = ATTRIBUTES[name][0]
-            out[key] = getattr(self, "_make_" + name.replace("-", "_"))(raw, real_dtype, groups)
+            if name in NORMAL_USERS:
+                if normals is None:
+                    normals = self._normals(raw, groups)
+                out[key] = (self._orient(raw, normals) if name == "orient" else normals).astype(real_dtype)
+            else:
+                out[key] = getattr(self, "_make_" + name.replace("-", "_"))(raw, real_dtype, groups)
         return out
 
     # -- plumbing ---------------------------------------------------------------------
@@ -94,6 +104,8 @@ class AttributeMaker:
 
     def _prepare_normal(self):
         for gi in self._used:
+            if ("normal", gi) in self._tables:
+                continue
             g = self.surface.geometries[gi]
             v, f = g.vertices, g.faces
             n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
@@ -101,12 +113,29 @@ class AttributeMaker:
                 n /= np.linalg.norm(n, axis=1, keepdims=True)
             self._tables["normal", gi] = n
 
-    def _make_normal(self, raw, real_dtype, groups):
+    def _normals(self, raw, groups):
+        """(n, 3) float64 unit normals: smooth when smooth-normal is asked for, else the face's."""
+        if "smooth-normal" in self.names:
+            return self._smooth_normals(raw, groups)
+        return self._face_normals(raw, groups)
+
+    def _face_normals(self, raw, groups):
         def compute(k, face, bary):
             n = self._tables["normal", self._geometry_of(k)][face]
             return self._to_world(k, n) if k in self._cof else n
 
-        return self._per_group(raw, groups, compute, 3).astype(real_dtype)
+        return self._per_group(raw, groups, compute, 3)
+
+    # -- orient: +Z onto the normal, then a spin about it from the seed ------------------
+
+    def _prepare_orient(self):
+        if "smooth-normal" not in self.names:
+            self._prepare_normal()
+
+    def _orient(self, raw, normals):
+        from .orient import point_orientations
+
+        return point_orientations(normals, self.seed, raw.start)
 
     # -- smooth-normal: vertex normals, interpolated and normalised -------------------
 
@@ -115,7 +144,7 @@ class AttributeMaker:
         for gi in self._used:
             self._tables["vn", gi] = vertex_normal_table(self.surface.geometries[gi].mesh)
 
-    def _make_smooth_normal(self, raw, real_dtype, groups):
+    def _smooth_normals(self, raw, groups):
         def compute(k, face, bary):
             gi = self._geometry_of(k)
             n = interpolate(self._tables["vn", gi], self.surface.geometries[gi].faces, face, bary)
@@ -125,7 +154,7 @@ class AttributeMaker:
                 n[bad] = self._to_world(k, self._tables["normal", gi][face[bad]].copy())
             return n
 
-        return self._per_group(raw, groups, compute, 3).astype(real_dtype)
+        return self._per_group(raw, groups, compute, 3)
 
     # -- uv -----------------------------------------------------------------------------
 

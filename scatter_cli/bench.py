@@ -8,7 +8,7 @@ integrals whose exact values follow from the triangles:
   bounding-box diagonal;
 - ``second``: the central second moments C = E[(x - c)(x - c)^T] (closed form);
   error |C^ - C|_F / |C|_F, C^ the mean of (x - c)(x - c)^T over the points;
-- ``smooth``: the mean of :func:`stats.smooth_test_function` (a Gauss rule of order 8
+- ``smooth``: the mean of :func:`exact.smooth_test_function` (a Gauss rule of order 8
   per triangle, exact to degree 15); error |f^ - f| / sqrt(E f^2).
 
 ``error`` is the root mean square of the three. Each (variant, count) is run with
@@ -84,19 +84,19 @@ class Exact:
 
 def exact_values(tri, areas, order=SMOOTH_ORDER) -> Exact:
     """Exact integrals over triangles ``tri`` (F, 3, 3) with areas ``areas`` (F,)."""
-    from . import stats
+    from . import exact
 
     flat = tri.reshape(-1, 3)
     bounds = np.stack([flat.min(0), flat.max(0)])
-    centroid, second = stats.surface_covariance(tri, areas)
+    centroid, second = exact.surface_covariance(tri, areas)
     area = float(areas.sum())
-    f = stats.surface_integral(lambda p: _smooth_and_square(p, bounds), tri, areas, order=order) / area
+    f = exact.surface_integral(lambda p: _smooth_and_square(p, bounds), tri, areas, order=order) / area
     return Exact(centroid, second, float(f[0]), math.sqrt(float(f[1])), bounds,
                  float(np.linalg.norm(bounds[1] - bounds[0])), area)
 
 
 def _smooth_and_square(p, bounds):
-    from .stats import smooth_test_function
+    from .exact import smooth_test_function
 
     v = smooth_test_function(p, bounds)
     return np.column_stack([v, v * v])
@@ -104,7 +104,7 @@ def _smooth_and_square(p, bounds):
 
 def errors(points, exact: Exact):
     """Relative errors (dict of floats) of the integrals estimated from points (n, 3)."""
-    from .stats import smooth_test_function
+    from .exact import smooth_test_function
 
     x = np.asarray(points, dtype=np.float64)
     d = x - exact.centroid
@@ -212,7 +212,7 @@ def pymeshlab_sampler(tri, kind):
     return run
 
 
-def variants(surface, tri, notes, quick=False):
+def variants(surface, tri, notes):
     """The sampler variants for one mesh: [Variant]."""
     out = []
     for method in ("random", "stratified", "sobol"):
@@ -293,7 +293,7 @@ def fit_slope(rows, key="error"):
 POISSON_OVERSAMPLING = (3, 5, 8, 10, 15)
 
 
-def poisson_hook(surface, area, counts, seed, notes):
+def poisson_hook(surface, counts, seed):
     """Relative radius rho and time of exact-count Poisson thinning against the
     oversampling factor (candidates per output point): the spacing that time buys."""
     from .api import prepare
@@ -400,14 +400,14 @@ def run_bench(meshes=None, out="bench-out", quick=False, counts=None, repeats=No
         exact = exact_values(tri, areas)
         log(f"{name}: {len(tri):,} faces, area {exact.area:.6g}")
         mesh_notes = []
-        for v in variants(surface, tri, mesh_notes, quick):
+        for v in variants(surface, tri, mesh_notes):
             t = time.perf_counter()
             rows = measure(v, exact, counts, repeats, seed)
             res = Result(name, v.name, v.kind, rows, {k: fit_slope(rows, k) for k in ERRORS + ("error",)}, v.note)
             results.append(res)
             log(f"  {v.name:24s} slope {res.slope['error']:+.2f}  error@{rows[-1]['n']:.0e} "
                 f"{rows[-1]['error']:.2e}  ({time.perf_counter() - t:.1f} s)")
-        for row in poisson_hook(surface, exact.area, POISSON_COUNTS_QUICK if quick else POISSON_COUNTS, seed, mesh_notes):
+        for row in poisson_hook(surface, POISSON_COUNTS_QUICK if quick else POISSON_COUNTS, seed):
             poisson.append(dict(row, mesh=name))
         notes += [f"{name}: {n}" for n in dict.fromkeys(mesh_notes)]
     notes += [f"{r.variant}: {r.note}" for r in {r.variant: r for r in results if r.note}.values()]

@@ -17,7 +17,7 @@ from .errors import ScatterError
 from .surface import Surface, corners, doubled_areas, load_surface
 
 ALPHA = 1e-3
-INSTALL_HINT = "scatter check needs pymeshlab: pip install 'scatter-cli[check]' (or: pip install pymeshlab)"
+INSTALL_HINT = "scatter check needs pymeshlab and scipy: pip install 'scatter-cli[check]' (or: pip install pymeshlab scipy)"
 
 
 def world_triangles(surface: Surface):
@@ -64,9 +64,10 @@ def run_check(mesh, count=100_000, seed=0, poisson=False, radius=None, sampler=N
     out = out or (lambda line: print(line, file=sys.stdout))
     try:
         import pymeshlab  # noqa: F401
+        import scipy  # noqa: F401
     except ImportError:
         raise ScatterError(INSTALL_HINT) from None
-    from . import stats
+    from . import uniformity
 
     surface = mesh if isinstance(mesh, Surface) else load_surface(mesh)
     tri, areas = world_triangles(surface)
@@ -81,9 +82,9 @@ def run_check(mesh, count=100_000, seed=0, poisson=False, radius=None, sampler=N
         raise ScatterError(f"{surface.source}: too few points to compare ({len(ours)} and {len(theirs)})")
 
     k = _slab_count(min(len(ours), len(theirs)))
-    r_ours = stats.region_test(ours, tri, areas, k=k)
-    r_theirs = stats.region_test(theirs, tri, areas, k=k)
-    two = stats.two_sample_test(ours, theirs, tri, areas, k=k)
+    r_ours = uniformity.region_test(ours, tri, areas, k=k)
+    r_theirs = uniformity.region_test(theirs, tri, areas, k=k)
+    two = uniformity.two_sample_test(ours, theirs, tri, areas, k=k)
     ok_ours, ok_theirs = r_ours["p"] >= ALPHA, r_theirs["p"] >= ALPHA
     passed = ok_ours
 
@@ -125,7 +126,7 @@ def _slab_count(n):
 
 
 def _spacing_rows(ours, theirs, area):
-    from .thinning import spacing_stats
+    from .spacing import spacing_stats
 
     a, b = spacing_stats(ours, area), spacing_stats(theirs, area)
     return [

@@ -7,8 +7,9 @@ import numpy as np
 from .surface import corners, doubled_areas, load_surface
 
 
-def describe(mesh, input_format=None) -> dict:
-    """A JSON-ready summary of ``mesh`` (path, trimesh object or Surface)."""
+def describe(mesh, input_format=None, exterior=False) -> dict:
+    """A JSON-ready summary of ``mesh`` (path, trimesh object or Surface); ``exterior``
+    adds :func:`exterior_report`."""
     surface = load_surface(mesh, input_format=input_format)
     areas, finite, lo, hi = [], [], np.full(3, np.inf), np.full(3, -np.inf)
     for inst in surface.instances:
@@ -42,15 +43,75 @@ def describe(mesh, input_format=None) -> dict:
             for k, inst in enumerate(surface.instances)
         ],
     }
+    if exterior:
+        report["exterior"] = exterior_report(surface)
     return report
+
+
+# Uniform candidates behind the exterior-area estimate of ``scatter info --exterior``
+# (standard error at most 0.5 / sqrt(N) of the area), and the probes of each face.
+INFO_CANDIDATES = 100_000
+FACE_PROBES = np.array([[0.8, 0.1, 0.1], [0.1, 0.8, 0.1], [0.1, 0.1, 0.8], [1 / 3, 1 / 3, 1 / 3]])
+
+
+def exterior_report(surface, seed=0) -> dict:
+    """Exterior area (estimate from uniform candidates, with its standard error) and the
+    faces whose probes (three points near the corners and the centroid) are all, some or
+    none exterior. The face counts are a survey, not a certificate: a face partly hidden
+    between its probes counts as exterior (so sampling classifies every point it keeps)."""
+    from .exterior import ExteriorSource, classify
+    from .sampling import RawChunk, SamplePlan
+    from .visibility import Occluder
+
+    occluder = Occluder(surface)
+    plan = SamplePlan(surface)
+    source = ExteriorSource(_Plain(plan, seed), occluder, seed, plan.area, candidates=INFO_CANDIDATES)
+    seen = []
+    for k, inst in enumerate(surface.instances):
+        g = surface.geometries[inst.geometry]
+        tri = surface.world_vertices(inst)[g.faces]  # (F, 3, 3)
+        points = np.einsum("pk,fkc->fpc", FACE_PROBES, tri).reshape(-1, 3)
+        face = np.repeat(np.arange(len(g.faces)), len(FACE_PROBES))
+        chunk = RawChunk(0, points, face, np.full(len(face), k, np.int64), None)
+        with np.errstate(invalid="ignore"):
+            ok, _ = classify(occluder, chunk, seed) if len(face) else (np.zeros(0, bool), 0)
+        seen.append(ok.reshape(-1, len(FACE_PROBES)).sum(axis=1))
+    seen = np.concatenate(seen) if seen else np.zeros(0, np.int64)
+    st = source.stats
+    return {
+        "area": st["exterior_area"],
+        "area_se": st["exterior_area_se"],
+        "fraction": st["exterior_fraction"],
+        "candidates": st["candidates"],
+        "faces_exterior": int(np.sum(seen == len(FACE_PROBES))),
+        "faces_mixed": int(np.sum((seen > 0) & (seen < len(FACE_PROBES)))),
+        "faces_hidden": int(np.sum(seen == 0)),
+    }
+
+
+class _Plain:
+    """The random stream of ``plan`` as a source."""
+
+    def __init__(self, plan, seed):
+        self.plan, self.seed = plan, seed
+
+    def draw(self, start, stop):
+        return self.plan.draw(start, stop, self.seed)
 
 
 def _attributes(surface) -> dict:
     """Which per-point attributes the file can provide (without computing any of them)."""
+    from .visuals import VertexTables
+
     has = {"normals": False, "colors": False, "uv": False, "texture": False}
     for g in surface.geometries:
         mesh = g.mesh
         if mesh is None:
+            continue
+        if isinstance(mesh, VertexTables):
+            has["normals"] |= mesh.normals is not None
+            has["colors"] |= any(c is not None for c in (mesh.vertex_colors, mesh.face_colors, mesh.constant_color))
+            has["uv"] |= mesh.uv is not None
             continue
         cache = getattr(mesh, "_cache", None)
         if cache is not None and "vertex_normals" in getattr(cache, "cache", {}):
@@ -84,6 +145,14 @@ def format_text(report) -> str:
         f"attributes     {', '.join(attrs) or 'none'}",
         f"objects        {report['instances']} instance(s) of {report['geometries']} geometry(ies)",
     ]
+    ext = report.get("exterior")
+    if ext:
+        lines += [
+            f"exterior area  {ext['area']:.6g} ± {ext['area_se']:.2g} ({100 * ext['fraction']:.2f} %, "
+            f"from {ext['candidates']:,} uniform points)",
+            f"exterior faces {ext['faces_exterior']:,} all probes out, {ext['faces_mixed']:,} some, "
+            f"{ext['faces_hidden']:,} none (4 probes a face)",
+        ]
     if report["instances"] > 1 or report["geometries"] > 1:
         lines += [f"  [{o['index']}] {o['name']} ({o['geometry']}, {o['faces']:,} faces)" for o in report["objects"]]
     return "\n".join(lines)

@@ -5,8 +5,11 @@ start-up cost. A new format or attribute added here appears in ``--help`` by its
 """
 
 # Output formats (-f), and the file suffixes that select them.
-FORMATS = ("ply", "csv", "xyz", "npy")
-SUFFIXES = {"ply": "ply", "csv": "csv", "xyz": "xyz", "txt": "xyz", "npy": "npy"}
+FORMATS = ("ply", "csv", "xyz", "npy", "pcd", "las", "laz", "usd")
+SUFFIXES = {"ply": "ply", "csv": "csv", "xyz": "xyz", "txt": "xyz", "npy": "npy", "pcd": "pcd", "las": "las",
+            "laz": "laz", "usd": "usd", "usda": "usd", "usdc": "usd"}
+# Formats --ascii applies to.
+ASCII_FORMATS = ("ply", "pcd")
 
 # Attribute name (as given to -a) -> (key in Samples, output columns, dtype kind).
 # "real" columns take the coordinate precision; the others have a fixed type.
@@ -18,6 +21,7 @@ ATTRIBUTES = {
     "color": ("color", ("red", "green", "blue", "alpha"), "u1"),
     "uv": ("uv", ("u", "v"), "real"),
     "object": ("object", ("object_index",), "<i4"),
+    "orient": ("orient", ("qx", "qy", "qz", "qw"), "real"),
 }
 # Columns always come in this order, whatever the order of -a.
-KEY_ORDER = ("normal", "face", "bary", "color", "uv", "object")
+KEY_ORDER = ("normal", "orient", "face", "bary", "color", "uv", "object")

@@ -26,21 +26,29 @@ def read_triangles(path):
     """(vertices (V, 3) float64, faces (F, 3) int64) of a binary PLY, or None."""
     try:
         with open(path, "rb") as f:
-            head = f.read(_MAX_HEADER)
-            end = head.find(b"end_header")
-            if not head.startswith(b"ply") or end < 0:
-                return None
-            body_at = head.index(b"\n", end) + 1
-            layout = _layout(head[:end].decode("ascii").split("\n"))
-            if layout is None:
-                return None
-            order, vertex, n_vertex, face, n_face = layout
-            vertex, face = vertex.newbyteorder(order), face.newbyteorder(order)
-            sizes = (vertex.itemsize * n_vertex, face.itemsize * n_face)
-            if body_at + sum(sizes) > os.fstat(f.fileno()).st_size:
-                return None  # truncated, or counts that do not fit: trimesh says which
             data = _contents(f)
-    except (OSError, ValueError, UnicodeDecodeError, TypeError):
+    except OSError:
+        return None
+    return read_triangles_from(data)
+
+
+def read_triangles_from(data):
+    """read_triangles on the bytes of a file (any buffer)."""
+    try:
+        head = bytes(data[:_MAX_HEADER])
+        end = head.find(b"end_header")
+        if not head.startswith(b"ply") or end < 0:
+            return None
+        body_at = head.index(b"\n", end) + 1
+        layout = _layout(head[:end].decode("ascii").split("\n"))
+        if layout is None:
+            return None
+        order, vertex, n_vertex, face, n_face = layout
+        vertex, face = vertex.newbyteorder(order), face.newbyteorder(order)
+        sizes = (vertex.itemsize * n_vertex, face.itemsize * n_face)
+        if body_at + sum(sizes) != len(data):
+            return None  # truncated, trailing bytes or counts that do not fit: trimesh says which
+    except (ValueError, UnicodeDecodeError, TypeError):
         return None
     v = np.frombuffer(data, dtype=vertex, count=n_vertex, offset=body_at)
     t = np.frombuffer(data, dtype=face, count=n_face, offset=body_at + sizes[0])

@@ -39,7 +39,7 @@ class Samples:
 
     ``samples.points``, ``samples.normal`` (n, 3), ``samples.face`` (n,) int32,
     ``samples.bary`` (n, 3), ``samples.color`` (n, 4) uint8, ``samples.uv`` (n, 2),
-    ``samples.object`` (n,) int32. ``info`` holds run statistics (area, radius, ...).
+    ``samples.object`` (n,) int32, ``samples.orient`` (n, 4) quaternions ``qx qy qz qw``. ``info`` holds run statistics (area, radius, ...).
     """
 
     def __init__(self, points, attributes=None, info=None):

@@ -19,6 +19,7 @@ import numpy as np
 from .errors import ScatterError, ScatterUsageError
 
 MESH_FORMATS = ("ply", "obj", "stl", "off", "glb", "gltf")
+USD_FORMATS = ("usd", "usda", "usdc", "usdz")  # read by usdread (optional extra `usd`)
 # Called before trimesh is first imported, when set: the command line imports it with
 # SciPy hidden (see cli.py). Nothing imports trimesh before a mesh needs it.
 import_trimesh = None
@@ -78,10 +79,14 @@ def load_surface(source, *, input_format: str | None = None, objects=None, plain
     """Load ``source`` (path, ``'-'`` for standard input, trimesh.Trimesh or trimesh.Scene).
 
     ``plain``: only vertices and faces are wanted (no colours, UVs or normals from the
-    file), so a binary PLY triangle mesh is read without importing trimesh.
+    file), so the fast readers (readers.py) may read it without importing trimesh.
     """
+    if isinstance(source, (str, os.PathLike)) and _suffix(source, input_format) in USD_FORMATS:
+        from .usdread import load_usd
+
+        return load_usd(os.fspath(source), input_format, objects=objects, plain=plain)
     if plain and not objects and isinstance(source, (str, os.PathLike)) and not _is_stream(os.fspath(source)):
-        fast = _read_plain_ply(os.fspath(source), input_format)
+        fast = _read_plain(os.fspath(source), input_format)
         if fast is not None:
             return fast
     if import_trimesh is not None and "trimesh" not in sys.modules:
@@ -108,17 +113,29 @@ def load_surface(source, *, input_format: str | None = None, objects=None, plain
     return surface
 
 
-def _read_plain_ply(path, input_format):
-    """The Surface of a binary PLY triangle mesh read by plyread, or None (use trimesh)."""
-    from .plyread import read_triangles
+def _suffix(source, input_format):
+    return (input_format or os.path.splitext(os.fspath(source))[1].lstrip(".")).lower()
 
-    if (input_format or os.path.splitext(path)[1].lstrip(".")).lower() != "ply":
-        return None
+
+def _read_plain(path, input_format):
+    """The Surface of a mesh file read by the fast readers, or None (use trimesh).
+
+    One geometry makes a mesh, several a scene, as trimesh.load makes them; the names
+    follow trimesh's for an OBJ split by material (file name, then name_1, name_2...).
+    """
+    from .readers import read_mesh
+
     _check_readable(path)
-    arrays = read_triangles(path)
-    if arrays is None:
+    parts = read_mesh(path, (input_format or os.path.splitext(path)[1].lstrip(".")).lower())
+    if parts is None:
         return None
-    surface = Surface([_checked_geometry(path, *arrays, path)], [Instance(os.path.basename(path), 0)], path)
+    if len(parts) == 1:
+        surface = Surface([_checked_geometry(path, *parts[0], path)], [Instance(os.path.basename(path), 0)], path)
+    else:
+        base = os.path.basename(path)
+        names = [base] + [f"{base}_{k}" for k in range(1, len(parts))]
+        geometries = [_checked_geometry(n, *arrays, path) for n, arrays in zip(names, parts)]
+        surface = Surface(geometries, [Instance(n, k) for k, n in enumerate(names)], path, is_scene=True)
     if surface.face_count == 0:
         raise ScatterError(f"{path}: the mesh has no faces")
     return surface
@@ -150,7 +167,11 @@ def _read_file(source, input_format):
                 raise ScatterError(f"{path}: no data in the pipe")
             file_obj = io.BytesIO(data)
     if file_type not in trimesh.available_formats():
-        raise ScatterUsageError(f"{path}: unknown mesh format '{file_type}' (try one of: {', '.join(MESH_FORMATS)})")
+        raise ScatterUsageError(f"{path}: unknown mesh format '{file_type}' (try one of: {', '.join(MESH_FORMATS + USD_FORMATS)})")
+    if file_type in ("glb", "gltf"):
+        from .draco import check_decoder
+
+        check_decoder(path, file_type, file_obj)
     try:
         with np.errstate(all="ignore"):
             return trimesh.load(file_obj, file_type=file_type, process=False)
@@ -289,5 +310,15 @@ def apply_matrix(m, v, out=None):
 
 
 def cofactor(a):
-    """Cofactor matrix of a (3, 3) matrix, defined for singular ones too."""
-    return np.stack([np.cross(a[1], a[2]), np.cross(a[2], a[0]), np.cross(a[0], a[1])])
+    """Cofactor matrix of a (3, 3) matrix, defined for singular ones too.
+
+    Row i is ``cross(a[i+1], a[i+2])``, worked out on Python floats: the same products
+    and differences as np.cross (so the same bits) without its per-call cost, which a
+    scene of many instances pays once per instance.
+    """
+    r0, r1, r2 = np.asarray(a, dtype=np.float64)[:3, :3].tolist()
+    return np.array([_cross(r1, r2), _cross(r2, r0), _cross(r0, r1)])
+
+
+def _cross(x, y):
+    return [x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]]

@@ -3,11 +3,9 @@
 Pillow is imported only by :meth:`Texture.pixels`, the first time a texel is needed, so
 a run that asks for no colour and no texture weight never decodes an image.
 
-Wrap modes: trimesh 5.2 does not keep the glTF sampler of a material's texture, so
+Wrap modes: trimesh does not keep the glTF sampler of a material's texture, so
 every texture is sampled with REPEAT (the glTF default). :func:`bilinear` implements
-CLAMP_TO_EDGE and MIRRORED_REPEAT too, for when the loader exposes the sampler (a
-material carrying ``_scatter_wrap = (wrap_s, wrap_t)`` is honoured by
-:func:`scatter_cli.visuals.color_source`).
+CLAMP_TO_EDGE and MIRRORED_REPEAT too, for a loader that gives the sampler.
 
 Colour: texture RGBA times the material's base colour factor, both taken as stored
 (sRGB-encoded bytes; no linearisation), rounded to uint8.
@@ -24,7 +22,6 @@ import threading
 import numpy as np
 
 REPEAT, CLAMP_TO_EDGE, MIRRORED_REPEAT = 10497, 33071, 33648
-WRAP_NAMES = {REPEAT: "REPEAT", CLAMP_TO_EDGE: "CLAMP_TO_EDGE", MIRRORED_REPEAT: "MIRRORED_REPEAT"}
 
 
 class Texture:

@@ -6,13 +6,71 @@ built by the caller that needs it, once per geometry, never per instance.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .texture import REPEAT, Texture
 
 
+@dataclass
+class VertexTables:
+    """What a reader other than trimesh found besides positions (a Geometry's ``mesh``).
+
+    vertices (V, 3), faces (F, 3): the geometry's own arrays. uv (V, 2) float64; normals
+    (V, 3) float64 (None: computed from the faces when asked for); colour as one of
+    vertex_colors (V, 4), face_colors (F, 4) or constant_color (4,), float64 RGBA in
+    [0, 255]. ``point_of`` (V,) int64: when the vertices are per-corner copies (to carry
+    face-varying values), the file point each copy came from, so that computed normals
+    are smooth across the copies.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    uv: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    vertex_colors: np.ndarray | None = None
+    face_colors: np.ndarray | None = None
+    constant_color: np.ndarray | None = None
+    point_of: np.ndarray | None = None
+
+    @property
+    def vertex_normals(self):
+        if self.normals is not None:
+            return self.normals
+        if self.point_of is None:
+            return weighted_vertex_normals(self.vertices, self.faces)
+        points = np.empty((int(self.point_of.max()) + 1, 3)) if len(self.point_of) else np.empty((0, 3))
+        points[self.point_of] = self.vertices
+        return weighted_vertex_normals(points, self.point_of[self.faces])[self.point_of]
+
+
+def weighted_vertex_normals(vertices, faces):
+    """(V, 3) float64 unit vertex normals: face normals summed around each vertex, weighted
+    by the corner angle (as trimesh computes them). vertices (V, 3), faces (F, 3) int64."""
+    tri = vertices[faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+    n[~np.isfinite(n).all(axis=1)] = 0.0
+    angles = np.empty(faces.shape)
+    for k in range(3):
+        a, b = tri[:, (k + 1) % 3] - tri[:, k], tri[:, (k + 2) % 3] - tri[:, k]
+        angles[:, k] = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+    angles[~np.isfinite(angles)] = 0.0
+    flat = faces.ravel()
+    out = np.empty((len(vertices), 3))
+    for c in range(3):
+        out[:, c] = np.bincount(flat, weights=(angles * n[:, c : c + 1]).ravel(), minlength=len(vertices))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out /= np.linalg.norm(out, axis=1, keepdims=True)
+    return out
+
+
 def uv_table(mesh):
     """(V, 2) float64 texture coordinates, or None when the geometry has none."""
+    if isinstance(mesh, VertexTables):
+        return mesh.uv
     visual = getattr(mesh, "visual", None)
     uv = getattr(visual, "uv", None) if getattr(visual, "kind", None) == "texture" else None
     if uv is None:
@@ -24,6 +82,8 @@ def uv_table(mesh):
 def vertex_normal_table(mesh):
     """(V, 3) float64 vertex normals: the file's when it has them, else trimesh's
     (face normals summed around each vertex, weighted by corner angle)."""
+    if isinstance(mesh, VertexTables):
+        return mesh.vertex_normals
     return np.asarray(mesh.vertex_normals, dtype=np.float64)
 
 
@@ -78,7 +138,10 @@ def interpolate(table, faces, face, bary):
 
 
 def color_source(mesh, faces, source="<mesh>", textures=None):
-    """The :class:`ColorSource` of a trimesh geometry, or None when it has no colour."""
+    """The :class:`ColorSource` of a geometry (trimesh or :class:`VertexTables`), or None
+    when it has no colour."""
+    if isinstance(mesh, VertexTables):
+        return _table_color_source(mesh, faces)
     visual = getattr(mesh, "visual", None)
     kind = getattr(visual, "kind", None)
     if kind == "vertex":
@@ -92,10 +155,19 @@ def color_source(mesh, faces, source="<mesh>", textures=None):
     image = getattr(material, "baseColorTexture", None) if hasattr(material, "baseColorTexture") else getattr(material, "image", None)
     uv = uv_table(mesh)
     if image is not None and not _placeholder(image) and uv is not None:
-        wrap_s, wrap_t = getattr(material, "_scatter_wrap", (REPEAT, REPEAT))
-        return ColorSource("texture", faces, uv=uv, texture=_shared_texture(textures, image, wrap_s, wrap_t, source), factor=factor)
+        return ColorSource("texture", faces, uv=uv, texture=_shared_texture(textures, image, REPEAT, REPEAT, source), factor=factor)
     if factor is not None:
         return ColorSource("constant", faces, factor=factor)
+    return None
+
+
+def _table_color_source(tables, faces):
+    if tables.vertex_colors is not None:
+        return ColorSource("vertex", faces, table=tables.vertex_colors)
+    if tables.face_colors is not None:
+        return ColorSource("face", faces, table=tables.face_colors)
+    if tables.constant_color is not None:
+        return ColorSource("constant", faces, factor=tables.constant_color)
     return None
 
 

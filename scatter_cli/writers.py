@@ -1,4 +1,4 @@
-"""Writers: PLY (binary or ASCII), CSV, XYZ and NPY, streamed chunk by chunk.
+"""Writers: PLY (binary or ASCII), CSV, XYZ, NPY, and through their modules PCD, LAS/LAZ and USD.
 
 A file is written to a temporary name beside it and renamed into place only when
 complete, so a failure never leaves a partial file and an existing one stays untouched.
@@ -16,6 +16,7 @@ import numpy as np
 
 from .errors import STDOUT, ScatterError, ScatterUsageError, writing
 from .outputs import FORMATS, SUFFIXES
+
 PLY_TYPES = {"f4": "float", "f8": "double", "i4": "int", "u1": "uchar"}
 
 
@@ -34,6 +35,11 @@ def infer_format(path, fmt=None) -> str:
     return SUFFIXES[suffix]
 
 
+def run_precision(fmt, precision):
+    """The coordinate precision a run needs for ``fmt``: LAS quantises float64 points itself."""
+    return "float64" if fmt in ("las", "laz") else precision
+
+
 def _structured_dtype(layout):
     return np.dtype([(c, dt) for _, cols, dt in layout for c in cols])
 
@@ -44,6 +50,7 @@ class _Writer:
         self.layout = layout
         self.count = count
         self.written = 0
+        self.report = {}
 
     def header(self):
         pass
@@ -130,7 +137,24 @@ class _TextEncoder:
         return ((self.row * n) % tuple(flat)).encode("ascii")
 
 
-def make_writer(stream, fmt, layout, count, ascii=False):
+def make_writer(stream, fmt, layout, count, ascii=False, bounds=None, **options):
+    """The writer of ``fmt``; ``bounds`` (2, 3): the sampled bounding box (LAS scale and offset).
+
+    ``options`` for USD: ``path`` (its suffix picks .usda text or .usdc crate), ``up_axis``,
+    ``meters_per_unit`` (from the input when it has them), ``spacing`` (placeholder size).
+    """
+    if fmt == "usd":
+        from .usdwrite import UsdWriter
+
+        return UsdWriter(stream, layout, count, **options)
+    if fmt in ("las", "laz"):
+        from .las import LasWriter
+
+        return LasWriter(stream, layout, count, bounds, compress=fmt == "laz")
+    if fmt == "pcd":
+        from .pcd import PcdWriter
+
+        return PcdWriter(stream, layout, count, ascii)
     if fmt == "ply":
         return PlyWriter(stream, layout, count, ascii)
     if fmt == "npy":
@@ -140,14 +164,36 @@ def make_writer(stream, fmt, layout, count, ascii=False):
     return TextWriter(stream, layout, count, " ", False)
 
 
-def write_samples(chunks, path, fmt, layout, count, ascii=False):
-    """Write an iterable of Samples chunks (``count`` points in all) to ``path`` or stdout."""
+def write_samples(chunks, path, fmt, layout, count, ascii=False, bounds=None, **options):
+    """Write an iterable of Samples chunks (``count`` points in all) to ``path`` or stdout.
+
+    Returns what the writer reports for ``--stats`` (LAS: the quantisation), a dict.
+    """
     with open_output(path) as stream:
-        writer = make_writer(stream, fmt, layout, count, ascii)
+        if fmt == "usd":
+            options["path"] = path
+        writer = make_writer(stream, fmt, layout, count, ascii, bounds, **options)
         writer.header()
         for chunk in chunks:
             writer.write(chunk)
         writer.finish()
+    return writer.report
+
+
+def copy_tail(path, offset, stream, block=1 << 22):
+    """Copy the bytes of file ``path`` from ``offset`` to its end into ``stream`` (for merging)."""
+    with _reading(path), open(path, "rb") as f:
+        f.seek(offset)
+        for data in iter(lambda: f.read(block), b""):
+            stream.write(data)
+
+
+@contextlib.contextmanager
+def _reading(path):
+    try:
+        yield
+    except OSError as exc:
+        raise ScatterError(f"{path}: cannot read: {exc.strerror or exc}") from None
 
 
 @contextlib.contextmanager

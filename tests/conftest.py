@@ -9,34 +9,14 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
+from benchmarks.hardcheck import spread_triangles, triangles_mesh  # noqa: F401 (the tests' mesh builders)
+
 # Property tests explore a fixed sequence of examples: a CI run is reproducible.
 settings.register_profile("scatter", derandomize=True, database=None, deadline=None)
 settings.load_profile("scatter")
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples"
-
-
-def triangles_mesh(tri):
-    """A trimesh.Trimesh of separate triangles: tri (F, 3, 3) float64."""
-    import trimesh
-
-    tri = np.asarray(tri, dtype=np.float64)
-    return trimesh.Trimesh(tri.reshape(-1, 3), np.arange(len(tri) * 3).reshape(-1, 3), process=False)
-
-
-def spread_triangles(exponents, rng=None):
-    """Right triangles with areas 10**e, one per exponent, each in its own plane z = index.
-
-    Returns (tri (F, 3, 3), areas (F,)).
-    """
-    exponents = np.asarray(exponents, dtype=np.float64)
-    legs = np.sqrt(2 * 10.0**exponents)
-    tri = np.zeros((len(legs), 3, 3))
-    tri[:, 1, 0] = legs
-    tri[:, 2, 1] = legs
-    tri[:, :, 2] = np.arange(len(legs))[:, None]
-    return tri, 10.0**exponents
 
 
 def user_env(env=None):

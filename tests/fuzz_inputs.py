@@ -57,8 +57,28 @@ def _off():
     return ("\n".join(lines) + "\n").encode()
 
 
+def _obj_split():
+    """Quads, negative indices, v//vn refs and two materials: the fast reader's harder rules."""
+    lines = [f"v {x} {y} {z}" for x, y, z in TRI_V + [(1.0, 1.0, 0.5)]] + ["vn 0 0 1"]
+    lines += ["usemtl a", "f 1//1 2//1 3//1 5//1", "usemtl b", "f -1//1 -2//1 -3//1", "usemtl a", "f 1//1 3//1 4//1 2//1"]
+    return ("\r\n".join(lines) + "\r\n").encode()
+
+
+def _off_quads():
+    lines = ["OFF", f"{len(TRI_V) + 1} 3 0"] + [" ".join(map(str, v)) for v in TRI_V + [(1.0, 1.0, 0.5)]]
+    lines += ["4 0 1 4 2", "3 0 2 3", "4 0 3 4 1"]
+    return "\n".join(lines).encode()  # no final newline
+
+
+def _ply_ascii_quads():
+    return _ply_ascii().replace(b"element face 4", b"element face 3").replace(b"3 0 1 2\n3 0 2 3\n", b"4 0 1 2 3\n")
+
+
 SEEDS = {
     "ply-ascii": ("ply", _ply_ascii()),
+    "ply-ascii-quads": ("ply", _ply_ascii_quads()),
+    "obj-split": ("obj", _obj_split()),
+    "off-quads": ("off", _off_quads()),
     "ply-binary": ("ply", _ply_binary()),
     "obj": ("obj", _obj()),
     "stl-ascii": ("stl", _stl_ascii()),
@@ -103,12 +123,62 @@ def mutate(data: bytes, ops) -> bytes:
             b[p:p] = b[p : p + 1 + arg % 64]
         elif kind == 7:  # replace a whole line-ish region with random-looking bytes
             b[p : p + 1 + arg % 8] = bytes((arg * 37 + i * 101) % 256 for i in range(1 + arg % 8))
+        elif kind == 8:  # a long line: spaces, digits or a run of one token
+            filler = (b" ", b"7", b"1/2/3 ", b"0.5 ")[arg % 4]
+            b[p:p] = filler * (1000 + 97 * (arg % 1000)) + b"\n"
+        elif kind == 9:  # a huge or extreme index where a number was
+            b[p:p] = (b" 2147483647", b" -2147483648", b" 2147483648", b" 18446744073709551616", b" -0")[arg % 5]
+        elif kind == 10:  # deep backslash continuations
+            b[p:p] = (b"\\\n", b"\\\r\n", b"\\")[arg % 3] * (1 + arg % 5000)
+        elif kind == 11:  # a number of 10^5 digits
+            b[p:p] = (b"1" * 100000, b"0." + b"0" * 100000 + b"1", b"9" * 50000 + b"e-50000")[arg % 3]
     return bytes(b)
 
 
 def random_ops(rng: np.random.Generator, max_ops=4):
     k = int(rng.integers(1, max_ops + 1))
-    return [(int(rng.integers(0, 8)), int(rng.integers(0, 1 << 16)), int(rng.integers(0, 1 << 16))) for _ in range(k)]
+    return [(int(rng.integers(0, MUTATIONS)), int(rng.integers(0, 1 << 16)), int(rng.integers(0, 1 << 16)))
+            for _ in range(k)]
+
+
+MUTATIONS = 12  # kinds of op in mutate()
+
+
+def differential(data: bytes, suffix: str, workdir) -> str:
+    """Where the fast reader answers for ``data``, check it against trimesh.
+
+    Returns 'handed' (the fast reader gave the file to trimesh) or 'same' (it answered,
+    and trimesh loads the same world-space triangles in the same order); raises
+    AssertionError when they differ or when trimesh rejects what the fast reader read.
+    """
+    import os
+
+    from scatter_cli.errors import ScatterError
+    from scatter_cli.readers import read_mesh
+    from scatter_cli.surface import load_surface
+
+    path = os.path.join(workdir, f"diff.{suffix}")
+    with open(path, "wb") as f:
+        f.write(data)
+    if read_mesh(path, suffix) is None:
+        return "handed"
+    try:
+        fast = load_surface(path, plain=True)
+    except ScatterError as exc:  # the arrays fail scatter's checks: so must trimesh's
+        try:
+            load_surface(path)
+        except ScatterError:
+            return "same"
+        raise AssertionError(f"only the fast reader's arrays were rejected: {exc}") from None
+    try:
+        slow = load_surface(path)
+    except ScatterError as exc:
+        raise AssertionError(f"the fast reader read a file trimesh rejects: {exc}") from None
+    a = [fast.world_vertices(i)[fast.geometries[i.geometry].faces] for i in fast.instances]
+    b = [slow.world_vertices(i)[slow.geometries[i.geometry].faces] for i in slow.instances]
+    if len(a) != len(b) or any(x.shape != y.shape or x.tobytes() != y.tobytes() for x, y in zip(a, b)):
+        raise AssertionError("the fast reader and trimesh give different triangles")
+    return "same"
 
 
 def exercise(data: bytes, suffix: str, workdir) -> str:

@@ -145,10 +145,12 @@ def test_vertex_colours_match_pymeshlab_attribute_transfer():
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=s.points))
     ms.transfer_attributes_per_vertex(sourcemesh=0, targetmesh=1, colortransfer=True)
     theirs = np.rint(ms.current_mesh().vertex_color_matrix() * 255)
-    # Away from the box edges (where two faces are equally close) the colours agree.
-    inner = np.all((s.points > 0.01) & (s.points < 0.99), axis=1).sum() >= 0
-    interior = (np.sort(np.minimum(s.points, 1 - s.points), axis=1)[:, 1] > 0.01)
-    assert inner and interior.sum() > 2000
+    # The points lie on the unit box's faces: the nearest face plane at distance 0 ...
+    to_planes = np.sort(np.minimum(s.points, 1 - s.points), axis=1)
+    assert (s.points >= 0).all() and (s.points <= 1).all() and to_planes[:, 0].max() < 1e-12
+    # ... and away from its edges (where two faces are equally close) the colours agree.
+    interior = to_planes[:, 1] > 0.01
+    assert interior.sum() > 2000
     diff = np.abs(theirs[interior] - s.color[interior].astype(float))
     assert diff.max() <= 2
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from scatter_cli import bench, stats
+from scatter_cli import bench
+from scatter_cli.exact import smooth_test_function
 from scatter_cli.surface import load_surface
 
 from .conftest import run_scatter, run_user
@@ -52,7 +53,7 @@ def test_exact_values_match_brute_force_quadrature(case):
 
     def integrand(p):
         d = p - c
-        f = stats.smooth_test_function(p, exact.bounds)
+        f = smooth_test_function(p, exact.bounds)
         return np.column_stack([d, (d[:, :, None] * d[:, None, :]).reshape(-1, 9), f])
 
     got = brute_force(tri, integrand) / area
@@ -73,7 +74,7 @@ def test_exact_values_match_a_high_count_estimate(case):
     x = sample(triangles_mesh(tri), n, seed=2, precision="float64").points
     d = x - exact.centroid
     values = np.column_stack([d, (d[:, :, None] * d[:, None, :]).reshape(-1, 9),
-                              stats.smooth_test_function(x, exact.bounds)])
+                              smooth_test_function(x, exact.bounds)])
     truth = np.concatenate([np.zeros(3), exact.second.ravel(), [exact.smooth]])
     se = values.std(axis=0) / np.sqrt(n)
     assert (np.abs(values.mean(axis=0) - truth) < 5 * se + 1e-12 * exact.diagonal**2).all()
@@ -86,7 +87,7 @@ def _signed(surface, exact, method, warp, seeds, n=200_000):
     for s in seeds:
         x = run(n, s)
         d = x - exact.centroid
-        out.append([stats.smooth_test_function(x, exact.bounds).mean() - exact.smooth,
+        out.append([smooth_test_function(x, exact.bounds).mean() - exact.smooth,
                     np.einsum("ij,ij->", d, d) / n - np.trace(exact.second)])
     return np.array(out)
 

@@ -127,7 +127,7 @@ def test_all_vertices_non_finite(tmp_path):
         (["-a", "normal,smooth-normal"], ["normal"]),
         (["--method", "magic"], ["magic"]),
         (["--precision", "float16"], ["float16"]),
-        (["-f", "las"], ["las"]),
+        (["-f", "e57"], ["e57"]),
         (["--seed", "-1"], ["seed"]),
         (["--chunk-size", "0"], ["chunk"]),
         (["--density", "-2"], ["density"]),
@@ -142,7 +142,7 @@ def test_usage_errors_exit_2(sample_mesh, existing, args, words):
 
 
 def test_output_suffix_unknown(sample_mesh, tmp_path):
-    assert_one_line_error(run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-o", tmp_path / "x.las"), 2, "x.las")
+    assert_one_line_error(run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-o", tmp_path / "x.e57"), 2, "x.e57")
 
 
 def test_output_folder_missing(sample_mesh, tmp_path):

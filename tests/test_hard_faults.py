@@ -127,7 +127,7 @@ def test_bad_input(tmp_path, out, case):
         (["-n", "-5"], ["count"]), (["-n", "1.5"], ["count"]), (["-n", "ten"], ["count"]),
         (["--radius", "0"], ["radius"]), (["--radius", "-1"], ["radius"]), (["--radius", "nan"], ["radius"]),
         (["-a", "normal,sparkle"], ["sparkle"]), (["--density", "0"], ["density"]), (["--density", "inf"], ["density"]),
-        (["-f", "las"], ["las"]),
+        (["-f", "e57"], ["e57"]),
     ],
 )
 def test_bad_values_are_usage_errors(out, args, words):

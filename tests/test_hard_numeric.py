@@ -18,10 +18,9 @@ from scatter_cli.sources import RandomSource
 from scatter_cli.surface import load_surface
 from scatter_cli.warps import square_to_triangle
 
-from .conftest import spread_triangles, triangles_mesh
+from benchmarks.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_chi2_pvalue, recover_bary,
+                                  spread_triangles, triangles_mesh, two_sum_le_one, uniform_in_triangle_pvalue)
 from .doubles import Float32CdfPlan, UnweightedSource
-from .hardcheck import (ALPHA, exact_face_errors, pooled_chi2_pvalue, recover_bary, two_sum_le_one,
-                        uniform_in_triangle_pvalue)
 
 ON_FACE_UNITS = 4  # "a few ulps": at most 4 roundings of a coordinate away from the face
 
@@ -145,15 +144,6 @@ def test_points_on_slivers_alone_stay_on_them():
 
 
 # ---------------------------------------------------------------- areas over 18 decades
-
-
-def area_groups(areas, counts, n):
-    """Observed and expected counts of faces grouped by area decade."""
-    decade = np.floor(np.log10(areas)).astype(int)
-    keys = np.unique(decade)
-    obs = np.array([counts[decade == k].sum() for k in keys])
-    exp = np.array([n * areas[decade == k].sum() / areas.sum() for k in keys])
-    return obs, exp
 
 
 def face_counts(source, faces):

@@ -156,11 +156,11 @@ def test_the_error_comparison_does_not_reject_for_equal_samplers(sphere):
 
 
 def test_api_methods_sample_the_surface(sample_mesh):
-    from scatter_cli import stats
+    from scatter_cli import uniformity
     from scatter_cli.check import world_triangles
 
     surface = load_surface(sample_mesh("spot_triangulated.obj"))
     tri, areas = world_triangles(surface)
     for method in ("stratified", "sobol"):
         pts = scatter_cli.sample(surface, 50_000, method=method, precision="float64", seed=1).points
-        assert stats.region_test(pts, tri, areas)["p_slabs"] > ALPHA
+        assert uniformity.region_test(pts, tri, areas)["p_slabs"] > ALPHA

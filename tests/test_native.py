@@ -13,13 +13,13 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli import native, sampling, thinning
+from scatter_cli import greedy, native, pairs, sampling, thinning
 from scatter_cli.surface import Geometry, Instance, Surface, load_surface
 
 from .conftest import SAMPLES, run_user, spread_triangles, triangles_mesh
 
 REPO = Path(__file__).resolve().parents[1]
-KERNELS_BUILT = sampling._kernel is not None and thinning._kernel is not None
+KERNELS_BUILT = sampling._kernel is not None and pairs._kernel is not None
 # Without a C compiler the install runs the NumPy path alone and these tests have nothing to
 # compare; .ci/run sets SCATTER_REQUIRE_KERNELS=1 so that there a missing kernel fails.
 pytestmark = pytest.mark.skipif(
@@ -35,7 +35,7 @@ def numpy_only(monkeypatch):
     def run(fn):
         with monkeypatch.context() as m:
             m.setattr(sampling, "_kernel", None)
-            m.setattr(thinning, "_kernel", None)
+            m.setattr(pairs, "_kernel", None)
             return fn()
 
     return run
@@ -44,6 +44,14 @@ def numpy_only(monkeypatch):
 def test_the_kernels_are_built():
     # CI must exercise the compiled path: a silent fallback would leave it untested.
     assert KERNELS_BUILT
+
+
+def test_the_kernels_share_the_numpy_paths_constants():
+    # what the C code and the NumPy path must agree on, read from both sides
+    assert sampling._kernel.DRAWS_PER_POINT == sampling.DRAWS_PER_POINT
+    assert pairs._kernel.BITS == pairs.BITS
+    assert pairs._kernel.MAX_CELLS == pairs.MAX_CELLS
+    assert pairs._kernel.CROWD_SCALE == greedy.CROWD_SCALE
 
 
 def test_scatter_numpy_switches_them_off(monkeypatch):
@@ -188,8 +196,8 @@ def test_thinning_kernels_match_numpy(name, numpy_only):
 @pytest.mark.parametrize("name", ["sphere", "clustered", "far"])
 def test_pair_kernel_finds_the_pairs_of_the_numpy_search(name):
     points, radius = point_sets()[name]
-    i, j, d = thinning._pairs(points, radius)
-    i2, j2, d2 = thinning._self_pairs(points, radius)
+    i, j, d = pairs.all_pairs(points, radius)
+    i2, j2, d2 = pairs.self_pairs(points, radius)
     key, key2 = np.lexsort((j, i)), np.lexsort((j2, i2))
     np.testing.assert_array_equal(i[key], i2[key2])
     np.testing.assert_array_equal(j[key], j2[key2])
@@ -211,14 +219,14 @@ def test_greedy_does_not_depend_on_the_thread_count(threads, monkeypatch):
 _THIN_IN_A_CHILD = """
 import sys
 import numpy as np
-from scatter_cli import thinning
+from scatter_cli import pairs, thinning
 from tests.test_native import point_sets
 out = {}
 for name in ("sphere", "clustered", "wall"):
     points, radius = point_sets()[name]
     out[name + "-radius"] = thinning.thin_by_radius(points, radius)
     out[name + "-count"] = thinning.thin_to_count(points, 500, 1.0)[0]
-    i, j, d = thinning._pairs(points, radius)
+    i, j, d = pairs.all_pairs(points, radius)
     key = np.lexsort((j, i))
     out[name + "-pairs"] = np.stack([i[key], j[key], d[key].view(np.int64)])
 np.savez(sys.argv[1], **out)
@@ -248,7 +256,7 @@ def test_kernels_refuse_bad_arrays_instead_of_crashing():
     with pytest.raises(TypeError):
         k.areas(np.zeros((3, 3), dtype=np.float32), np.array([[0, 1, 2]]), None, out)
     with pytest.raises(TypeError):
-        thinning._kernel.grid(np.zeros((4, 2)), np.zeros(3), 1.0, 0)
+        pairs._kernel.grid(np.zeros((4, 2)), np.zeros(3), 1.0, 0)
 
 
 @pytest.mark.parametrize("seed,start", [(0, 0), (7, 3), (2**63 + 5, 10**12), (123456789, 2**40 + 1)])

@@ -6,10 +6,10 @@ import pytest
 from scipy.spatial import cKDTree
 
 import scatter_cli
-from scatter_cli import api, stats
+from scatter_cli import api, uniformity
 from scatter_cli.check import world_triangles
 from scatter_cli.surface import load_surface
-from scatter_cli.thinning import relative_radius
+from scatter_cli.spacing import relative_radius
 
 from .conftest import run_scatter
 
@@ -64,9 +64,9 @@ def test_thinned_set_is_uniform_at_coarse_scale(sample_mesh, name):
     tri, areas = world_triangles(surface)
     good = scatter_cli.sample(surface, 5000, poisson=True, precision="float64", seed=3).points
     # coarse scale: 8 equal-area slabs per direction, far wider than the disk radius
-    assert stats.region_test(good, tri, areas, k=8)["p_slabs"] > ALPHA
+    assert uniformity.region_test(good, tri, areas, k=8)["p_slabs"] > ALPHA
     candidates = api.prepare(surface, 50_000, precision="float64", seed=3).source
-    assert stats.region_test(face_order_thinning(candidates, 5000), tri, areas, k=8)["p_slabs"] < ALPHA
+    assert uniformity.region_test(face_order_thinning(candidates, 5000), tri, areas, k=8)["p_slabs"] < ALPHA
 
 
 def test_thinning_with_attributes_and_scene(sample_mesh):

@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
-from scatter_cli.thinning import relative_radius, spacing_stats, thin_by_radius, thin_to_count
+from scatter_cli.spacing import relative_radius, spacing_stats
+from scatter_cli.thinning import thin_by_radius, thin_to_count
 
 from .conftest import SAMPLES
 

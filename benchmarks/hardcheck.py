@@ -1,4 +1,7 @@
-"""Checks shared by the hard-case tests and benchmarks: exact on-face test, chi-square helpers."""
+"""Builders and checks shared by the hard-case tests (tests/) and benchmarks/hard_cases.py:
+meshes of separate triangles, the exact on-face test, chi-square helpers.
+
+Here rather than in tests/ so that a benchmark never imports a test module."""
 
 from __future__ import annotations
 
@@ -124,3 +127,34 @@ def two_sum_le_one(x, y):
     bb = s - x
     err = (x - (s - bb)) + (y - bb)
     return (s < 1) | ((s == 1) & (err <= 0))
+
+
+def triangles_mesh(tri):
+    """A trimesh.Trimesh of separate triangles: tri (F, 3, 3) float64."""
+    import trimesh
+
+    tri = np.asarray(tri, dtype=np.float64)
+    return trimesh.Trimesh(tri.reshape(-1, 3), np.arange(len(tri) * 3).reshape(-1, 3), process=False)
+
+
+def spread_triangles(exponents):
+    """Right triangles with areas 10**e, one per exponent, each in its own plane z = index.
+
+    Returns (tri (F, 3, 3), areas (F,)).
+    """
+    exponents = np.asarray(exponents, dtype=np.float64)
+    legs = np.sqrt(2 * 10.0**exponents)
+    tri = np.zeros((len(legs), 3, 3))
+    tri[:, 1, 0] = legs
+    tri[:, 2, 1] = legs
+    tri[:, :, 2] = np.arange(len(legs))[:, None]
+    return tri, 10.0**exponents
+
+
+def area_groups(areas, counts, n):
+    """Observed and expected counts (g,) of faces grouped by area decade."""
+    decade = np.floor(np.log10(areas)).astype(int)
+    keys = np.unique(decade)
+    obs = np.array([counts[decade == k].sum() for k in keys])
+    exp = np.array([n * areas[decade == k].sum() / areas.sum() for k in keys])
+    return obs, exp

@@ -1,0 +1,78 @@
+"""The stable kernel under AddressSanitizer and UndefinedBehaviorSanitizer.
+
+Builds scatter_cli/_cstable.c with -fsanitize=address,undefined into a copy of the package
+in a temporary directory, then runs, with the sanitizer runtimes preloaded, --stable on
+the sample meshes and on random meshes with degenerate, duplicated and non-finite faces,
+and calls the kernel with out-of-range indices (it must refuse them). Any report aborts.
+
+    python benchmarks/stable_sanitizers.py      (gcc with libasan/libubsan; Linux)
+
+Run once at c71580a: no report; the three bad calls refused.
+"""
+
+import glob
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+import tempfile
+from pathlib import Path
+
+import numpy
+
+ROOT = Path(__file__).resolve().parents[1]
+
+CHECK = r'''
+import numpy as np, sys, trimesh
+import scatter_cli
+from scatter_cli import stable
+assert stable._kernel is not None and sys.argv[1] in stable._kernel.__file__
+rng = np.random.default_rng(0)
+for name in ("skull.ply", "cesiummilktruck.glb", "narrow_triangles.obj", "moebius-160-10.ply"):
+    for kw in (dict(count=20000), dict(count=None, density=5.0), dict(count=0)):
+        scatter_cli.sample(sys.argv[2] + "/" + name, stable=True, attributes=("face", "bary"), **kw)
+for k in range(30):
+    v = rng.normal(size=(50, 3))
+    v[rng.integers(0, 50, 3)] = np.nan if k % 3 == 0 else 0.0
+    f = rng.integers(0, 50, size=(200, 3))
+    f[:20] = f[20:40]
+    try:
+        scatter_cli.sample(trimesh.Trimesh(v, f, process=False), 500, stable=True, attributes=("bary",))
+    except scatter_cli.ScatterError:
+        pass
+key, rate = np.zeros(3, np.uint64), np.ones(3)
+bad = [lambda: stable._kernel.arrivals(key, rate, 1.0, 2.0, stable.POISSON_CDF, 0, 5, None, None, None),
+       lambda: stable._kernel.faces(np.zeros((3, 3)), np.array([[0, 1, 7]]), 0, 1, 0, np.empty(1, np.uint8),
+                                    np.empty(1, np.uint64), np.empty(1)),
+       lambda: stable._kernel.place(np.array([9]), np.zeros(1, np.uint64), key, np.zeros(3, np.uint8), np.arange(3),
+                                    np.zeros((3, 3), np.int64), np.zeros((3, 3)), np.empty((1, 3)), np.empty((1, 2)),
+                                    np.zeros(1, np.int64))]
+for call in bad:
+    try:
+        call()
+        raise SystemExit("a bad call was not refused")
+    except (ValueError, TypeError):
+        pass
+print("stable kernel: no sanitizer report, bad calls refused")
+'''
+
+
+def main():
+    runtimes = [glob.glob(f"/usr/lib/gcc/x86_64-linux-gnu/*/lib{n}.so")[:1] for n in ("asan", "ubsan")]
+    if not all(runtimes):
+        sys.exit("needs gcc's libasan and libubsan")
+    with tempfile.TemporaryDirectory() as tmp:
+        pkg = Path(tmp) / "scatter_cli"
+        shutil.copytree(ROOT / "scatter_cli", pkg, ignore=shutil.ignore_patterns("_cstable*.so", "__pycache__"))
+        out = pkg / ("_cstable" + sysconfig.get_config_var("EXT_SUFFIX"))
+        subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-g", "-fsanitize=address,undefined",
+                        "-fno-sanitize-recover=undefined", "-ffp-contract=off", "-I" + sysconfig.get_paths()["include"],
+                        "-I" + numpy.get_include(), str(ROOT / "scatter_cli" / "_cstable.c"), "-o", str(out)], check=True)
+        env = dict(os.environ, PYTHONPATH=tmp, LD_PRELOAD=":".join(r[0] for r in runtimes), ASAN_OPTIONS="detect_leaks=0")
+        env.pop("SCATTER_NUMPY", None)
+        subprocess.run([sys.executable, "-c", CHECK, tmp, str(ROOT / "samples")], env=env, check=True)
+
+
+if __name__ == "__main__":
+    main()

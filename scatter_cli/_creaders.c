@@ -1,0 +1,1112 @@
+/* Compiled readers for text mesh formats: OBJ, OFF, the body of an ASCII PLY, ASCII STL.
+ *
+ * Each reader accepts a strict subset of its format and gives the arrays trimesh gives
+ * with process=False for it (the rules are in docs/loading.md); for anything outside the
+ * subset it returns None and the caller hands the file to trimesh. The input is any
+ * buffer (a read-only mapping of the file): no reader reads past its end or needs a final
+ * newline. Numbers: a strict decimal grammar, converted with correct rounding (exact
+ * small cases directly, the rest by strtod on a copy of the token).
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
+#include <numpy/arrayobject.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <math.h>
+
+#define MAX_INDEX 2147483647LL
+#define MAX_CORNERS 255
+#define MAX_MATERIALS 4096
+
+typedef struct {
+    const char *p, *end;
+} cursor;
+
+/* ---- growing arrays ---- */
+typedef struct {
+    char *data;
+    size_t len, cap; /* bytes */
+} grow;
+
+static int grow_room(grow *g, size_t more)
+{
+    if (g->len + more <= g->cap)
+        return 0;
+    size_t cap = g->cap ? g->cap : 4096;
+    while (cap < g->len + more) {
+        if (cap > SIZE_MAX / 2)
+            return -1;
+        cap *= 2;
+    }
+    char *d = realloc(g->data, cap);
+    if (!d)
+        return -1;
+    g->data = d;
+    g->cap = cap;
+    return 0;
+}
+
+static void grow_free(grow *g)
+{
+    free(g->data);
+    g->data = NULL;
+    g->len = g->cap = 0;
+}
+
+static void free_capsule(PyObject *cap)
+{
+    free(PyCapsule_GetPointer(cap, NULL));
+}
+
+/* An ndarray of `rows` x `cols` owning `data` (malloc'd; freed with the array). Takes
+ * `data` in every case. */
+static PyObject *owned_array(void *data, npy_intp rows, npy_intp cols, int type)
+{
+    npy_intp dims[2] = {rows, cols};
+    if (!data) {
+        data = malloc(1);
+        if (!data)
+            return PyErr_NoMemory();
+    }
+    PyObject *arr = PyArray_SimpleNewFromData(2, dims, type, data);
+    if (!arr) {
+        free(data);
+        return NULL;
+    }
+    PyObject *cap = PyCapsule_New(data, NULL, free_capsule);
+    if (!cap) {
+        free(data);
+        Py_DECREF(arr);
+        return NULL;
+    }
+    if (PyArray_SetBaseObject((PyArrayObject *)arr, cap) < 0) {
+        Py_DECREF(arr);
+        return NULL;
+    }
+    return arr;
+}
+
+/* ---- characters and numbers ---- */
+static inline int is_space(char c) { return c == ' ' || c == '\t'; }
+static inline int is_digit(char c) { return c >= '0' && c <= '9'; }
+static inline int is_break(char c) { return c == '\n' || c == '\r'; }
+
+static void skip_spaces(cursor *c)
+{
+    while (c->p < c->end && is_space(*c->p))
+        c->p++;
+}
+
+static inline int at_token_end(const cursor *c)
+{
+    return c->p >= c->end || is_space(*c->p) || is_break(*c->p);
+}
+
+static const double POW10[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,  1e8,  1e9,  1e10, 1e11,
+                                 1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+
+static const uint64_t POW10_INT[20] = {1ULL, 10ULL, 100ULL, 1000ULL, 10000ULL, 100000ULL, 1000000ULL,
+                                       10000000ULL, 100000000ULL, 1000000000ULL, 10000000000ULL,
+                                       100000000000ULL, 1000000000000ULL, 10000000000000ULL,
+                                       100000000000000ULL, 1000000000000000ULL, 10000000000000000ULL,
+                                       100000000000000000ULL, 1000000000000000000ULL,
+                                       10000000000000000000ULL};
+
+static int bits128(unsigned __int128 x)
+{
+    uint64_t hi = (uint64_t)(x >> 64), lo = (uint64_t)x;
+    return hi ? 128 - __builtin_clzll(hi) : lo ? 64 - __builtin_clzll(lo) : 0;
+}
+
+/* m * 10^e10 rounded to the nearest double (ties to even), for 0 < m < 2^64 and
+ * |e10| <= 19, with exact 128-bit integers: a product, or a quotient with at least 62
+ * bits and a remainder for the sticky bit. */
+static double exact_decimal(uint64_t m, int e10)
+{
+    unsigned __int128 q;
+    int shift = 0, inexact = 0;
+    if (e10 >= 0) {
+        q = (unsigned __int128)m * POW10_INT[e10];
+    } else {
+        unsigned __int128 d = POW10_INT[-e10];
+        shift = 127 - (64 - __builtin_clzll(m));
+        unsigned __int128 n = (unsigned __int128)m << shift;
+        q = n / d;
+        inexact = n % d != 0;
+    }
+    int drop = bits128(q) - 53;
+    if (drop > 0) {
+        unsigned __int128 low = q & ((((unsigned __int128)1) << drop) - 1), half = ((unsigned __int128)1) << (drop - 1);
+        q >>= drop;
+        if (low > half || (low == half && (inexact || (q & 1))))
+            q++;
+        if (q >> 53) {
+            q >>= 1;
+            drop++;
+        }
+    } else {
+        drop = 0;
+    }
+    return ldexp((double)(uint64_t)q, drop - shift);
+}
+
+/* A decimal number at c->p ([+-]? digits [. digits] [e [+-] digits], a digit somewhere
+ * before the exponent), ending at whitespace, a line break or the end. 0 and the value
+ * in *out, or -1 (not such a number; c->p then undefined). */
+static int parse_double(cursor *c, double *out)
+{
+    const char *start = c->p, *p = c->p, *end = c->end;
+    int negative = 0;
+    if (p < end && (*p == '+' || *p == '-'))
+        negative = *p++ == '-';
+    uint64_t mantissa = 0;
+    int significant = 0, digits = 0, scale = 0;
+    while (p < end && is_digit(*p)) {
+        if (mantissa || *p != '0') {
+            if (significant < 19)
+                mantissa = mantissa * 10 + (uint64_t)(*p - '0');
+            else
+                scale++;
+            significant++;
+        }
+        digits++;
+        p++;
+    }
+    if (p < end && *p == '.') {
+        p++;
+        while (p < end && is_digit(*p)) {
+            if (mantissa || *p != '0') {
+                if (significant < 19) {
+                    mantissa = mantissa * 10 + (uint64_t)(*p - '0');
+                    scale--;
+                }
+                significant++;
+            } else {
+                scale--;
+            }
+            digits++;
+            p++;
+        }
+    }
+    if (!digits)
+        return -1;
+    long exponent = 0;
+    if (p < end && (*p == 'e' || *p == 'E')) {
+        p++;
+        int eneg = 0;
+        if (p < end && (*p == '+' || *p == '-'))
+            eneg = *p++ == '-';
+        if (p >= end || !is_digit(*p))
+            return -1;
+        while (p < end && is_digit(*p)) {
+            if (exponent < 100000000)
+                exponent = exponent * 10 + (*p - '0');
+            p++;
+        }
+        if (eneg)
+            exponent = -exponent;
+    }
+    c->p = p;
+    if (!at_token_end(c))
+        return -1;
+    long e10 = exponent + scale;
+    if (mantissa == 0) {
+        *out = negative ? -0.0 : 0.0;
+        return 0;
+    }
+    if (significant <= 19 && mantissa <= (1ULL << 53) && e10 >= -22 && e10 <= 22) {
+        double m = (double)mantissa; /* exact */
+        double v = e10 < 0 ? m / POW10[-e10] : m * POW10[e10];
+        *out = negative ? -v : v;
+        return 0;
+    }
+    if (significant <= 19 && e10 >= -19 && e10 <= 19) {
+        double v = exact_decimal(mantissa, (int)e10);
+        *out = negative ? -v : v;
+        return 0;
+    }
+    /* the general case: strtod on a NUL-terminated copy of the token */
+    size_t n = (size_t)(p - start);
+    char small[128];
+    char *copy = n < sizeof small ? small : malloc(n + 1);
+    if (!copy)
+        return -1;
+    memcpy(copy, start, n);
+    copy[n] = 0;
+    char *stop;
+    *out = strtod(copy, &stop);
+    int ok = stop == copy + n;
+    if (copy != small)
+        free(copy);
+    return ok ? 0 : -1;
+}
+
+/* An integer [-]digits at c->p, |value| <= MAX_INDEX, then a token end unless `more`
+ * names the one character allowed to follow ('/'). */
+static int parse_int(cursor *c, int64_t *out, char more)
+{
+    const char *p = c->p, *end = c->end;
+    int negative = 0;
+    if (p < end && *p == '-') {
+        negative = 1;
+        p++;
+    }
+    if (p >= end || !is_digit(*p))
+        return -1;
+    int64_t v = 0;
+    while (p < end && is_digit(*p)) {
+        v = v * 10 + (*p - '0');
+        if (v > MAX_INDEX)
+            return -1;
+        p++;
+    }
+    c->p = p;
+    if (!(at_token_end(c) || (more && p < end && *p == more)))
+        return -1;
+    *out = negative ? -v : v;
+    return 0;
+}
+
+/* The line ends here (spaces, then a break or the end): 0, moving past the break. */
+static int end_line(cursor *c)
+{
+    skip_spaces(c);
+    if (c->p >= c->end)
+        return 0;
+    if (*c->p == '\r') {
+        c->p++;
+        if (c->p < c->end && *c->p == '\n')
+            c->p++;
+        return 0;
+    }
+    if (*c->p == '\n') {
+        c->p++;
+        return 0;
+    }
+    return -1;
+}
+
+/* Only tab, LF, CR and printable ASCII: other bytes mean decoding, Unicode line breaks or
+ * whitespace that only trimesh's own handling decides. */
+static int plain_text(const char *s, Py_ssize_t n)
+{
+    for (Py_ssize_t i = 0; i < n; i++) {
+        unsigned char b = (unsigned char)s[i];
+        if (b >= 0x7f || (b < 0x20 && b != '\t' && b != '\n' && b != '\r'))
+            return 0;
+    }
+    return 1;
+}
+
+static const char *find(const char *hay, size_t n, const char *needle)
+{
+    return memmem(hay, n, needle, strlen(needle));
+}
+
+/* ---- OBJ ---- */
+
+typedef struct {
+    grow v;       /* double x3 per vertex */
+    grow refs;    /* int32 per corner, as written (1-based or negative) */
+    grow corners; /* uint8 per face line */
+    grow runs;    /* run: a stretch of face lines under one material */
+    const char *names[MAX_MATERIALS];
+    size_t name_len[MAX_MATERIALS];
+    int64_t group_lines[MAX_MATERIALS], group_min[MAX_MATERIALS], group_max[MAX_MATERIALS];
+    int64_t group_cmin[MAX_MATERIALS], group_cmax[MAX_MATERIALS]; /* numbers on a face line */
+    int group_forms[MAX_MATERIALS];                                /* bit per ref form seen */
+    int groups;
+    const char *material; /* the current material, NULL before any usemtl */
+    size_t material_len;
+    int current; /* its group, -1 until a face uses it */
+    int v_cols, vt_cols;
+} obj_state;
+
+typedef struct {
+    int64_t first_line, first_ref, lines;
+    int group;
+} run;
+
+/* The numbers on the rest of a line: count; stores the first three in xyz (may be NULL). */
+static int numbers(cursor *c, double *xyz)
+{
+    int n = 0;
+    for (;;) {
+        skip_spaces(c);
+        if (c->p >= c->end || is_break(*c->p))
+            return n;
+        double d;
+        if (parse_double(c, &d) < 0)
+            return -1;
+        if (xyz && n < 3)
+            xyz[n] = d;
+        n++;
+    }
+}
+
+static int group_of(obj_state *s)
+{
+    for (int g = 0; g < s->groups; g++) {
+        if (s->name_len[g] == s->material_len &&
+            (s->material == s->names[g] ||
+             (s->material && s->names[g] && !memcmp(s->material, s->names[g], s->material_len))))
+            return g;
+    }
+    if (s->groups >= MAX_MATERIALS)
+        return -1;
+    int g = s->groups++;
+    s->names[g] = s->material;
+    s->name_len[g] = s->material_len;
+    s->group_lines[g] = 0;
+    s->group_min[g] = s->group_cmin[g] = 4 * MAX_CORNERS;
+    s->group_max[g] = s->group_cmax[g] = 0;
+    s->group_forms[g] = 0;
+    return g;
+}
+
+/* One ref: v, v/t, v//n or v/t/n (form 0 to 3). */
+static int face_ref(cursor *c, int32_t *vertex, int *form_out)
+{
+    int64_t v, other;
+    int form = 0;
+    if (parse_int(c, &v, '/') < 0)
+        return -1;
+    if (c->p < c->end && *c->p == '/') {
+        c->p++;
+        if (c->p < c->end && *c->p == '/') {
+            c->p++;
+            if (parse_int(c, &other, 0) < 0)
+                return -1;
+            form = 2;
+        } else {
+            if (parse_int(c, &other, '/') < 0)
+                return -1;
+            form = 1;
+            if (c->p < c->end && *c->p == '/') {
+                c->p++;
+                if (parse_int(c, &other, 0) < 0)
+                    return -1;
+                form = 3;
+            }
+        }
+    }
+    if (v == 0)
+        return -1;
+    *vertex = (int32_t)v;
+    *form_out = form;
+    return 0;
+}
+
+/* 0, 1 to hand off, -1 out of memory. */
+static int face_line(cursor *c, obj_state *s, int64_t line)
+{
+    static const int NUMBERS[4] = {1, 2, 2, 3};
+    int k = 0, forms = 0, columns = 0;
+    for (;;) {
+        skip_spaces(c);
+        if (c->p >= c->end || is_break(*c->p))
+            break;
+        if (k >= MAX_CORNERS)
+            return 1;
+        if (grow_room(&s->refs, 4) < 0)
+            return -1;
+        int32_t v;
+        int form;
+        if (face_ref(c, &v, &form) < 0)
+            return 1;
+        forms |= 1 << form;
+        columns += NUMBERS[form];
+        memcpy(s->refs.data + s->refs.len, &v, 4);
+        s->refs.len += 4;
+        k++;
+    }
+    if (k < 3)
+        return 1;
+    if (s->current < 0) {
+        s->current = group_of(s);
+        if (s->current < 0)
+            return 1;
+    }
+    int g = s->current;
+    run *last = s->runs.len ? (run *)(s->runs.data + s->runs.len - sizeof(run)) : NULL;
+    if (!last || last->group != g) {
+        if (grow_room(&s->runs, sizeof(run)) < 0)
+            return -1;
+        last = (run *)(s->runs.data + s->runs.len);
+        last->first_line = line;
+        last->first_ref = (int64_t)(s->refs.len / 4) - k;
+        last->lines = 0;
+        last->group = g;
+        s->runs.len += sizeof(run);
+    }
+    last->lines++;
+    if (grow_room(&s->corners, 1) < 0)
+        return -1;
+    s->corners.data[s->corners.len++] = (char)k;
+    s->group_lines[g]++;
+    if (k < s->group_min[g])
+        s->group_min[g] = k;
+    if (k > s->group_max[g])
+        s->group_max[g] = k;
+    if (columns < s->group_cmin[g])
+        s->group_cmin[g] = columns;
+    if (columns > s->group_cmax[g])
+        s->group_cmax[g] = columns;
+    s->group_forms[g] |= forms;
+    return 0;
+}
+
+static int rest_has_usemtl(cursor *c)
+{
+    const char *e = memchr(c->p, '\n', (size_t)(c->end - c->p));
+    e = e ? e : c->end;
+    return find(c->p, (size_t)(e - c->p), "usemtl ") != NULL;
+}
+
+static void skip_line(cursor *c)
+{
+    const char *e = memchr(c->p, '\n', (size_t)(c->end - c->p));
+    c->p = e ? e + 1 : c->end;
+}
+
+static int starts(const cursor *c, const char *word)
+{
+    size_t n = strlen(word);
+    return (size_t)(c->end - c->p) >= n && !memcmp(c->p, word, n);
+}
+
+/* 0 parsed, 1 hand off, -1 out of memory. */
+static int obj_lines(cursor *c, obj_state *s)
+{
+    int64_t line = 0;
+    while (c->p < c->end) {
+        char ch = *c->p;
+        if (is_break(ch)) {
+            if (end_line(c) < 0)
+                return 1;
+            continue;
+        }
+        if (is_space(ch)) { /* a blank line, or content trimesh would not see */
+            skip_spaces(c);
+            if (end_line(c) < 0)
+                return 1;
+            continue;
+        }
+        if (ch == 'v' && c->end - c->p > 2 && c->p[1] == ' ') { /* the common lines first */
+            c->p += 2;
+            double xyz[3];
+            if (grow_room(&s->v, 3 * sizeof(double)) < 0)
+                return -1;
+            int n = numbers(c, xyz);
+            if (n < 3 || (s->v_cols && n != s->v_cols))
+                return 1;
+            s->v_cols = n;
+            memcpy(s->v.data + s->v.len, xyz, sizeof xyz);
+            s->v.len += sizeof xyz;
+            if (end_line(c) < 0)
+                return 1;
+            continue;
+        }
+        if (ch == 'f' && c->end - c->p > 2 && c->p[1] == ' ') {
+            c->p += 2;
+            int status = face_line(c, s, line++);
+            if (status)
+                return status;
+            if (end_line(c) < 0)
+                return 1;
+            continue;
+        }
+        if (ch == '#' || starts(c, "o ") || starts(c, "g ") || starts(c, "s ") || starts(c, "mtllib ")) {
+            if (rest_has_usemtl(c))
+                return 1;
+            skip_line(c);
+            continue;
+        }
+        if (starts(c, "v ")) {
+            c->p += 2;
+            double xyz[3];
+            if (grow_room(&s->v, 3 * sizeof(double)) < 0)
+                return -1;
+            int n = numbers(c, xyz);
+            if (n < 3 || (s->v_cols && n != s->v_cols))
+                return 1;
+            s->v_cols = n;
+            memcpy(s->v.data + s->v.len, xyz, sizeof xyz);
+            s->v.len += sizeof xyz;
+        } else if (starts(c, "vt ")) {
+            c->p += 3;
+            int n = numbers(c, NULL);
+            if (n < 2 || n > 3 || (s->vt_cols && n != s->vt_cols))
+                return 1;
+            s->vt_cols = n;
+        } else if (starts(c, "vn ")) {
+            c->p += 3;
+            if (numbers(c, NULL) != 3)
+                return 1;
+        } else if (starts(c, "f ")) {
+            c->p += 2;
+            int status = face_line(c, s, line++);
+            if (status)
+                return status;
+        } else if (starts(c, "usemtl ")) {
+            c->p += 7;
+            if (rest_has_usemtl(c))
+                return 1;
+            skip_spaces(c);
+            const char *a = c->p, *e = memchr(c->p, '\n', (size_t)(c->end - c->p));
+            e = e ? e : c->end;
+            while (e > a && (is_space(e[-1]) || e[-1] == '\r'))
+                e--;
+            s->material = a;
+            s->material_len = (size_t)(e - a);
+            s->current = -1;
+            skip_line(c);
+            continue;
+        } else {
+            return 1; /* l, p, curves, v\t...: trimesh decides */
+        }
+        if (end_line(c) < 0)
+            return 1;
+    }
+    return 0;
+}
+
+/* The CRLF and backslash-newline rules as trimesh applies them: every CR must begin a
+ * CRLF; CRLF becomes LF, then each backslash-LF goes (two left-to-right passes, as two
+ * str.replace calls). Returns the new length, or -1 for a lone CR. */
+static Py_ssize_t normalise(char *t, Py_ssize_t n)
+{
+    Py_ssize_t w = 0;
+    for (Py_ssize_t r = 0; r < n; r++) {
+        if (t[r] == '\r') {
+            if (r + 1 >= n || t[r + 1] != '\n')
+                return -1;
+            continue;
+        }
+        t[w++] = t[r];
+    }
+    n = w;
+    w = 0;
+    for (Py_ssize_t r = 0; r < n; r++) {
+        if (t[r] == '\\' && r + 1 < n && t[r + 1] == '\n') {
+            r++;
+            continue;
+        }
+        t[w++] = t[r];
+    }
+    return w;
+}
+
+static int64_t resolve(int32_t r, int64_t nv)
+{
+    int64_t i = r > 0 ? (int64_t)r - 1 : nv + r;
+    return (i >= 0 && i < nv) ? i : -1;
+}
+
+/* Triangles of one material group in trimesh's order, appended at out (int64 x3), or
+ * NULL to hand off. When every face line of the group holds as many numbers, trimesh
+ * reads them as one array (then all quads give every first triangle, then every second;
+ * mixed ref forms would be misread, so those go to trimesh); else line by line (a quad
+ * gives its two triangles in turn). Larger polygons are fans either way. */
+static int64_t *emit_group(obj_state *s, int g, const int32_t *refs, int64_t nv, int64_t *out)
+{
+    const run *runs = (const run *)s->runs.data;
+    size_t nruns = s->runs.len / sizeof(run);
+    const uint8_t *corners = (const uint8_t *)s->corners.data;
+    int flat = s->group_cmin[g] == s->group_cmax[g];
+    int forms = s->group_forms[g];
+    if (flat && (forms & (forms - 1)))
+        return NULL;
+    int passes = (flat && s->group_max[g] == 4) ? 2 : 1; /* all quads: first halves, then second */
+    for (int pass = 0; pass < passes; pass++) {
+        for (size_t r = 0; r < nruns; r++) {
+            if (runs[r].group != g)
+                continue;
+            const int32_t *f = refs + runs[r].first_ref;
+            for (int64_t l = 0; l < runs[r].lines; l++) {
+                int k = corners[runs[r].first_line + l];
+                int64_t idx[MAX_CORNERS];
+                for (int j = 0; j < k; j++) {
+                    idx[j] = resolve(f[j], nv);
+                    if (idx[j] < 0)
+                        return NULL;
+                }
+                if (passes == 2) {
+                    int a = pass ? 2 : 0, b = pass ? 3 : 1, cc = pass ? 0 : 2;
+                    *out++ = idx[a], *out++ = idx[b], *out++ = idx[cc];
+                } else if (k == 4) { /* a quad read line by line */
+                    *out++ = idx[0], *out++ = idx[1], *out++ = idx[2];
+                    *out++ = idx[2], *out++ = idx[3], *out++ = idx[0];
+                } else {
+                    for (int j = 1; j + 1 < k; j++)
+                        *out++ = idx[0], *out++ = idx[j], *out++ = idx[j + 1];
+                }
+                f += k;
+            }
+        }
+    }
+    return out;
+}
+
+static PyObject *read_obj(PyObject *self, PyObject *args)
+{
+    Py_buffer buf;
+    if (!PyArg_ParseTuple(args, "y*", &buf))
+        return NULL;
+    const char *text = buf.buf;
+    Py_ssize_t n = buf.len;
+    char *copy = NULL;
+    PyObject *result = NULL;
+    obj_state *s = calloc(1, sizeof(obj_state));
+    if (!s) {
+        PyBuffer_Release(&buf);
+        return PyErr_NoMemory();
+    }
+    s->current = -1;
+    int status = 1;
+    Py_BEGIN_ALLOW_THREADS
+    if (plain_text(text, n)) {
+        status = 0;
+        if (memchr(text, '\r', (size_t)n) || memchr(text, '\\', (size_t)n)) {
+            copy = malloc((size_t)n + 1);
+            if (!copy)
+                status = -1;
+            else {
+                memcpy(copy, text, (size_t)n);
+                n = normalise(copy, n);
+                text = copy;
+                if (n < 0)
+                    status = 1;
+            }
+        }
+        if (!status) {
+            cursor c = {text, text + n};
+            status = obj_lines(&c, s);
+        }
+    }
+    Py_END_ALLOW_THREADS
+    if (status < 0) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    int64_t nv = (int64_t)(s->v.len / (3 * sizeof(double)));
+    if (status || !s->corners.len || !nv) {
+        result = Py_None;
+        Py_INCREF(result);
+        goto done;
+    }
+    int64_t nf = 0;
+    for (size_t i = 0; i < s->corners.len; i++)
+        nf += (uint8_t)s->corners.data[i] - 2;
+    int64_t *faces = malloc((size_t)nf * 3 * sizeof(int64_t) + 1);
+    PyObject *counts = PyList_New(0);
+    if (!faces || !counts) {
+        free(faces);
+        Py_XDECREF(counts);
+        PyErr_NoMemory();
+        goto done;
+    }
+    int64_t *out = faces;
+    for (int g = s->groups - 1; g >= 0; g--) { /* trimesh builds the last material first */
+        int64_t *next = emit_group(s, g, (const int32_t *)s->refs.data, nv, out);
+        if (!next) {
+            free(faces);
+            Py_DECREF(counts);
+            result = Py_None;
+            Py_INCREF(result);
+            goto done;
+        }
+        PyObject *k = PyLong_FromLongLong((next - out) / 3);
+        if (!k || PyList_Append(counts, k) < 0) {
+            Py_XDECREF(k);
+            free(faces);
+            Py_DECREF(counts);
+            goto done;
+        }
+        Py_DECREF(k);
+        out = next;
+    }
+    PyObject *v = owned_array(s->v.data, nv, 3, NPY_FLOAT64);
+    s->v.data = NULL;
+    PyObject *f = owned_array(faces, nf, 3, NPY_INT64);
+    if (v && f)
+        result = Py_BuildValue("(NNN)", v, f, counts);
+    else {
+        Py_XDECREF(v);
+        Py_XDECREF(f);
+        Py_DECREF(counts);
+    }
+done:
+    grow_free(&s->v);
+    grow_free(&s->refs);
+    grow_free(&s->corners);
+    grow_free(&s->runs);
+    free(s);
+    free(copy);
+    PyBuffer_Release(&buf);
+    return result;
+}
+
+/* ---- OFF and ASCII PLY: counted vertex and face lines ---- */
+
+/* Past blank lines (the OFF reader drops them). */
+static void skip_blank_lines(cursor *c)
+{
+    for (;;) {
+        const char *p = c->p;
+        skip_spaces(c);
+        if (c->p < c->end && is_break(*c->p)) {
+            end_line(c);
+            continue;
+        }
+        if (c->p >= c->end)
+            return;
+        c->p = p;
+        skip_spaces(c);
+        return;
+    }
+}
+
+/* Polygon lists: triangles in file order, then every quad's first triangle, then every
+ * quad's second (trimesh's triangulate_quads); polygons of five or more corners only when
+ * every face has the same count (then fans, face by face). idx holds k corners a face. */
+typedef struct {
+    grow tri, quad, poly; /* int64 x3 / x4 / xk */
+    int64_t kmin, kmax;
+} polys;
+
+static int add_face(polys *q, const int64_t *idx, int k)
+{
+    grow *g = k == 3 ? &q->tri : k == 4 ? &q->quad : &q->poly;
+    if (grow_room(g, (size_t)k * 8) < 0)
+        return -1;
+    memcpy(g->data + g->len, idx, (size_t)k * 8);
+    g->len += (size_t)k * 8;
+    if (k < q->kmin)
+        q->kmin = k;
+    if (k > q->kmax)
+        q->kmax = k;
+    return 0;
+}
+
+/* The (F, 3) triangles, or NULL with *nf = -1 to hand off (mixed with polygons). */
+static int64_t *triangulate(polys *q, int64_t *nf)
+{
+    int64_t nt = (int64_t)(q->tri.len / 24), nq = (int64_t)(q->quad.len / 32);
+    int64_t np_ = 0, k = q->kmax;
+    if (q->poly.len) {
+        if (q->kmin != q->kmax) {
+            *nf = -1;
+            return NULL;
+        }
+        np_ = (int64_t)(q->poly.len / (8 * (size_t)k));
+    }
+    *nf = nt + 2 * nq + np_ * (k - 2);
+    int64_t *out = malloc((size_t)*nf * 24 + 1), *o = out;
+    if (!out)
+        return NULL;
+    if (q->tri.len) /* no memcpy from NULL, even of 0 bytes (UBSan finding) */
+        memcpy(o, q->tri.data, q->tri.len);
+    o += 3 * nt;
+    const int64_t *qd = (const int64_t *)q->quad.data;
+    for (int64_t i = 0; i < nq; i++, o += 3)
+        o[0] = qd[4 * i], o[1] = qd[4 * i + 1], o[2] = qd[4 * i + 2];
+    for (int64_t i = 0; i < nq; i++, o += 3)
+        o[0] = qd[4 * i + 2], o[1] = qd[4 * i + 3], o[2] = qd[4 * i];
+    const int64_t *pd = (const int64_t *)q->poly.data;
+    for (int64_t i = 0; i < np_; i++)
+        for (int64_t j = 1; j + 1 < k; j++, o += 3)
+            o[0] = pd[k * i], o[1] = pd[k * i + j], o[2] = pd[k * i + j + 1];
+    return out;
+}
+
+static void polys_free(polys *q)
+{
+    grow_free(&q->tri);
+    grow_free(&q->quad);
+    grow_free(&q->poly);
+}
+
+/* A face line: count k then k indices in [0, nv) (then, for OFF, anything). */
+static int face_record(cursor *c, polys *q, int64_t nv, int exact, int max_k)
+{
+    int64_t k, idx[MAX_CORNERS];
+    skip_spaces(c);
+    if (parse_int(c, &k, 0) < 0 || k < 3 || k > max_k)
+        return 1;
+    for (int64_t j = 0; j < k; j++) {
+        skip_spaces(c);
+        if (parse_int(c, &idx[j], 0) < 0 || idx[j] < 0 || idx[j] >= nv)
+            return 1;
+    }
+    if (add_face(q, idx, (int)k) < 0)
+        return -1;
+    if (exact)
+        return end_line(c) < 0 ? 1 : 0;
+    skip_line(c);
+    return 0;
+}
+
+static PyObject *polys_result(double *v, int64_t nv, polys *q, int status)
+{
+    PyObject *result = NULL;
+    if (status < 0)
+        PyErr_NoMemory();
+    else if (status > 0) {
+        result = Py_None;
+        Py_INCREF(result);
+    } else {
+        int64_t nf;
+        int64_t *faces = triangulate(q, &nf);
+        if (!faces && nf < 0) {
+            result = Py_None;
+            Py_INCREF(result);
+        } else if (!faces)
+            PyErr_NoMemory();
+        else {
+            PyObject *va = owned_array(v, nv, 3, NPY_FLOAT64);
+            v = NULL;
+            PyObject *fa = owned_array(faces, nf, 3, NPY_INT64);
+            if (va && fa)
+                result = Py_BuildValue("(NN)", va, fa);
+            else {
+                Py_XDECREF(va);
+                Py_XDECREF(fa);
+            }
+        }
+    }
+    free(v);
+    polys_free(q);
+    return result;
+}
+
+/* 0 and the OFF header's counts past the keyword, or 1. */
+static int off_header(cursor *c, int64_t *nv, int64_t *nf)
+{
+    skip_blank_lines(c);
+    if (starts(c, "COFF"))
+        c->p += 4;
+    else if (starts(c, "OFF"))
+        c->p += 3;
+    else
+        return 1;
+    skip_blank_lines(c);
+    int64_t counts[3];
+    int n = 0;
+    for (;;) {
+        skip_spaces(c);
+        if (c->p >= c->end || is_break(*c->p))
+            break;
+        int64_t x;
+        if (parse_int(c, &x, 0) < 0)
+            return 1;
+        if (n < 3)
+            counts[n] = x;
+        n++;
+    }
+    if (n < 2 || end_line(c) < 0 || counts[0] <= 0 || counts[1] <= 0)
+        return 1;
+    *nv = counts[0];
+    *nf = counts[1];
+    return 0;
+}
+
+static PyObject *read_off(PyObject *self, PyObject *args)
+{
+    Py_buffer buf;
+    if (!PyArg_ParseTuple(args, "y*", &buf))
+        return NULL;
+    const char *text = buf.buf;
+    cursor c = {text, text + buf.len};
+    int64_t nv = 0, nf = 0;
+    double *v = NULL;
+    polys q = {{0}, {0}, {0}, MAX_CORNERS + 1, 0};
+    int status = 1;
+    Py_BEGIN_ALLOW_THREADS
+    if (plain_text(text, buf.len) && !memchr(text, '#', (size_t)buf.len) && !off_header(&c, &nv, &nf) &&
+        nv <= (c.end - c.p) / 6 + 1 && nf <= (c.end - c.p) / 8 + 1) {
+        v = malloc((size_t)nv * 24);
+        status = v ? 0 : -1;
+        for (int64_t i = 0; i < nv && !status; i++) {
+            skip_blank_lines(&c);
+            for (int j = 0; j < 3 && !status; j++) {
+                skip_spaces(&c);
+                if (parse_double(&c, &v[3 * i + j]) < 0)
+                    status = 1;
+            }
+            if (!status)
+                skip_line(&c);
+        }
+        for (int64_t i = 0; i < nf && !status; i++) {
+            skip_blank_lines(&c);
+            status = face_record(&c, &q, nv, 0, MAX_CORNERS);
+        }
+    }
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&buf);
+    return polys_result(v, nv, &q, status);
+}
+
+/* The body of an ASCII PLY: nv vertex lines of `props` numbers (x, y, z at columns
+ * xyz[0..2], rounded to float32 where single[k]), then nf lines `k i0 .. ik-1`, k 3 or 4. */
+static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
+{
+    Py_buffer buf;
+    Py_ssize_t offset;
+    long long nv, nf;
+    int props, x, y, z, sx, sy, sz;
+    if (!PyArg_ParseTuple(args, "y*nLLiiiiiii", &buf, &offset, &nv, &nf, &props, &x, &y, &z, &sx, &sy, &sz))
+        return NULL;
+    const char *text = buf.buf;
+    int col[3] = {x, y, z}, single[3] = {sx, sy, sz};
+    double *v = NULL;
+    polys q = {{0}, {0}, {0}, MAX_CORNERS + 1, 0};
+    int status = 1;
+    if (offset < 0 || offset > buf.len || nv <= 0 || nf <= 0 || props < 3) {
+        PyBuffer_Release(&buf);
+        Py_RETURN_NONE;
+    }
+    cursor c = {text + offset, text + buf.len};
+    Py_BEGIN_ALLOW_THREADS
+    if (plain_text(c.p, c.end - c.p) && nv <= (c.end - c.p) / 6 + 1 && nf <= (c.end - c.p) / 8 + 1) {
+        v = malloc((size_t)nv * 24);
+        status = v ? 0 : -1;
+        for (int64_t i = 0; i < nv && !status; i++) {
+            for (int k = 0; k < props && !status; k++) {
+                double d;
+                skip_spaces(&c);
+                if (parse_double(&c, &d) < 0) {
+                    status = 1;
+                    break;
+                }
+                for (int a = 0; a < 3; a++)
+                    if (col[a] == k)
+                        v[3 * i + a] = single[a] ? (double)(float)d : d;
+            }
+            if (!status && end_line(&c) < 0)
+                status = 1;
+        }
+        for (int64_t i = 0; i < nf && !status; i++)
+            status = face_record(&c, &q, nv, 1, 4);
+        while (!status && c.p < c.end) /* trimesh reads every line left as numbers */
+            if (!is_space(*c.p) && !is_break(*c.p++))
+                status = 1;
+    }
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&buf);
+    return polys_result(v, nv, &q, status);
+}
+
+/* ---- ASCII STL ---- */
+
+static int starts_nocase(const cursor *c, const char *word)
+{
+    size_t n = strlen(word);
+    if ((size_t)(c->end - c->p) < n)
+        return 0;
+    for (size_t i = 0; i < n; i++) {
+        char ch = c->p[i];
+        if (ch >= 'A' && ch <= 'Z')
+            ch += 'a' - 'A';
+        if (ch != word[i])
+            return 0;
+    }
+    return 1;
+}
+
+static int contains_nocase(const char *p, const char *end, const char *word)
+{
+    cursor c = {p, end};
+    for (; c.p < c.end; c.p++)
+        if (starts_nocase(&c, word))
+            return 1;
+    return 0;
+}
+
+/* The rest of a keyword line, which must not hold a word trimesh searches for. */
+static int plain_line_rest(cursor *c)
+{
+    const char *e = memchr(c->p, '\n', (size_t)(c->end - c->p));
+    e = e ? e : c->end;
+    if (contains_nocase(c->p, e, "vertex") || contains_nocase(c->p, e, "solid"))
+        return -1;
+    c->p = e < c->end ? e + 1 : e;
+    return 0;
+}
+
+static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
+{
+    Py_buffer buf;
+    if (!PyArg_ParseTuple(args, "y*", &buf))
+        return NULL;
+    const char *text = buf.buf;
+    cursor c = {text, text + buf.len};
+    grow v = {0};
+    int status = 1;
+    Py_BEGIN_ALLOW_THREADS
+    skip_blank_lines(&c);
+    if (plain_text(text, buf.len) && starts_nocase(&c, "solid")) {
+        c.p += 5;
+        status = plain_line_rest(&c) < 0 ? 1 : 2;
+        while (status == 2) {
+            skip_blank_lines(&c);
+            if (c.p >= c.end) {
+                status = 1; /* no endsolid */
+            } else if (starts_nocase(&c, "vertex")) {
+                c.p += 6;
+                double xyz[3];
+                if (grow_room(&v, sizeof xyz) < 0)
+                    status = -1;
+                else if (!at_token_end(&c) || numbers(&c, xyz) != 3 || end_line(&c) < 0)
+                    status = 1;
+                else {
+                    memcpy(v.data + v.len, xyz, sizeof xyz);
+                    v.len += sizeof xyz;
+                }
+            } else if (starts_nocase(&c, "endsolid")) {
+                c.p += 8;
+                if (contains_nocase(c.p, c.end, "solid"))
+                    status = 1; /* another solid: another geometry */
+                else
+                    status = 0;
+            } else if (starts_nocase(&c, "facet") || starts_nocase(&c, "outer") || starts_nocase(&c, "endloop") ||
+                       starts_nocase(&c, "endfacet")) {
+                if (plain_line_rest(&c) < 0)
+                    status = 1;
+            } else {
+                status = 1;
+            }
+        }
+    }
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&buf);
+    size_t nv = v.len / 24;
+    if (status < 0) {
+        grow_free(&v);
+        return PyErr_NoMemory();
+    }
+    if (status || nv < 3 || nv % 3) {
+        grow_free(&v);
+        Py_RETURN_NONE;
+    }
+    return owned_array(v.data, (npy_intp)nv, 3, NPY_FLOAT64);
+}
+
+static PyMethodDef methods[] = {
+    {"read_obj", read_obj, METH_VARARGS, "read_obj(buffer) -> (vertices, faces, group face counts) or None"},
+    {"read_off", read_off, METH_VARARGS, "read_off(buffer) -> (vertices, faces) or None"},
+    {"read_ply_ascii", read_ply_ascii, METH_VARARGS,
+     "read_ply_ascii(buffer, offset, nv, nf, props, x, y, z, x32, y32, z32) -> (vertices, faces) or None"},
+    {"read_stl_ascii", read_stl_ascii, METH_VARARGS, "read_stl_ascii(buffer) -> vertices (3F, 3) or None"},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_creaders", "Compiled text mesh readers.", -1, methods};
+
+PyMODINIT_FUNC PyInit__creaders(void)
+{
+    import_array();
+    return PyModule_Create(&module);
+}

@@ -1,0 +1,370 @@
+"""``scatter batch``: many meshes in one command, each written as ``scatter sample`` would.
+
+The inputs are listed (and their outputs checked for collisions) before any work; then
+an engine runs one job per mesh: the local engine in ``-j`` long-lived worker processes
+(:mod:`scatter_cli.worker`), the Dask engine as tasks on a cluster
+(:mod:`scatter_cli.dask_engine`). The report and the summary come from here, the same
+for both.
+"""
+
+from __future__ import annotations
+
+import array
+import os
+import sys
+import time
+
+from .errors import ScatterUsageError
+
+MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb", ".gltf", ".usd", ".usda", ".usdc", ".usdz")
+TEMPLATE_FIELDS = ("stem", "name", "rel", "index")
+ENGINES = ("local", "dask")
+# sample options that a batch passes to api.prepare as they are
+SAMPLE_OPTIONS = ("count", "density", "seed", "method", "attributes", "poisson", "radius", "weight", "objects",
+                  "precision", "chunk_size", "shard", "oversampling", "exterior", "stable")
+
+
+class Inputs:
+    """The meshes of a batch in input order: paths, held once, and the folder each was
+    found under (for ``{rel}``)."""
+
+    def __init__(self):
+        self.paths = []
+        self.roots = []  # folders given as INPUT
+        self.root_of = array.array("i")  # per path: index into roots, -1 for a file given directly
+
+    def add_file(self, path, root=-1):
+        self.paths.append(path)
+        self.root_of.append(root)
+
+    def add_folder(self, folder):
+        self.roots.append(folder)
+        root = len(self.roots) - 1
+        found = []
+        for top, dirs, files in os.walk(folder):
+            dirs.sort()
+            found.extend(os.path.join(top, f) for f in files if os.path.splitext(f)[1].lower() in MESH_SUFFIXES)
+        found.sort(key=lambda p: os.path.relpath(p, folder).split(os.sep))
+        for p in found:
+            self.add_file(p, root)
+
+    def add_list(self, source):
+        """One path a line from the file ``source`` (``-``: standard input), streamed."""
+        stream = sys.stdin if source == "-" else _open_list(source)
+        try:
+            for line in stream:
+                path = line.rstrip("\r\n")
+                if path:
+                    self.add_file(path)
+        finally:
+            if stream is not sys.stdin:
+                stream.close()
+
+    def __len__(self):
+        return len(self.paths)
+
+    def fields(self, i):
+        path = self.paths[i]
+        name = os.path.basename(path)
+        stem = os.path.splitext(name)[0]
+        root = self.root_of[i]
+        rel = stem if root < 0 else os.path.splitext(os.path.relpath(path, self.roots[root]))[0]
+        return {"stem": stem, "name": name, "rel": rel, "index": i}
+
+
+def _open_list(path):
+    try:
+        return open(path, encoding="utf-8", errors="surrogateescape")
+    except OSError as exc:
+        raise ScatterUsageError(f"{path}: cannot read the list of meshes: {exc.strerror or exc}") from None
+
+
+def collect_inputs(inputs=(), from_list=None) -> Inputs:
+    found = Inputs()
+    for item in ([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs or ()):
+        item = os.fspath(item)
+        if os.path.isdir(item):
+            found.add_folder(item)
+        else:
+            found.add_file(item)
+    if from_list is not None:
+        found.add_list(os.fspath(from_list))
+    if not len(found):
+        given = ", ".join(map(str, [*([inputs] if isinstance(inputs, str) else inputs or ()), *([from_list] if from_list else [])]))
+        raise ScatterUsageError(f"no mesh files to sample in: {given or 'nothing given'}")
+    return found
+
+
+class Template:
+    """``-o TEMPLATE`` filled in per mesh; checked once against a sample of fields."""
+
+    def __init__(self, text):
+        self.text = os.fspath(text)
+        try:
+            self.text.format(stem="s", name="n", rel="r", index=0)
+        except (KeyError, IndexError) as exc:
+            raise ScatterUsageError(f"unknown field {exc} in the output template '{self.text}' "
+                                    f"(fields: {', '.join('{' + f + '}' for f in TEMPLATE_FIELDS)})") from None
+        except ValueError as exc:
+            raise ScatterUsageError(f"bad output template '{self.text}': {exc}") from None
+
+    def fill(self, fields):
+        return self.text.format(**fields)
+
+
+def plan_outputs(found: Inputs, template: Template, fmt=None):
+    """Check every output before any work: a format known from its suffix (or ``fmt``), and
+    no two meshes writing one path. Holds one hash per output, not the paths."""
+    from .writers import infer_format
+
+    seen = {}
+    suffixes = set()
+    for i in range(len(found)):
+        out = template.fill(found.fields(i))
+        suffix = os.path.splitext(out)[1].lower()
+        if suffix not in suffixes:
+            infer_format(out, fmt)
+            suffixes.add(suffix)
+        key = hash(os.path.normpath(os.path.abspath(out)))
+        if key in seen:
+            first = seen[key]
+            if _same_output(template.fill(found.fields(first)), out):
+                raise ScatterUsageError(f"{found.paths[first]} and {found.paths[i]} would both write {out}: "
+                                        "use {rel} or {index} in the output template")
+        seen[key] = i
+
+
+def _same_output(a, b):
+    return os.path.normpath(os.path.abspath(a)) == os.path.normpath(os.path.abspath(b))
+
+
+def check_sample_options(options, fmt, ascii):
+    """The sample options' checks that need no mesh, once for the batch: usage errors (exit 2)."""
+    from . import api
+    from .samples import parse_attributes
+
+    unknown = set(options) - set(SAMPLE_OPTIONS)
+    if unknown:
+        raise TypeError(f"batch() got unexpected keyword arguments: {', '.join(sorted(unknown))}")
+    api.check_options(options.get("count"), options.get("density"), options.get("seed", 0),
+                      options.get("method", "random"), options.get("precision", "auto"), options.get("chunk_size"),
+                      options.get("radius"), options.get("poisson", False), options.get("weight"),
+                      options.get("oversampling"), options.get("exterior", False), options.get("stable", False))
+    parse_attributes(options.get("attributes"))
+    if options.get("shard") is not None:
+        options["shard"] = list(api.check_shard(options["shard"], options.get("poisson"), options.get("radius")))
+    if options.get("poisson") and options.get("radius") is not None:
+        raise ScatterUsageError("give either --poisson (an exact count) or --radius, not both")
+    if options.get("weight"):
+        from .weighting import parse_weight
+
+        parse_weight(options["weight"])
+    if ascii and fmt not in (None, "ply"):
+        raise ScatterUsageError("--ascii applies to PLY output only")
+    if isinstance(options.get("attributes"), tuple):
+        options["attributes"] = list(options["attributes"])
+
+
+def _check_batch_options(jobs, timeout, max_memory, engine):
+    if jobs is not None and (not isinstance(jobs, int) or jobs < 1):
+        raise ScatterUsageError(f"--jobs must be a positive integer, not {jobs!r}")
+    if timeout is not None and not timeout > 0:
+        raise ScatterUsageError(f"--timeout must be a positive number of seconds, not {timeout!r}")
+    if max_memory is not None and not max_memory > 0:
+        raise ScatterUsageError(f"--max-memory must be a positive number of MB, not {max_memory!r}")
+    if engine not in ENGINES:
+        raise ScatterUsageError(f"unknown engine '{engine}' (choose from: {', '.join(ENGINES)})")
+
+
+def batch(inputs, output, *, jobs=None, skip_existing=False, timeout=None, max_memory=None, report=None,
+          client=None, **sample_options) -> list:
+    """Sample many meshes: for each, what ``sample(mesh)`` written to ``output`` gives.
+
+    inputs: paths of meshes and of folders (searched recursively for mesh suffixes).
+    output: the template, with fields ``{stem} {name} {rel} {index}``.
+    client: a ``dask.distributed.Client``: run the meshes as tasks on its cluster.
+    Returns the report records (one dict per mesh, in input order); ``report`` also
+    writes them as JSON Lines. A mesh that fails is a record with status ``failed``.
+    """
+    fmt = sample_options.pop("format", None)
+    ascii = sample_options.pop("ascii", False)
+    return run_batch(inputs, output, jobs=jobs, skip_existing=skip_existing, timeout=timeout,
+                     max_memory=max_memory, report=report, client=client, fmt=fmt, ascii=ascii,
+                     options=sample_options, quiet=True, collect=True)["records"]
+
+
+def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False, timeout=None, max_memory=None,
+              report=None, engine="local", scheduler=None, client=None, fmt=None, ascii=False, options=None,
+              quiet=False, progress=False, collect=False):
+    """The batch behind both the command and :func:`batch`.
+
+    Returns ``{"written", "skipped", "failed", "seconds", "records"}`` (records only
+    with ``collect``). KeyboardInterrupt and other exceptions stop the workers, remove
+    the outputs in progress and propagate.
+    """
+    from .writers import infer_format
+
+    started = time.monotonic()
+    options = dict(options or {})
+    if client is not None:
+        engine = "dask"
+    _check_batch_options(jobs, timeout, max_memory, engine)
+    if fmt is not None:
+        fmt = infer_format(None, fmt)
+    check_sample_options(options, fmt, ascii)
+    template = Template(output)
+    found = collect_inputs(inputs, from_list)
+    plan_outputs(found, template, fmt)
+    if ascii and infer_format(template.fill(found.fields(0)), fmt) != "ply":
+        raise ScatterUsageError("--ascii applies to PLY output only")
+    setup = {"options": options, "ascii": ascii, "quiet": quiet}
+    tally = Tally(len(found), report, collect, progress and not quiet, quiet)
+    jobs_iter = ((i, found.paths[i], template.fill(found.fields(i))) for i in range(len(found)))
+    try:
+        if engine == "dask":
+            from .dask_engine import run_dask
+
+            run_dask(jobs_iter, setup, fmt, client=client, scheduler=scheduler, timeout=timeout,
+                     max_memory=max_memory, skip_existing=skip_existing, done=tally.add)
+        else:
+            run_local(jobs_iter, setup, fmt, jobs=jobs or available_cpus(), timeout=timeout, max_memory=max_memory,
+                      skip_existing=skip_existing, done=tally.add)
+    finally:
+        tally.close()
+    result = tally.summary(time.monotonic() - started)
+    if not quiet:
+        print(f"batch: {result['written']} written, {result['skipped']} skipped, {result['failed']} failed "
+              f"in {result['seconds']:.1f} s", file=sys.stderr)
+    return result
+
+
+def available_cpus() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing, done):
+    """``jobs`` lanes (threads, each driving one worker process) take meshes one at a time."""
+    import queue
+    import threading
+
+    from .worker import Lane, StaleTemps
+    from .writers import infer_format
+
+    env = dict(os.environ)
+    env.setdefault("SCATTER_THREADS", str(max(1, available_cpus() // jobs)))
+    stale = StaleTemps()
+    lock = threading.Lock()
+    results = queue.Queue()
+    lanes = [Lane(setup, env, timeout, max_memory, skip_existing, stale) for _ in range(jobs)]
+
+    def work(lane):
+        try:
+            while not lane.stopped:
+                with lock:
+                    job = next(jobs_iter, None)
+                if job is None:
+                    break
+                index, input, output = job
+                results.put((index, lane.process(input, output, infer_format(output, fmt))))
+        except BaseException as exc:  # noqa: BLE001 (handed to the main thread)
+            if not lane.stopped:
+                results.put((None, exc))
+        finally:
+            lane.close()
+
+    threads = [threading.Thread(target=work, args=(lane,), daemon=True) for lane in lanes]
+    for t in threads:
+        t.start()
+    try:
+        while any(t.is_alive() for t in threads) or not results.empty():
+            try:
+                index, rec = results.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            if index is None:
+                raise rec
+            done(index, rec)
+    except BaseException:
+        for lane in lanes:
+            lane.stop()
+        for t in threads:
+            t.join(timeout=10)
+        raise
+
+
+class Tally:
+    """Counts, the report in input order, the error lines and the progress line."""
+
+    def __init__(self, total, report, collect, progress, quiet):
+        self.total = total
+        self.counts = {"written": 0, "skipped": 0, "failed": 0}
+        self.pending = {}
+        self.next = 0
+        self.records = [] if collect else None
+        self.progress = progress
+        self.quiet = quiet
+        self.started = self.last_drawn = time.monotonic()
+        self.drawn = False
+        self._report_cm = None
+        self.stream = None
+        if report is not None:
+            from .writers import open_output
+
+            self._report_cm = open_output(report)
+            self.stream = self._report_cm.__enter__()
+
+    def add(self, index, rec):
+        self.counts[rec["status"]] += 1
+        if rec["status"] == "failed" and not self.quiet:
+            self._clear_line()
+            print(f"error: {rec['error']}", file=sys.stderr, flush=True)
+        self.pending[index] = rec
+        while self.next in self.pending:
+            self._emit(self.pending.pop(self.next))
+            self.next += 1
+        self._draw()
+
+    def _emit(self, rec):
+        if self.records is not None:
+            self.records.append(rec)
+        if self.stream is not None:
+            import json
+
+            self.stream.write((json.dumps(rec) + "\n").encode())
+
+    def close(self):
+        """Write what is done (records after a gap too, still in input order) and commit the report."""
+        for index in sorted(self.pending):
+            self._emit(self.pending.pop(index))
+        self._clear_line()
+        if self._report_cm is not None:
+            cm, self._report_cm = self._report_cm, None
+            cm.__exit__(None, None, None)
+
+    def summary(self, seconds):
+        return dict(self.counts, seconds=seconds, records=self.records)
+
+    def _draw(self):
+        if not self.progress:
+            return
+        now = time.monotonic()
+        if now - self.last_drawn < 0.2 and sum(self.counts.values()) < self.total:
+            return
+        self.last_drawn = now
+        done = sum(self.counts.values())
+        elapsed = max(now - self.started, 1e-9)
+        rate = done / elapsed
+        left = (self.total - done) / rate if rate else 0.0
+        sys.stderr.write(f"\rbatch: {done:,}/{self.total:,} done, {self.counts['failed']:,} failed, "
+                         f"{rate:.1f} meshes/s, {left:.0f} s left ")
+        sys.stderr.flush()
+        self.drawn = True
+
+    def _clear_line(self):
+        if self.drawn:
+            sys.stderr.write("\r\033[K")
+            sys.stderr.flush()
+            self.drawn = False

@@ -1,0 +1,341 @@
+"""Exact quantities of a piecewise-flat surface: the area below a height, equal-area
+slabs, moments and quadrature.
+
+A surface is ``tri`` ``(F, 3, 3) float64`` (vertex ``k`` of face ``f`` is ``tri[f, k]``)
+and ``areas`` ``(F,) float64``; faces of zero area contribute nothing. Everything is a
+closed form per triangle, vectorised over faces and points. Used by ``scatter check``
+(through :mod:`scatter_cli.uniformity`), ``scatter bench`` and the tests.
+"""
+
+import numpy as np
+
+# Upper bound on the entries of one (faces x values) work matrix; each chunk
+# holds a handful of such temporaries, so this keeps them to tens of MB.
+CHUNK_ENTRIES = 1 << 21
+
+# Unordered coordinate pairs for second central moments: xx, yy, zz, xy, xz, yz.
+COV_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+_TINY = 1e-300
+
+
+# ---------------------------------------------------------------------------
+# Height distribution along a direction
+
+
+def _unit(d):
+    d = np.asarray(d, dtype=float).reshape(3)
+    norm = np.linalg.norm(d)
+    if not norm > 0:
+        raise ValueError("direction must be a non-zero 3-vector")
+    return d / norm
+
+
+def _kept(tri, areas):
+    """Faces with positive area (F', 3, 3), their areas (F',) and the
+    bounding-box centre (3,) that heights and moments are taken about, so
+    large coordinates do not swamp them."""
+    tri = np.asarray(tri, dtype=float)
+    areas = np.asarray(areas, dtype=float)
+    keep = areas > 0
+    tri, areas = tri[keep], areas[keep]
+    if len(tri) == 0:
+        raise ValueError("surface has zero area")
+    return tri, areas, 0.5 * (tri.min(axis=(0, 1)) + tri.max(axis=(0, 1)))
+
+
+def _heights(tri, ref, d):
+    """Sorted vertex heights (F, 3) about ref, and the offset ref.d removed."""
+    d = _unit(d)
+    return np.sort((tri - ref) @ d, axis=1), float(ref @ d)
+
+
+def _face_heights(tri, areas, d):
+    """Sorted heights (F', 3) and areas (F',) of the faces with positive
+    area, and the height offset removed from the heights."""
+    tri, areas, ref = _kept(tri, areas)
+    h, off = _heights(tri, ref, d)
+    return h, areas, off
+
+
+def _chunks(n_rows, row_size, budget=CHUNK_ENTRIES):
+    step = max(1, budget // max(1, row_size))
+    for start in range(0, n_rows, step):
+        yield slice(start, min(n_rows, start + step))
+
+
+def _below_fraction(h0, h1, h2, t):
+    """Fraction of a triangle with sorted vertex heights h0 <= h1 <= h2 lying
+    at height <= t (all arguments broadcast)."""
+    # Each branch is used only where its denominator is positive (h0 <= t < h1
+    # needs h1 > h0; h1 <= t < h2 needs h2 > h1), so the substituted 1.0 never
+    # reaches the result; a face flat in the direction becomes a step.
+    den_lo = (h1 - h0) * (h2 - h0)
+    den_hi = (h2 - h0) * (h2 - h1)
+    lower = (t - h0) ** 2 / np.where(den_lo > 0, den_lo, 1.0)
+    upper = 1.0 - (h2 - t) ** 2 / np.where(den_hi > 0, den_hi, 1.0)
+    return np.where(t >= h2, 1.0, np.where(t >= h1, upper, np.where(t >= h0, lower, 0.0)))
+
+
+def _cdf_from_heights(h, areas, s):
+    """Area with height <= s for each s in (m,), from sorted heights (F, 3)."""
+    s = np.asarray(s, dtype=float).ravel()
+    out = np.zeros(s.size)
+    for sl in _chunks(len(h), s.size):
+        frac = _below_fraction(h[sl, 0, None], h[sl, 1, None], h[sl, 2, None], s[None, :])
+        out += areas[sl] @ frac
+    return out
+
+
+class _Sorted:
+    """Faces sorted by lowest and by highest vertex height, with running areas:
+    bounds the area function cheaply, area(h2 <= t) <= A(t) <= area(h0 <= t)."""
+
+    def __init__(self, h, areas):
+        o0, o2 = np.argsort(h[:, 0], kind="stable"), np.argsort(h[:, 2], kind="stable")
+        self.h0, self.h2 = h[o0, 0], h[o2, 2]
+        self.cum0 = np.concatenate(([0.0], np.cumsum(areas[o0])))
+        self.cum2 = np.concatenate(([0.0], np.cumsum(areas[o2])))
+
+    def bracket(self, targets, floor):
+        """(lo, hi) per target with A(lo) < target <= A(hi) (up to rounding)."""
+        i_hi = np.minimum(np.searchsorted(self.cum2[1:], targets, side="left"), len(self.h2) - 1)
+        hi = self.h2[i_hi]
+        # The first face whose start lifts the upper bound to the target; lo is
+        # the next lower distinct start height, where even the bound is short.
+        i_lo = np.minimum(np.searchsorted(self.cum0[1:], targets, side="left"), len(self.h0) - 1)
+        j = np.searchsorted(self.h0, self.h0[i_lo], side="left")
+        lo = np.where(j > 0, self.h0[np.maximum(j - 1, 0)], floor)
+        return np.minimum(lo, hi), hi
+
+    def area_below(self, t):
+        """Area of faces lying wholly at height <= t."""
+        return self.cum2[np.searchsorted(self.h2, t, side="right")]
+
+
+def _solve_heights(h, areas, targets, iterations, pad=0.0, budget=4 * CHUNK_ENTRIES):
+    """Heights (m,) where the area function reaches each of targets (m,), by
+    vectorised bisection, and the area function for heights (m,) each no more
+    than ``pad`` above its solution.  Each bracket only involves the faces
+    straddling it, so the work is those faces rather than all F per target."""
+    lo0 = float(h[:, 0].min())
+    extent = float(h[:, 2].max()) - lo0
+    table = _Sorted(h, areas)
+    lo, hi = table.bracket(targets, lo0 - extent)
+    # Straddling faces per target, concatenated: (face index, target index).
+    masks = [(h[:, 2] > l) & (h[:, 0] <= u + pad) for l, u in zip(lo.tolist(), hi.tolist())]
+    sizes = [int(m.sum()) for m in masks]
+    if sum(sizes) > budget:  # long faces everywhere: plain chunked evaluation
+        area_at = lambda t: _cdf_from_heights(h, areas, t)
+    else:
+        faces = np.concatenate([np.nonzero(m)[0] for m in masks]) if masks else np.zeros(0, np.intp)
+        owner = np.repeat(np.arange(len(targets)), sizes)
+        h_sel, a_sel = h[faces], areas[faces]
+        base = table.area_below(lo)
+
+        def area_at(t):
+            frac = _below_fraction(h_sel[:, 0], h_sel[:, 1], h_sel[:, 2], t[owner])
+            return base + np.bincount(owner, a_sel * frac, minlength=len(targets))
+
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        below = area_at(mid) < targets
+        lo = np.where(below, mid, lo)
+        hi = np.where(below, hi, mid)
+    return hi, area_at
+
+
+def _split(h, areas, k, iterations=48):
+    """Interior edges (k-1,) of k equal-area slabs over sorted heights h, and
+    the area below each edge."""
+    lo0, hi0 = float(h[:, 0].min()), float(h[:, 2].max())
+    extent = hi0 - lo0
+    if extent <= 0:
+        return np.full(k - 1, hi0), np.full(k - 1, areas.sum())
+    nudge = 1e-11 * extent + 1e-13 * max(abs(lo0), abs(hi0))
+    hi, area_at = _solve_heights(h, areas, areas.sum() * np.arange(1, k) / k, iterations, pad=nudge)
+    inner = np.minimum(hi + nudge, hi0)
+    return inner, area_at(inner)
+
+
+def height_cdf(tri, areas, d, t):
+    """Area of the surface whose height x.d is <= t.
+
+    tri (F, 3, 3), areas (F,), d (3,) direction (normalised here), t any
+    shape; returns an array of t's shape (float for scalar t).  Divide by
+    ``areas.sum()`` for the CDF of the height of a uniform surface point.
+    """
+    h, a, off = _face_heights(tri, areas, d)
+    t = np.asarray(t, dtype=float)
+    out = _cdf_from_heights(h, a, t.ravel() - off).reshape(t.shape)
+    return float(out) if out.ndim == 0 else out
+
+
+def equal_area_slabs(tri, areas, d, k, iterations=48):
+    """Edges (k+1,) of k slabs along d that each hold 1/k of the area.
+
+    edges[0] and edges[k] are the lowest and highest surface heights; the
+    k-1 interior edges are found together by bisection on the exact area
+    function.  Where the area jumps (faces flat in d) an exact split may not
+    exist; the edge then sits just above the jump, so use
+    ``slab_probabilities`` for the exact share of each slab.  Interior edges
+    are nudged up by ~1e-11 of the extent so points lying on a flat face at an
+    edge's height fall below it whatever their rounding.
+    """
+    k = int(k)
+    if k < 1:
+        raise ValueError("equal_area_slabs: k must be >= 1")
+    tri, areas, ref = _kept(tri, areas)
+    h, off = _heights(tri, ref, d)
+    inner, _ = _split(h, areas, k, iterations)
+    return _edges(h, inner) + off
+
+
+def _edges(h, inner):
+    return np.concatenate(([h[:, 0].min()], inner, [h[:, 2].max()]))
+
+
+def slab_probabilities(tri, areas, d, edges):
+    """Exact probability (k,) that a uniform surface point falls in each slab
+    of ``edges`` (k+1,): slab 0 is (-inf, e1], slab j is (e_j, e_j+1], the last
+    is (e_k-1, inf) — the same convention as ``slab_counts``."""
+    h, a, off = _face_heights(tri, areas, d)
+    inner = _cdf_from_heights(h, a, np.asarray(edges, dtype=float)[1:-1] - off) / a.sum()
+    # Rounding in the per-face sums can make the CDF step back by an ulp: keep it monotone.
+    inner = np.maximum.accumulate(np.clip(inner, 0.0, 1.0))
+    return np.diff(np.concatenate(([0.0], inner, [1.0])))
+
+
+def slab_counts(points, d, edges):
+    """Counts (k,) of points (n, 3) per slab of ``edges`` (k+1,) along d.
+
+    Slab j holds heights in (e_j, e_j+1]; heights below e_1 count in slab 0
+    and heights above e_k-1 in the last slab.
+    """
+    edges = np.asarray(edges, dtype=float)
+    k = edges.size - 1
+    hts = np.asarray(points, dtype=float).reshape(-1, 3) @ _unit(d)
+    idx = np.clip(np.searchsorted(edges, hts, side="left") - 1, 0, k - 1)
+    return np.bincount(idx, minlength=k)
+
+
+def slabs(tri, areas, directions, k):
+    """[(direction (3,), edges (k+1,), exact probabilities (k,))] for each of the
+    directions (m, 3): k equal-area slabs along each, as ``equal_area_slabs`` finds them."""
+    dirs = np.asarray(directions, dtype=float).reshape(-1, 3)
+    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    tri, areas, ref = _kept(tri, areas)
+    total = areas.sum()
+    out = []
+    for d in dirs:  # a handful of directions
+        h, off = _heights(tri, ref, d)
+        inner, below = _split(h, areas, int(k))
+        below = np.maximum.accumulate(np.clip(below / total, 0.0, 1.0))
+        prob = np.diff(np.concatenate(([0.0], below, [1.0])))
+        out.append((d, _edges(h, inner) + off, prob))
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Moments
+
+
+def centred_moments(tri, areas):
+    """(ref (3,), mean - ref (3,), covariance (3,3), kept tri, kept areas)."""
+    tri, areas, ref = _kept(tri, areas)
+    v = tri - ref
+    w = areas / areas.sum()
+    s = v.sum(axis=1)
+    mean = w @ (s / 3.0)
+    # Per triangle E[x x^T] = (sum_i v_i v_i^T + s s^T) / 12, s = v0 + v1 + v2.
+    second = (np.einsum("f,fki,fkj->ij", w, v, v) + np.einsum("f,fi,fj->ij", w, s, s)) / 12.0
+    cov = second - np.outer(mean, mean)
+    cov = 0.5 * (cov + cov.T)
+    return ref, mean, cov, tri, areas
+
+
+def surface_moments(tri, areas):
+    """Exact mean (3,) and second moment E[x x^T] (3, 3) of a uniform point
+    on the surface.  Computed about the bounding-box centre; for large
+    coordinates prefer ``surface_covariance``, which never forms E[x x^T]."""
+    ref, mean, cov, _, _ = centred_moments(tri, areas)
+    mu = ref + mean
+    return mu, cov + np.outer(mu, mu)
+
+
+def surface_covariance(tri, areas):
+    """Exact mean (3,) and covariance (3, 3) of a uniform point on the surface."""
+    ref, mean, cov, _, _ = centred_moments(tri, areas)
+    return ref + mean, cov
+
+
+def fourth_central_moments(tri_c, areas):
+    """E[(x_i)^2 (x_j)^2] (6,) for COV_PAIRS, surface already centred at its mean."""
+    i = np.array([p[0] for p in COV_PAIRS])
+    j = np.array([p[1] for p in COV_PAIRS])
+    # Degree-4 integrand: the order-3 rule (exact to degree 5) is exact.
+    total = surface_integral(lambda p: p[:, i] ** 2 * p[:, j] ** 2, tri_c, areas, order=3)
+    return total / areas.sum()
+
+
+# ---------------------------------------------------------------------------
+# Quadrature
+
+
+def triangle_quadrature(order):
+    """Rule on the triangle: barycentric nodes (q, 3) and weights (q,) summing to 1.
+
+    Gauss-Legendre through the collapsed (Duffy) map (u, v) -> (u, (1-u) v):
+    ``order`` points along v and ``order + 1`` along u (the Jacobian 1-u adds
+    one degree), q = order (order + 1); exact for polynomials of total degree
+    <= 2 order - 1.
+    """
+    order = int(order)
+    if order < 1:
+        raise ValueError("triangle_quadrature: order must be >= 1")
+    gu, wu = np.polynomial.legendre.leggauss(order + 1)
+    gv, wv = np.polynomial.legendre.leggauss(order)
+    u, wu = 0.5 * (gu + 1.0), 0.5 * wu
+    v, wv = 0.5 * (gv + 1.0), 0.5 * wv
+    x = np.repeat(u, order)
+    y = np.outer(1.0 - u, v).ravel()
+    # Reference triangle has area 1/2; the factor 2 makes weights sum to 1.
+    w = (2.0 * (1.0 - u) * wu)[:, None] * wv[None, :]
+    nodes = np.column_stack((1.0 - x - y, x, y))
+    return nodes, w.ravel()
+
+
+def surface_integral(f, tri, areas, order=4):
+    """Integral of f over the surface with the ``triangle_quadrature(order)`` rule.
+
+    f maps points (m, 3) to values (m,) or (m, c); returns a float or (c,).
+    Faces are processed in chunks so at most ~256k points exist at once.
+    """
+    tri = np.asarray(tri, dtype=float)
+    areas = np.asarray(areas, dtype=float)
+    nodes, weights = triangle_quadrature(order)
+    q = len(weights)
+    total = 0.0
+    for sl in _chunks(len(tri), q, budget=1 << 18):
+        pts = np.einsum("qk,fkj->fqj", nodes, tri[sl]).reshape(-1, 3)
+        vals = np.asarray(f(pts), dtype=float)
+        vals = vals.reshape((sl.stop - sl.start, q) + vals.shape[1:])
+        total = total + np.einsum("f,q,fq...->...", areas[sl], weights, vals)
+    return float(total) if np.ndim(total) == 0 else total
+
+
+def smooth_test_function(points, bounds):
+    """Smooth non-polynomial test integrand: points (n, 3) -> (n,).
+
+    With ``bounds`` (2, 3) (min and max corners, e.g. ``mesh.bounds``) the
+    coordinates are mapped to u = (p - centre) / half, half being half the
+    largest box side, so u lies in [-1, 1]^3 whatever the mesh's size, and
+    f = exp(0.7 u_x - 0.4 u_y) cos(1.3 u_y + 0.6 u_z) + sin(1.9 u_z + 0.8 u_x + 0.3).
+    It is entire (fast quadrature convergence) and of order one on the mesh.
+    """
+    bounds = np.asarray(bounds, dtype=float).reshape(2, 3)
+    centre = bounds.mean(axis=0)
+    half = max(0.5 * float((bounds[1] - bounds[0]).max()), _TINY)
+    u = (np.asarray(points, dtype=float).reshape(-1, 3) - centre) / half
+    x, y, z = u[:, 0], u[:, 1], u[:, 2]
+    return np.exp(0.7 * x - 0.4 * y) * np.cos(1.3 * y + 0.6 * z) + np.sin(1.9 * z + 0.8 * x + 0.3)

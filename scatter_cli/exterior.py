@@ -1,0 +1,132 @@
+"""The exterior source: the points of another source that can be seen from outside.
+
+Candidates come from the underlying source's stream in fixed blocks of ``BLOCK`` (a
+constant: not the chunk size, not the thread count). Each candidate is classified by
+rays (:mod:`.visibility`) with a rotation drawn from its own index, so a block's verdicts
+are a pure function of the seed and the block. A first pass classifies blocks in order
+until N exterior candidates are found and keeps one bit a candidate; point ``j`` of the
+output is then the ``j``-th exterior candidate in stream order, and ``draw(start, stop)``
+redraws only the blocks holding that range.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from . import native
+from .errors import ScatterError
+from .sampling import RawChunk
+
+BLOCK = 1 << 14
+_TAG = 0x4558_5452  # key of the rotation stream: independent of the sampling streams
+# When this many candidates in a row are all hidden, the surface has no exterior part
+# that sampling can find.
+GIVE_UP = 1 << 20
+
+
+class ShortStream(ScatterError):
+    """A bounded underlying source (``candidates`` given with ``count``) held fewer than
+    ``count`` exterior points: ask again with more candidates."""
+
+
+def rotation_uniforms(seed: int, start: int, stop: int):
+    """(n, 3) uniforms in [0, 1) for candidates ``start .. stop - 1``: their ray rotations."""
+    bits = np.random.PCG64DXSM(np.random.SeedSequence([_TAG, seed]))
+    bits.advance(3 * int(start))
+    return np.random.Generator(bits).random((stop - start, 3))
+
+
+def classify(occluder, chunk: RawChunk, seed: int):
+    """((n,) bool exterior, rays cast) for the candidates of ``chunk``."""
+    normals = occluder.face_normals(chunk.face, chunk.instance)
+    u = rotation_uniforms(seed, chunk.start, chunk.start + len(chunk.points))
+    return occluder.exterior(chunk.points, normals, u)
+
+
+class ExteriorSource:
+    """The exterior candidates of ``base`` (anything with ``draw(start, stop) -> RawChunk``
+    over an unbounded stream of candidates), in stream order.
+
+    ``count``: exactly this many points; ``candidates``: look no further than the first
+    ``candidates`` (alone: keep every exterior one among them, a ``--density`` run; with
+    ``count``, over a bounded source: :class:`ShortStream` when they hold fewer).
+    ``area`` is the estimated exterior area, ``stats`` what the pass found.
+    """
+
+    def __init__(self, base, occluder, seed, total_area, count=None, candidates=None, threads=None):
+        self.base, self.occluder, self.seed = base, occluder, seed
+        t = time.perf_counter()
+        self._bits, self._sizes, kept, rays = [], [], [0], 0
+        limit = math.inf if candidates is None else candidates
+        threads = threads or native.worker_count()
+        faces_total = len(occluder.normals)
+        hit_faces = np.zeros(faces_total, dtype=bool)
+        tried_faces = np.zeros(faces_total, dtype=bool)
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            block = 0
+            while (count is None or kept[-1] < count) and block * BLOCK < limit:
+                group = [b for b in range(block, block + self._blocks_to_go(count, kept[-1], block, threads))
+                         if b * BLOCK < limit]
+                for mask, chunk_rays, faces in pool.map(lambda b: self._classify_block(b, limit), group):
+                    if count is not None and kept[-1] >= count:
+                        break  # blocks past the N-th exterior candidate: the thread count's, not the run's
+                    self._bits.append(np.packbits(mask))
+                    self._sizes.append(len(mask))
+                    kept.append(kept[-1] + int(np.count_nonzero(mask)))
+                    rays += chunk_rays
+                    tried_faces[faces] = True
+                    hit_faces[faces[mask]] = True
+                block += len(group)
+                if kept[-1] == 0 and block * BLOCK >= GIVE_UP:
+                    raise ScatterError(f"no exterior surface found: the first {block * BLOCK:,} candidates are all hidden")
+        self._kept = np.asarray(kept, dtype=np.int64)
+        if count is not None and kept[-1] < count:
+            raise ShortStream(f"{kept[-1]:,} exterior points among {limit:,} candidates, not {count:,}")
+        tried = sum(self._sizes)
+        self.count = int(self._kept[-1]) if count is None else count
+        p = self._kept[-1] / tried if tried else 0.0
+        self.area = float(total_area * p)
+        self.stats = {
+            "exterior_area": self.area,
+            "exterior_area_se": total_area * math.sqrt(p * (1 - p) / tried) if tried else 0.0,
+            "exterior_fraction": float(p),
+            "candidates": int(tried),
+            "exterior_candidates": int(self._kept[-1]),
+            "rays": int(rays),
+            "rays_per_candidate": rays / tried if tried else 0.0,
+            "faces_seen_exterior": int(np.count_nonzero(hit_faces)),
+            "faces_seen_hidden_only": int(np.count_nonzero(tried_faces & ~hit_faces)),
+            "seconds": time.perf_counter() - t,
+        }
+
+    @staticmethod
+    def _blocks_to_go(count, kept, done, threads):
+        """Blocks for the next round of the pass: about what the rate so far says is left
+        (a few more), in multiples of the thread count, at most 16 rounds' worth a time."""
+        if count is None or not kept:
+            return threads
+        need = (count - kept) * done / kept * 1.05 + 1
+        return threads * max(1, min(16, math.ceil(need / threads)))
+
+    def _classify_block(self, b, limit):
+        start, stop = b * BLOCK, int(min((b + 1) * BLOCK, limit))
+        chunk = self.base.draw(start, stop)
+        mask, rays = classify(self.occluder, chunk, self.seed)
+        return mask, rays, self.occluder.offsets[chunk.instance] + chunk.face
+
+    def draw(self, start: int, stop: int) -> RawChunk:
+        """Exterior points ``start .. stop - 1`` (the ``j``-th exterior candidate is point j)."""
+        first = int(np.searchsorted(self._kept, start, side="right")) - 1
+        last = max(first, int(np.searchsorted(self._kept, stop - 1, side="right")) - 1)
+        parts = []
+        for b in range(first, min(last, len(self._bits) - 1) + 1):
+            mask = np.unpackbits(self._bits[b], count=self._sizes[b]).view(bool)
+            index = np.flatnonzero(mask)[max(start - self._kept[b], 0) : stop - self._kept[b]]
+            chunk = self.base.draw(b * BLOCK, b * BLOCK + self._sizes[b])
+            parts.append(chunk.take(index))
+        out = RawChunk.join(parts) if parts else self.base.draw(0, 0)
+        return RawChunk(start, out.points, out.face, out.instance, out.bary)

@@ -1,0 +1,230 @@
+"""LAS 1.4 and LAZ output (optional extra ``las``: laspy with lazrs), streamed in chunks.
+
+Point format 6, or 7 when colour is asked for (16-bit channels, 8-bit colour times 257).
+Coordinates are scaled integers: one scale for the three axes, a power of ten chosen
+from the sampled bounding box so that a stored point is within 1e-6 of the box's
+diagonal of its float64 position and never coarser than 0.1 mm (1e-4, for data in
+metres); the offset is the box's centre. Every other column is an Extra Bytes field of
+its own, in the contract's column order: real columns as float32, indices as int32, the
+colour's alpha as uint8.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import ScatterError
+from .writers import _Writer, open_output
+
+SOFTWARE = "scatter"
+FINEST_STEP = 1e-4  # 0.1 mm in metres: never coarser than this
+RELATIVE_ERROR = 1e-6  # of the bounding-box diagonal
+INT32_LIMIT = 2**31 - 2
+RETURN_1_OF_1 = 0x11  # point formats 6-10: return number (bits 0-3) 1 of 1 (bits 4-7)
+
+
+def _laspy():
+    try:
+        import laspy
+    except ImportError:
+        raise ScatterError("LAS/LAZ output needs laspy and lazrs: pip install 'scatter-cli[las]'") from None
+    return laspy
+
+
+def quantisation(bounds):
+    """(step, offset (3,)): the coordinate scale and offset for points inside ``bounds`` (2, 3).
+
+    The largest power of ten whose rounding error (sqrt(3)/2 step in 3D) stays within
+    1e-6 of the diagonal, capped at 1e-4; made coarser only if the extent would overflow
+    int32 at that step.
+    """
+    lo, hi = np.asarray(bounds, dtype=np.float64)
+    diag = float(np.linalg.norm(hi - lo))
+    want = min(FINEST_STEP, 2.0 * RELATIVE_ERROR * diag / math.sqrt(3.0)) if diag > 0 else FINEST_STEP
+    step = 10.0 ** math.floor(math.log10(want))
+    centre = 0.5 * (lo + hi)
+    while True:
+        offset = np.round(centre / step) * step
+        if max(np.abs(hi - offset).max(), np.abs(lo - offset).max()) / step <= INT32_LIMIT:
+            return step, offset
+        step *= 10.0
+
+
+def quantisation_report(step, offset, bounds):
+    lo, hi = np.asarray(bounds, dtype=np.float64)
+    diag = float(np.linalg.norm(hi - lo))
+    err = math.sqrt(3.0) / 2.0 * step
+    return {"scale": [step] * 3, "offset": [float(o) for o in offset], "max_error": err,
+            "max_error_of_diagonal": err / diag if diag > 0 else None}
+
+
+def extra_fields(layout):
+    """[(key, column index, name, numpy dtype)] of the Extra Bytes fields for ``layout``."""
+    out = []
+    for key, cols, dt in layout[1:]:
+        if key == "color":
+            out.append((key, 3, "alpha", np.dtype("u1")))
+            continue
+        kind = np.dtype("<f4") if dt.kind == "f" else np.dtype("<i4")
+        out += [(key, j, c, kind) for j, c in enumerate(cols)]
+    return out
+
+
+def make_header(layout, bounds):
+    laspy = _laspy()
+    colour = any(key == "color" for key, _, _ in layout)
+    header = laspy.LasHeader(point_format=7 if colour else 6, version="1.4")
+    step, offset = quantisation(bounds)
+    header.scales = np.full(3, step)
+    header.offsets = offset
+    header.generating_software = SOFTWARE
+    header.system_identifier = SOFTWARE
+    extras = extra_fields(layout)
+    if extras:
+        header.add_extra_dims([laspy.ExtraBytesParams(name=name, type=dt) for _, _, name, dt in extras])
+        _no_extra_statistics(header)
+    return header, step, offset, extras
+
+
+def _no_extra_statistics(header):
+    """Drop the optional min/max of the Extra Bytes descriptors: laspy 2.7 fills them from
+    the first chunk's values when a file is written in one chunk, so they would be wrong
+    and would depend on the chunk size."""
+    for vlr in header.vlrs:
+        for struct in getattr(vlr, "extra_bytes_structs", ()):
+            struct.options &= ~(struct.MIN_BIT_MASK | struct.MAX_BIT_MASK)
+
+
+class LasWriter(_Writer):
+    def __init__(self, stream, layout, count, bounds=None, compress=False):
+        super().__init__(stream, layout, count)
+        if bounds is None:
+            raise ScatterError("internal error: LAS output needs the sampled bounding box")
+        self.compress = compress
+        self.header_, self.step, self.offset, self.extras = make_header(layout, bounds)
+        self.report = {"las": quantisation_report(self.step, self.offset, bounds)}
+        self._las = None
+
+    def header(self):
+        laspy = _laspy()
+        try:
+            seekable = self.stream.seekable()
+        except (AttributeError, OSError):
+            seekable = False
+        if not seekable:
+            raise ScatterError("LAS/LAZ output needs a file (-o PATH): its header is completed at the end")
+        backend = laspy.LazBackend.LazrsParallel if self.compress else None
+        self._las = laspy.open(self.stream, mode="w", header=self.header_, do_compress=self.compress,
+                               laz_backend=backend, closefd=False)
+        self._lo = np.full(3, np.iinfo(np.int64).max)
+        self._hi = np.full(3, np.iinfo(np.int64).min)
+
+    def write(self, samples):
+        # laspy's point writer takes the records; the header's extents and counts are kept
+        # here (LasWriter.write_points would sort every chunk's return numbers: a third of
+        # the write time, and each of our points is return 1 of 1).
+        rec = self.records(samples)
+        if not len(samples):
+            return
+        self._las.point_writer.write_points(rec)
+        self.written += len(samples)
+        for c, name in enumerate("XYZ"):
+            col = rec.array[name]
+            self._lo[c] = min(self._lo[c], int(col.min()))
+            self._hi[c] = max(self._hi[c], int(col.max()))
+
+    def records(self, samples):
+        """The chunk as a laspy PackedPointRecord."""
+        laspy = _laspy()
+        n = len(samples)
+        rec = laspy.PackedPointRecord.zeros(n, self.header_.point_format)
+        a = rec.array
+        p = samples.points
+        for c, name in enumerate("XYZ"):
+            a[name] = np.rint((p[:, c] - self.offset[c]) / self.step)
+        a["bit_fields"] = RETURN_1_OF_1
+        if "color" in samples.attributes:
+            color = samples.attributes["color"]
+            for c, name in enumerate(("red", "green", "blue")):
+                a[name] = color[:, c]
+                a[name] *= 257
+        for key, j, name, dt in self.extras:
+            a[name] = samples.attributes[key].reshape(n, -1)[:, j]
+        return rec
+
+    def finish(self):
+        super().finish()
+        h = self._las.header
+        h.point_count = self.written
+        h.number_of_points_by_return = np.zeros_like(h.number_of_points_by_return)
+        h.number_of_points_by_return[0] = self.written
+        if self.written:
+            h.mins = self._lo * self.step + self.offset
+            h.maxs = self._hi * self.step + self.offset
+        self._las.close()
+        clear_creation_date(self.stream)
+
+
+CREATION_DATE_AT = 90  # header bytes 90-93: creation day of year and year (uint16 each)
+
+
+def clear_creation_date(stream):
+    """Zero the header's creation date ("not set"): the output depends on the input, the
+    options and the seed only, not on the day it was written (laspy always stamps today)."""
+    stream.seek(CREATION_DATE_AT)
+    stream.write(bytes(4))
+    stream.seek(0, 2)
+
+
+# -- merge ------------------------------------------------------------------------------
+
+def read_header(path):
+    """The laspy header of the LAS/LAZ file ``path``; a one-line error when it is not one."""
+    laspy = _laspy()
+    try:
+        with laspy.open(path) as f:
+            return f.header
+    except FileNotFoundError:
+        raise ScatterError(f"{path}: no such file") from None
+    except Exception as exc:  # laspy raises its own error types for bad files
+        raise ScatterError(f"{path}: not a LAS/LAZ file ({exc})") from None
+
+
+def layout_of(header):
+    """What parts must share to be joined: point format, extra bytes, scale and offset."""
+    return (header.point_format.id, tuple(header.point_format.extra_dimension_names),
+            tuple(header.scales.tolist()), tuple(header.offsets.tolist()))
+
+
+def merge_las(paths, out, chunk=1 << 20):
+    """Join LAS or LAZ files of one point layout, scale and offset into ``out``, in order.
+
+    Parts of one run (``--shard``) share the run's scale and offset, so the result is
+    the run's output byte for byte; the compression follows ``out``'s suffix.
+    """
+    heads = [read_header(p) for p in paths]
+    for p, h in zip(paths, heads):
+        if layout_of(h) != layout_of(heads[0]):
+            raise ScatterError(f"{p}: LAS point format, extra bytes, scale or offset differ from {paths[0]}")
+    with open_output(out) as stream:
+        write_joined(paths, heads[0], stream, str(out).lower().endswith(".laz"), chunk)
+
+
+def write_joined(paths, first, stream, compress, chunk=1 << 20):
+    """Write the points of ``paths`` in order to ``stream`` under a header like ``first``'s."""
+    laspy = _laspy()
+    header = laspy.LasHeader(point_format=first.point_format, version=first.version)
+    header.scales, header.offsets = first.scales, first.offsets
+    header.generating_software = first.generating_software
+    header.system_identifier = first.system_identifier
+    _no_extra_statistics(header)
+    backend = laspy.LazBackend.LazrsParallel if compress else None
+    with laspy.open(stream, mode="w", header=header, do_compress=compress, laz_backend=backend,
+                    closefd=False) as writer:
+        for p in paths:
+            with laspy.open(p) as f:
+                for points in f.chunk_iterator(chunk):
+                    writer.write_points(points)
+    clear_creation_date(stream)

@@ -1,0 +1,141 @@
+"""PCD (Point Cloud Library's format): a text header, then packed records, streamed.
+
+Fields as PCL names them (``x y z``, ``normal_x normal_y normal_z``, ``rgb``), the other
+columns under their own names, in the contract's column order. Colour is one 4-byte
+``rgb`` field holding bytes b, g, r, a, as PCL's PointXYZRGB(A) keeps it in memory:
+TYPE F in binary files (PCL's own type), TYPE U in ASCII ones, where the float reading
+of an opaque colour is a NaN that text cannot carry (PCL's ASCII writer prints the
+integer too).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import ScatterError
+from .samples import Samples
+from .writers import _TextEncoder, _Writer, copy_tail, open_output
+
+PCL_NAMES = {"nx": "normal_x", "ny": "normal_y", "nz": "normal_z"}
+PCD_TYPES = {"f": "F", "i": "I", "u": "U"}
+
+
+def pcd_layout(layout, ascii=False):
+    """[(key, field names, dtype)] of the PCD records for a writer ``layout``."""
+    out = []
+    for key, cols, dt in layout:
+        if key == "color":
+            out.append(("rgb", ("rgb",), np.dtype("<u4" if ascii else "<f4")))
+        else:
+            out.append((key, tuple(PCL_NAMES.get(c, c) for c in cols), dt))
+    return out
+
+
+def pack_rgb(color):
+    """(n,) uint32 ``a << 24 | r << 16 | g << 8 | b`` of ``color`` (n, 4) uint8 RGBA."""
+    c = np.asarray(color, dtype=np.uint32)
+    return (c[:, 3] << 24) | (c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]
+
+
+def header(fields, count, ascii):
+    """The PCD v0.7 header for ``fields`` (a pcd_layout) and ``count`` points, as bytes."""
+    names, sizes, types = [], [], []
+    for _, cols, dt in fields:
+        names += cols
+        sizes += [str(dt.itemsize)] * len(cols)
+        types += [PCD_TYPES[dt.kind]] * len(cols)
+    lines = ["# .PCD v0.7 - Point Cloud Data file format", "VERSION 0.7", "FIELDS " + " ".join(names),
+             "SIZE " + " ".join(sizes), "TYPE " + " ".join(types), "COUNT " + " ".join("1" * len(names)),
+             f"WIDTH {count}", "HEIGHT 1", "VIEWPOINT 0 0 0 1 0 0 0", f"POINTS {count}",
+             f"DATA {'ascii' if ascii else 'binary'}"]
+    return ("\n".join(lines) + "\n").encode("ascii")
+
+
+class PcdWriter(_Writer):
+    def __init__(self, stream, layout, count, ascii=False):
+        super().__init__(stream, layout, count)
+        self.ascii = ascii
+        self.fields = pcd_layout(layout, ascii)
+        self.dtype = np.dtype([(c, dt) for _, cols, dt in self.fields for c in cols])
+        if ascii:
+            self._text = _TextEncoder(self.fields, " ")
+
+    def header(self):
+        self.stream.write(header(self.fields, self.count, self.ascii))
+
+    def _columns(self, samples):
+        """key -> (n, k) array of each PCD field group."""
+        out = {}
+        for key, cols, dt in self.fields:
+            if key == "points":
+                data = samples.points
+            elif key == "rgb":
+                data = pack_rgb(samples.attributes["color"]).view(dt)
+            else:
+                data = samples.attributes[key]
+            out[key] = data.reshape(len(samples), len(cols))
+        return out
+
+    def encode(self, samples):
+        columns = self._columns(samples)
+        if self.ascii:
+            return self._text(Samples(columns["points"], columns))
+        if len(self.fields) == 1:
+            return np.ascontiguousarray(samples.points, dtype=self.fields[0][2]).data
+        rec = np.empty(len(samples), dtype=self.dtype)
+        for key, cols, _ in self.fields:
+            for j, c in enumerate(cols):
+                rec[c] = columns[key][:, j]
+        return rec.data
+
+
+# -- merge ------------------------------------------------------------------------------
+
+def read_header(path):
+    """(header lines without WIDTH/POINTS, point count, data offset) of a PCD file we wrote."""
+    lines, offset = [], 0
+    try:
+        with open(path, "rb") as f:
+            for raw in iter(lambda: f.readline(4096), b""):
+                offset += len(raw)
+                line = raw.decode("ascii", "replace").strip()
+                lines.append(line)
+                if line.startswith("DATA"):
+                    break
+    except OSError as exc:
+        raise ScatterError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    keys = {ln.split(" ", 1)[0]: ln for ln in lines if ln and not ln.startswith("#")}
+    if "DATA" not in keys or "POINTS" not in keys or keys["DATA"] not in ("DATA ascii", "DATA binary"):
+        raise ScatterError(f"{path}: not an uncompressed PCD file")
+    try:
+        count = int(keys["POINTS"].split()[1])
+    except (IndexError, ValueError):
+        raise ScatterError(f"{path}: bad POINTS line in the PCD header") from None
+    layout = [ln for ln in lines if not ln.startswith(("WIDTH", "POINTS", "#"))]
+    return layout, count, offset
+
+
+def merge_pcd(paths, out):
+    """Join PCD files of one layout (all binary or all ASCII) into ``out``, in order."""
+    heads = [read_header(p) for p in paths]
+    first = heads[0][0]
+    for p, (layout, _, _) in zip(paths, heads):
+        if layout != first:
+            raise ScatterError(f"{p}: PCD fields or encoding differ from {paths[0]}")
+    total = sum(h[1] for h in heads)
+    with open_output(out) as stream:
+        stream.write(header_from_lines(first, total))
+        for p, (_, _, offset) in zip(paths, heads):
+            copy_tail(p, offset, stream)
+
+
+def header_from_lines(layout, count):
+    """A header with ``layout``'s lines (WIDTH/POINTS dropped) and ``count`` points."""
+    lines = ["# .PCD v0.7 - Point Cloud Data file format"]
+    for ln in layout:
+        if ln.startswith("HEIGHT"):
+            lines.append(f"WIDTH {count}")
+        if ln.startswith("DATA"):
+            lines.append(f"POINTS {count}")
+        lines.append(ln)
+    return ("\n".join(lines) + "\n").encode("ascii")

@@ -1,0 +1,136 @@
+"""Fast readers for plain jobs: OBJ, OFF, ASCII PLY, ASCII and binary STL without trimesh.
+
+Each reader gives the triangles trimesh gives with ``process=False`` (same corners, same
+order, same split into geometries), or None when the file holds anything it is not sure
+of; the caller then loads the file with trimesh, which also words the error for a
+malformed file. The text formats are parsed by the compiled ``_creaders`` (without it,
+or with SCATTER_NUMPY=1, they go to trimesh); binary STL is read with NumPy. The rules
+and the measurements behind the choice are in docs/loading.md.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .native import kernel
+from .plyread import _TYPES, _contents
+
+_STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
+_MAX_HEADER = 1 << 16
+
+
+def read_mesh(path, file_type):
+    """A list of (vertices (V, 3) float64, faces (F, 3) int64), one per geometry in
+    trimesh's order, or None (hand the file to trimesh)."""
+    reader = _READERS.get(file_type)
+    if reader is None:
+        return None
+    try:
+        with open(path, "rb") as f:
+            data = _contents(f)
+    except OSError:
+        return None
+    try:
+        return reader(data)
+    finally:
+        if hasattr(data, "close"):
+            try:
+                data.close()
+            except BufferError:  # an array still views the mapping: it closes with it
+                pass
+
+
+def _obj(data):
+    c = kernel("_creaders")
+    got = c and c.read_obj(data)
+    if not got:
+        return None
+    vertices, faces, counts = got
+    ends = np.cumsum(counts)
+    return [(vertices, faces[end - n : end]) for n, end in zip(counts, ends)]
+
+
+def _off(data):
+    c = kernel("_creaders")
+    got = c and c.read_off(data)
+    return [got] if got else None
+
+
+def _stl(data):
+    """Binary when the size matches the count in the header (trimesh's test), else ASCII."""
+    if len(data) >= 84:
+        count = int(np.frombuffer(data, dtype="<u4", count=1, offset=80)[0])
+        if len(data) == 84 + count * _STL_RECORD.itemsize:
+            if count == 0:
+                return None
+            corners = np.frombuffer(data, dtype=_STL_RECORD, count=count, offset=84)["corners"]
+            vertices = np.empty((3 * count, 3))
+            vertices.reshape(count, 3, 3)[...] = corners  # one pass from the strided records
+            return [(vertices, np.arange(3 * count, dtype=np.int64).reshape(-1, 3))]
+    c = kernel("_creaders")
+    vertices = c and c.read_stl_ascii(data)
+    if vertices is None or vertices is False:
+        return None
+    return [(vertices, np.arange(len(vertices), dtype=np.int64).reshape(-1, 3))]
+
+
+def _ply(data):
+    from .plyread import read_triangles_from
+
+    got = read_triangles_from(data)
+    if got is not None:
+        return [got]
+    layout = _ascii_layout(bytes(data[:_MAX_HEADER]))
+    c = kernel("_creaders")
+    if layout is None or not c:
+        return None
+    got = c.read_ply_ascii(data, *layout)
+    return [got] if got else None
+
+
+def _ascii_layout(head):
+    """(body offset, vertex count, face count, vertex properties, x, y, z columns, and
+    whether each of x, y, z is float32) for an ASCII PLY of ``vertex`` (scalar properties)
+    then ``face`` (one list of int indices), or None."""
+    end = head.find(b"end_header\n")
+    if not head.startswith(b"ply\n") or end < 0 or b"\r" in head[:end]:
+        return None
+    try:
+        lines = head[:end].decode("ascii").split("\n")
+    except UnicodeDecodeError:
+        return None
+    elements = []
+    for words in (line.split(" ") for line in lines[1:]):
+        if words == [""] or words[0] in ("comment", "obj_info"):
+            continue
+        if words == ["format", "ascii", "1.0"]:
+            continue
+        if words[0] == "element" and len(words) == 3 and words[2].isdigit():
+            elements.append((words[1], int(words[2]), []))
+        elif words[0] == "property" and elements:
+            elements[-1][2].append(words[1:])
+        else:
+            return None
+    if "format ascii 1.0" not in lines or [e[0] for e in elements] != ["vertex", "face"]:
+        return None
+    (_, n_vertex, vprops), (_, n_face, fprops) = elements
+    names = [p[1] if len(p) == 2 else None for p in vprops]
+    if None in names or len(set(names)) != len(names) or any(p[0] not in _TYPES for p in vprops):
+        return None
+    if {"x", "y", "z"} - set(names) or len(fprops) != 1 or len(fprops[0]) != 4:
+        return None
+    kind, count_type, index_type, name = fprops[0]
+    if kind != "list" or name not in ("vertex_indices", "vertex_index") or count_type not in _TYPES:
+        return None
+    if _TYPES.get(index_type) not in ("i4", "u4"):
+        return None
+    columns = [names.index(a) for a in "xyz"]
+    kinds = [_TYPES[vprops[k][0]] for k in columns]
+    if any(t not in ("f4", "f8") for t in kinds):
+        return None
+    return (end + len(b"end_header\n"), n_vertex, n_face, len(vprops), *columns, *(int(t == "f4") for t in kinds))
+
+
+_READERS = {"obj": _obj, "off": _off, "stl": _stl, "ply": _ply}

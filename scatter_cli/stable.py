@@ -1,0 +1,688 @@
+"""Stable placement (``--stable``): points keyed to the faces themselves.
+
+Each usable face is a Poisson process in time with rate ``area`` (times its mean weight
+under ``--weight``), drawn from its own counter-based stream: a key hashed from the seed
+and the face's world-space corners (rotated to start at the smallest corner, so a
+renumbered or rotated face keeps its key; a mirrored winding is another face). Nothing
+about a face's stream depends on its index or on any other face.
+
+A face's time axis is cut into blocks of length ``BLOCK_MEAN / rate`` (the face's own
+scale, so a block holds BLOCK_MEAN arrivals on average whatever the mesh's units). Block
+``b`` of the face with key ``k`` has state ``s = mix(k + (b + 1) G)``; lane ``l`` of
+the block is ``mix(s + l G)``: lane 0 gives the block's Poisson count ``c``, arrival
+``j < c`` uses lanes ``1 + 4 j .. 4 + 4 j`` (its time within the block, then the in-face
+warp's inputs). ``mix`` is SplitMix64's finaliser and ``G`` its golden-ratio increment.
+
+A run keeps the arrivals before a threshold time: the N earliest over the whole surface
+(count mode), every one before D (``--density D``), or every one before a time fixed by
+R and then dart-thrown in arrival order (``--radius R``). Output is in arrival order,
+ties in time broken by (face key, counter): a total order that depends on no index. The
+work is O(N + F): per face a key and the blocks up to the threshold, per arrival a time.
+"""
+
+from __future__ import annotations
+
+import math
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from . import native
+from .errors import ScatterError, ScatterUsageError
+from .sampling import RawChunk, in_blocks
+from .surface import apply_matrix
+from .warps import square_to_triangle
+
+MASK = (1 << 64) - 1
+GOLDEN = 0x9E3779B97F4A7C15
+_G = np.uint64(GOLDEN)
+_M1, _M2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+# Expected arrivals per block. The work is about F + N / m block counts plus N + F m / 2
+# arrival times: 2 balances the 1.31M-face icosphere at 10^6 points against the skull
+# (0.1M faces) at 10^7.
+BLOCK_MEAN = 2.0
+COUNT_BITS = 5  # a block's arrival number j fits in 5 bits: counts are capped at 31
+LANES = 4  # per arrival: time, then up to three warp inputs
+FACE_BLOCK = 1 << 16  # faces keyed at a time
+_kernel = native.kernel("_cstable")
+ARRIVAL_BLOCK = 1 << 20  # time blocks expanded at a time
+
+
+def _poisson_cdf():
+    """(31,) float64 P(count <= k) for a Poisson(BLOCK_MEAN) count, k = 0 .. 30.
+
+    Built from a literal e^-2 by plain multiplications and additions, so the table is
+    the same on every machine.
+    """
+    p = 0.1353352832366127  # exp(-2.0)
+    cdf = []
+    total = 0.0
+    for k in range((1 << COUNT_BITS) - 1):
+        if k:
+            p = p * BLOCK_MEAN / k
+        total += p
+        cdf.append(total)
+    return np.array(cdf)
+
+
+POISSON_CDF = _poisson_cdf()
+
+
+def mix(z):
+    """SplitMix64's finaliser on (n,) uint64 ``z``, in place; returns ``z``."""
+    z ^= z >> np.uint64(30)
+    z *= _M1
+    z ^= z >> np.uint64(27)
+    z *= _M2
+    z ^= z >> np.uint64(31)
+    return z
+
+
+def lane(state, offset):
+    """(n,) uint64 ``mix(state + offset G)``; offset a scalar or (n,) uint64."""
+    z = np.asarray(offset, dtype=np.uint64) * _G
+    z += state
+    return mix(z)
+
+
+def to_unit(z):
+    """(n,) uint64 -> (n,) float64 in [0, 1): the top 53 bits."""
+    return (z >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))
+
+
+def seed_word(seed: int) -> int:
+    """The seed (any non-negative int) folded into one 64-bit word."""
+    h = 0
+    seed = int(seed)
+    while True:
+        h = _mix_int((h ^ (seed & MASK)) + GOLDEN)
+        seed >>= 64
+        if not seed:
+            return h
+
+
+def _mix_int(z):
+    z &= MASK
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & MASK
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & MASK
+    return z ^ (z >> 31)
+
+
+def canonical(cols):
+    """Rotate faces to start at their smallest corner (x, then y, then z).
+
+    cols: 9 (n,) float64 columns of world corners (corner 0 x y z, corner 1, corner 2)
+    -> (rotation (n,) int64 in 0..2, 9 canonical columns starting at corner ``rotation``,
+    -0.0 written as 0.0).
+    """
+    c = [[cols[3 * k + a] + 0.0 for a in range(3)] for k in range(3)]
+    rot = np.zeros(len(cols[0]), dtype=np.int64)
+    best = c[0]
+    for k in (1, 2):
+        x = c[k]
+        less = (x[0] < best[0]) | ((x[0] == best[0]) & ((x[1] < best[1]) | ((x[1] == best[1]) & (x[2] < best[2]))))
+        rot[less] = k
+        best = [np.where(less, x[a], best[a]) for a in range(3)]
+    one, two = rot == 1, rot == 2
+    out = list(best)
+    for k in (1, 2):
+        for a in range(3):
+            out.append(np.where(one, c[(1 + k) % 3][a], np.where(two, c[(2 + k) % 3][a], c[k][a])))
+    return rot, out
+
+
+def doubled_areas(cols):
+    """(n,) float64 twice the areas of faces given as 9 corner columns (n,), computed as
+    :func:`scatter_cli.surface.doubled_areas` computes them from (n, 9) rows."""
+    e1 = [cols[3 + c] - cols[c] for c in range(3)]
+    e2 = [cols[6 + c] - cols[c] for c in range(3)]
+    n = [e1[(c + 1) % 3] * e2[(c + 2) % 3] - e1[(c + 2) % 3] * e2[(c + 1) % 3] for c in range(3)]
+    s = n[0] * n[0]
+    s += n[1] * n[1]
+    s += n[2] * n[2]
+    return np.sqrt(s, out=s)
+
+
+def face_keys(cols, seed, extra=None):
+    """(n,) uint64 keys of 9 canonical corner columns (n,) float64 (and ``extra`` (n,)
+    float64, the weight, when given): one hash over their bytes, seeded."""
+    h = np.full(len(cols[0]), seed_word(seed), dtype=np.uint64)
+    for w in list(cols) + ([] if extra is None else [extra]):
+        h ^= np.ascontiguousarray(w, dtype=np.float64).view(np.uint64)
+        h += _G
+        mix(h)
+    return h
+
+
+class FaceTable:
+    """The usable faces of a surface in world space, keyed.
+
+    Per used face k (instances in order, faces in file order): ``part[k]`` instance,
+    ``face[k]`` index in its geometry, ``rot[k]`` (uint8) rotation to its canonical
+    corners, ``key[k]`` (uint64), ``rate[k]`` (float64 > 0) arrivals per unit time.
+    ``weight``: None, or a weighting with ``corner_weights(instance) -> (F, 3)`` or a
+    per-face bound and a rejection test (see :class:`StableSource`).
+    """
+
+    def __init__(self, surface, seed, weight=None):
+        self.surface = surface
+        self._columns = {}
+        parts, faces, rots, keys, rates, areas = [], [], [], [], [], []
+        self.non_finite = 0
+        for k, inst in enumerate(surface.instances):
+            g = surface.geometries[inst.geometry]
+            w_faces = None if weight is None else weight.face_weights_of(k, inst)
+            world = self.world_columns(k) if _kernel is None or weight is not None else None
+            if world is None:
+                for got in self._kernel_faces(k, seed):
+                    self._keep(k, *got, parts, faces, rots, keys, rates, areas)
+            for i in range(0, len(g.faces) if world is not None else 0, FACE_BLOCK):
+                j = min(i + FACE_BLOCK, len(g.faces))
+                rot, cols = canonical([np.take(world[a], g.faces[i:j, c]) for c in range(3) for a in range(3)])
+                w = None
+                if w_faces is not None:
+                    w = _rotated_mean(w_faces[i:j], rot) if w_faces.ndim == 2 else w_faces[i:j]
+                with np.errstate(invalid="ignore", over="ignore"):
+                    area = 0.5 * doubled_areas(cols)
+                    rate = area if w is None else area * w
+                good = area[np.isfinite(area) & (area > 0)]
+                areas.append(float(np.sum(good)))
+                finite = np.isfinite(rate)
+                self.non_finite += int(len(rate) - np.count_nonzero(finite))
+                ok = np.flatnonzero(finite & (rate > 0))
+                if not len(ok):
+                    continue
+                parts.append(np.full(len(ok), k, dtype=np.int32))
+                faces.append(ok + i)
+                rots.append(rot[ok].astype(np.uint8))
+                keys.append(face_keys([x[ok] for x in cols], seed, None if w is None else w[ok]))
+                rates.append(rate[ok])
+            if inst.matrix is not None and len(surface.instances) > 1:
+                self._columns.pop(k, None)  # moved vertices are made again for the few faces drawn
+                self._columns.pop(("v", k), None)
+        cat = lambda xs, dt: np.concatenate(xs) if xs else np.empty(0, dtype=dt)  # noqa: E731
+        self.part, self.face, self.rot = cat(parts, np.int32), cat(faces, np.int64), cat(rots, np.uint8)
+        self.key, self.rate = cat(keys, np.uint64), cat(rates, np.float64)
+        self.area = float(np.sum(areas))
+        self.total = float(np.sum(self.rate)) if len(self.rate) else 0.0
+        if weight is not None and self.area > 0 and self.total == 0:
+            raise ScatterError(f"{surface.source}: --weight: the weight is zero over the whole surface")
+        if not (self.total > 0 and math.isfinite(self.total)):
+            raise ScatterError(f"{surface.source}: the mesh has no faces with a non-zero, finite area")
+
+    def __len__(self):
+        return len(self.key)
+
+    def _kernel_faces(self, k, seed):
+        """[(first face, rot, key, area)] of instance ``k`` by the kernel, in blocks on
+        the worker threads."""
+        vertices = self.world_vertices(k)
+        g = self.surface.geometries[self.surface.instances[k].geometry]
+        word = seed_word(seed)
+
+        def block(i, j):
+            rot, key, area = np.empty(j - i, np.uint8), np.empty(j - i, np.uint64), np.empty(j - i)
+            _kernel.faces(vertices, g.faces[i:j], 0, j - i, word, rot, key, area)
+            return i, rot, key, area
+
+        return in_blocks(block, len(g.faces))
+
+    def _keep(self, k, i, rot, key, area, parts, faces, rots, keys, rates, areas):
+        """Append the usable faces of a kernel block (unweighted: rate = area)."""
+        ok = np.isfinite(area) & (area > 0)
+        self.non_finite += int(len(area) - np.count_nonzero(np.isfinite(area)))
+        if ok.all():
+            good = slice(None)
+        else:
+            good = np.flatnonzero(ok)
+        areas.append(float(np.sum(area[good])))
+        if not ok.any():
+            return
+        parts.append(np.full(len(area[good]), k, dtype=np.int32))
+        faces.append(np.arange(i, i + len(area)) if ok.all() else good + i)
+        rots.append(rot[good])
+        keys.append(key[good])
+        rates.append(area[good])
+
+    @property
+    def parts(self):
+        """[sampling.Part] of the used faces, instance by instance: what
+        api.sampled_bounds reads (so a stable run builds no SamplePlan)."""
+        from .sampling import Part
+
+        out = []
+        bounds = np.searchsorted(self.part, np.arange(len(self.surface.instances) + 1))
+        for k, inst in enumerate(self.surface.instances):
+            g = self.surface.geometries[inst.geometry]
+            faces = self.face[bounds[k] : bounds[k + 1]]
+            out.append(Part(k, None if len(faces) == len(g.faces) else faces, None, inst.matrix, g))
+        return out
+
+    def world_vertices(self, k):
+        """(V, 3) float64 world vertices of instance ``k`` (the rows apply_matrix gives)."""
+        inst = self.surface.instances[k]
+        v = self.surface.geometries[inst.geometry].vertices
+        if inst.matrix is None:
+            return v
+        key = ("v", k)
+        if key not in self._columns:
+            self._columns[key] = apply_matrix(inst.matrix[:3], v)
+        return self._columns[key]
+
+    def world_columns(self, k):
+        """[x, y, z] (V,) float64 world vertex columns of instance ``k``: an unmoved
+        geometry's are kept (shared by its instances), a moved one's made when asked."""
+        inst = self.surface.instances[k]
+        key = ("g", inst.geometry) if inst.matrix is None else k
+        if key not in self._columns:
+            v = self.surface.geometries[inst.geometry].vertices
+            if inst.matrix is not None:
+                v = apply_matrix(inst.matrix[:3], v)
+            self._columns[key] = [np.ascontiguousarray(v[:, a]) for a in range(3)]
+        return self._columns[key]
+
+    def corner_columns(self, used):
+        """The canonical world corners of used faces ``used`` (n,): a list of 9 (n,)
+        float64 columns, corner 0 x y z, corner 1, corner 2."""
+        n = len(used)
+        part = self.part[used]
+        one = len(self.surface.instances) == 1
+        cols = None if one else [np.empty(n) for _ in range(9)]
+        for k in (range(1) if one else np.unique(part)):
+            rows = None if one else np.flatnonzero(part == k)
+            mine = used if one else used[rows]
+            inst = self.surface.instances[k]
+            g = self.surface.geometries[inst.geometry]
+            base = 3 * self.face[mine]
+            rot = self.rot[mine].astype(np.int64)
+            vi = [np.take(g.faces.reshape(-1), base + (rot + c) % 3) for c in range(3)]
+            if inst.matrix is None:
+                world = self.world_columns(k)
+                got = [np.take(world[a], vi[c]) for c in range(3) for a in range(3)]
+            else:  # the rows apply_matrix gives for all vertices, made for these only
+                got = []
+                for c in range(3):
+                    w = apply_matrix(inst.matrix[:3], np.take(g.vertices, vi[c], axis=0))
+                    got += [w[:, a] for a in range(3)]
+            if one:
+                return got
+            for c in range(9):
+                cols[c][rows] = got[c]
+        return cols
+
+    def rekey_duplicates(self, seed):
+        """Give faces with equal keys distinct keys (the second copy, third, ...): a face
+        listed twice has twice the weight, not one stream read twice. Returns whether any."""
+        order = np.argsort(self.key, kind="stable")
+        same = self.key[order][1:] == self.key[order][:-1]
+        if not same.any():
+            return False
+        run_start = np.flatnonzero(np.concatenate([[True], ~same]))
+        occurrence = np.arange(len(order)) - np.repeat(run_start, np.diff(np.append(run_start, len(order))))
+        dup = order[occurrence > 0]
+        self.key[dup] = lane(self.key[dup], occurrence[occurrence > 0].astype(np.uint64) + np.uint64(1 << 40))
+        return True
+
+
+def _rotated_mean(w, rot):
+    """(n,) mean of corner weights ``w`` (n, 3), summed from corner ``rot`` on (so that a
+    rotated face gets the same bits)."""
+    r = _rotated_rows(w, rot, width=1)
+    return (r[:, 0] + r[:, 1] + r[:, 2]) / 3.0
+
+
+def _rotated_rows(tri, rot, width=3):
+    """Rows of ``tri`` (n, 3 width) with their corners rotated to start at ``rot`` (n,)."""
+    rot = rot.astype(np.int64)
+    rows = np.arange(len(tri))[:, None]
+    cols = ((rot[:, None] + np.arange(3)) % 3)[:, :, None] * width + np.arange(width)
+    return tri[rows, cols.reshape(len(tri), 3 * width)]
+
+
+def _interpolate(cols, b):
+    """(n, 3) float64 points ``v0 + b1 (v1 - v0) + b2 (v2 - v0)`` from 9 corner columns
+    (n,), rounded as the random method's (sampling._corner_points)."""
+    points = np.empty((len(b), 3))
+    b1, b2 = np.ascontiguousarray(b[:, 0]), np.ascontiguousarray(b[:, 1])
+    for c in range(3):
+        col = (cols[3 + c] - cols[c]) * b1
+        col += (cols[6 + c] - cols[c]) * b2
+        col += cols[c]
+        points[:, c] = col
+    return points
+
+
+def _blocks_before(tau, length):
+    """(n,) int64 blocks of lengths ``length`` (n,) that cover time [0, tau): every
+    arrival of a later block has time >= tau, in floating point too."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        nb = np.floor(tau / length) + 1
+    nb = nb.astype(np.int64)
+    nb += nb * length < tau
+    return nb
+
+
+def _expand(counts):
+    """(owner (total,), rank (total,)) int64: entry ``t`` of run ``owner`` counts 0.."""
+    owner = np.repeat(np.arange(len(counts)), counts)
+    starts = np.cumsum(counts) - counts
+    return owner, np.arange(len(owner)) - starts[owner]
+
+
+def arrivals(table, tau, first=0, last=None):
+    """Arrivals before ``tau`` of used faces ``first .. last - 1``.
+
+    Returns (time (m,) float64, used face (m,) int64, counter (m,) uint64 = block << 5 | j).
+    """
+    last = len(table) if last is None else last
+    rate = table.rate[first:last]
+    length = BLOCK_MEAN / rate
+    nb = _blocks_before(tau, length)
+    cum = np.cumsum(nb)
+    out = []
+    total = int(cum[-1]) if len(cum) else 0
+    for lo in range(0, total, ARRIVAL_BLOCK):
+        hi = min(lo + ARRIVAL_BLOCK, total)
+        f0 = int(np.searchsorted(cum, lo, side="right"))
+        f1 = int(np.searchsorted(cum, hi - 1, side="right")) + 1
+        counts = nb[f0:f1].copy()
+        skip = lo - (int(cum[f0]) - int(nb[f0]))
+        counts[0] -= skip
+        counts[-1] -= int(cum[f1 - 1]) - hi
+        owner, b = _expand(counts)
+        b[: counts[0]] += skip
+        face = owner + f0
+        state = lane(table.key[first + face], (b + 1).astype(np.uint64))
+        c = np.searchsorted(POISSON_CDF, to_unit(lane(state, 0)), side="right")
+        blk, j = _expand(c)
+        u = to_unit(lane(state[blk], (1 + LANES * j).astype(np.uint64)))
+        t = (b[blk] + u) * length[face[blk]]
+        keep = np.flatnonzero(t < tau)
+        ctr = (b[blk[keep]].astype(np.uint64) << np.uint64(COUNT_BITS)) | j[keep].astype(np.uint64)
+        out.append((t[keep], face[blk[keep]] + first, ctr))
+    if not out:
+        return np.empty(0), np.empty(0, np.int64), np.empty(0, np.uint64)
+    return tuple(np.concatenate(x) for x in zip(*out))
+
+
+def all_arrivals(table, tau):
+    """:func:`arrivals` of every used face, in face ranges on the worker threads.
+
+    The kernel counts each range's arrivals, then writes them into arrays of exactly
+    that size: no concatenated copy.
+    """
+    n = len(table)
+    threads = native.worker_count()
+    pieces = 1 if threads == 1 or n < 2 * FACE_BLOCK else 4 * threads
+    cuts = np.linspace(0, n, pieces + 1).astype(np.int64).tolist()
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        if _kernel is None:
+            parts = list(pool.map(lambda a, b: arrivals(table, tau, a, b), cuts[:-1], cuts[1:]))
+            return tuple(np.concatenate(x) for x in zip(*parts)) if len(parts) > 1 else parts[0]
+        tau = float(tau)
+        args = (table.key, table.rate, tau, BLOCK_MEAN, POISSON_CDF)
+        sizes = list(pool.map(lambda a, b: _kernel.arrivals(*args, a, b, None, None, None), cuts[:-1], cuts[1:]))
+        ends = np.cumsum(sizes).tolist()
+        t, face, ctr = np.empty(ends[-1]), np.empty(ends[-1], np.int64), np.empty(ends[-1], np.uint64)
+
+        def fill(k):
+            s = slice(ends[k] - sizes[k], ends[k])
+            _kernel.arrivals(*args, cuts[k], cuts[k + 1], t[s], face[s], ctr[s])
+
+        list(pool.map(fill, range(pieces)))
+    return t, face, ctr
+
+
+def arrival_order(t, face, ctr, key):
+    """(m,) int64 permutation sorting arrivals by (time, face key, counter).
+
+    t (m,) float64, face (m,) used-face index, ctr (m,) uint64, key (F,) uint64 face keys.
+    One value sort of packed words (time quantised in the high bits, position in the low
+    ones), then the rare runs of equal quantised time ordered exactly.
+    """
+    m = len(t)
+    if m == 0:
+        return np.empty(0, np.int64)
+    bits = max(1, (m - 1).bit_length())
+    qbits = min(52, 64 - bits)
+    top = float(t.max())
+    scale = 2.0 ** (qbits - 1) / top if top > 0 else 0.0  # q < 2^qbits even when rounded up
+    packed = (t * scale).astype(np.uint64)
+    packed <<= np.uint64(bits)
+    packed |= np.arange(m, dtype=np.uint64)
+    packed.sort()
+    order = (packed & np.uint64((1 << bits) - 1)).astype(np.int64)
+    packed >>= np.uint64(bits)
+    tie = np.flatnonzero(packed[1:] == packed[:-1])
+    if len(tie):
+        member = np.zeros(m, dtype=bool)
+        member[tie] = True
+        member[tie + 1] = True
+        pos = np.flatnonzero(member)
+        run = np.cumsum(np.concatenate([[1], np.diff(pos) > 1]))
+        idx = order[pos]
+        order[pos] = idx[np.lexsort((ctr[idx], key[face[idx]], t[idx], run))]
+    return order
+
+
+def _face_order(face):
+    """(n,) int64 permutation sorting ``face`` (n,) int64 >= 0: one value sort of packed
+    (face, position) words, several times faster than argsort."""
+    n = len(face)
+    bits = max(1, (n - 1).bit_length())
+    if n < 2 or int(face.max()) >= 1 << (64 - bits):
+        return np.argsort(face, kind="stable")
+    packed = face.astype(np.uint64) << np.uint64(bits)
+    packed |= np.arange(n, dtype=np.uint64)
+    packed.sort()
+    return (packed & np.uint64((1 << bits) - 1)).astype(np.int64)
+
+
+def _duplicates(t, face, ctr, key):
+    """Whether two consecutive arrivals (sorted arrays) are the same arrival of two faces
+    with one key."""
+    same = np.flatnonzero(t[1:] == t[:-1])
+    if not len(same):
+        return False
+    return bool(np.any((key[face[same]] == key[face[same + 1]]) & (ctr[same] == ctr[same + 1])))
+
+
+class StableSource:
+    """The ``--stable`` point source: ``draw(start, stop)`` gives points start..stop-1 in
+    arrival order (a pure function of the range).
+
+    Exactly one of ``count`` (the N earliest arrivals), ``density`` (every arrival before
+    time D) and ``radius`` (arrival-order dart throwing) is given. ``weight``: an object
+    with ``face_weights_of(k, inst)`` and ``barycentric(w, u)`` (vertex colours) or with
+    ``accept(raw, u)`` (textures: arrivals at rate area times bound, kept with
+    probability weight over bound).
+    """
+
+    def __init__(self, surface, seed, *, count=None, density=None, radius=None, want_bary=False, weight=None,
+                 max_candidates=None):
+        self.surface, self.seed, self.want_bary, self.weight = surface, seed, want_bary, weight
+        self.table = FaceTable(surface, seed, weight)
+        self.area = self.table.area
+        self.rate = self.table.total
+        if radius is not None:
+            self._select_radius(radius, max_candidates)
+        elif density is not None:
+            self._select_before(float(density))
+        else:
+            self._select_count(int(count))
+        self.count = len(self.used)
+
+    # -- selection ---------------------------------------------------------------------
+
+    def _candidates(self, tau):
+        """Arrivals before ``tau``, in arrival order, as (time, used face, counter);
+        faces with one key get distinct keys first."""
+        for _ in range(4):
+            t, face, ctr = all_arrivals(self.table, tau)
+            if self._accepts:
+                keep = self._accept(face, ctr)
+                t, face, ctr = t[keep], face[keep], ctr[keep]
+            order = arrival_order(t, face, ctr, self.table.key)
+            t = t[order]  # one array at a time: peak memory 40 bytes an arrival
+            face = face[order]
+            ctr = ctr[order]
+            del order
+            if not (_duplicates(t, face, ctr, self.table.key) and self.table.rekey_duplicates(self.seed)):
+                return t, face, ctr
+        raise ScatterError(f"{self.surface.source}: --stable could not tell duplicate faces apart")
+
+    @property
+    def _accepts(self):
+        return self.weight is not None and hasattr(self.weight, "accept")
+
+    def _select_before(self, tau):
+        _, self.used, self.ctr = self._candidates(tau)
+
+    def _select_count(self, n):
+        if n == 0:
+            self.used, self.ctr = np.empty(0, np.int64), np.empty(0, np.uint64)
+            return
+        # a time that n arrivals beat with overwhelming odds: mean count n + 6 sd + 16
+        tau = (n + 6.0 * math.sqrt(n) + 16.0) / self.rate
+        for _ in range(64):
+            t, face, ctr = self._candidates(tau)
+            if len(t) >= n:
+                self.used, self.ctr = face[:n], ctr[:n]  # views: the few past n stay
+                self.threshold = float(t[n - 1])
+                return
+            tau *= max(1.25, 1.1 * n / max(len(t), 1))
+        raise ScatterError(f"{self.surface.source}: --stable found fewer than {n:,} arrivals")
+
+    def _select_radius(self, radius, max_candidates):
+        from . import greedy, pairs
+        from .api import RADIUS_OVERSAMPLING
+
+        # candidates at RADIUS_OVERSAMPLING times the hexagonal density of spacing R: a
+        # time per unit area, the same for every face, so an edit moves only nearby points
+        tau = RADIUS_OVERSAMPLING / (math.sqrt(3) / 2 * radius * radius)
+        expected = tau * self.rate
+        if max_candidates is not None and expected > max_candidates:
+            raise ScatterUsageError(f"--radius {radius:g} is too small for {self.surface.source} (area "
+                                    f"{self.area:.6g}): thinning would need {expected:,.0f} candidates, more than "
+                                    f"{max_candidates:,}")
+        self.horizon = tau
+        _, face, ctr = self._candidates(tau)
+        points = self._place(face, ctr).points
+        i, j, _ = pairs.all_pairs(points, radius)
+        kept = np.flatnonzero(greedy.in_priority_order(len(face), i, j, np.arange(len(face))))
+        self.used, self.ctr = face[kept], ctr[kept]
+
+    def _accept(self, face, ctr):
+        """(m,) bool: texture-weighted arrivals that pass their rejection test."""
+        raw = self._place(face, ctr, bary=True)
+        u = to_unit(lane(self._state(face, ctr), (LANES * (ctr & np.uint64(31)) + np.uint64(4)).astype(np.uint64)))
+        return self.weight.accept(raw, u)
+
+    # -- points ------------------------------------------------------------------------
+
+    def _state(self, face, ctr):
+        return lane(self.table.key[face], (ctr >> np.uint64(COUNT_BITS)) + np.uint64(1))
+
+    def _place(self, face, ctr, start=0, bary=None):
+        """The RawChunk of arrivals (used face (n,), counter (n,))."""
+        want_bary = self.want_bary if bary is None else bary
+        t = self.table
+        if _kernel is not None and not self._barycentric and len(self.surface.instances) == 1:
+            points, b = np.empty((len(face), 3)), np.empty((len(face), 2))
+            inst = self.surface.instances[0]
+            # in face order: arrival order reads the face and vertex tables at random (on
+            # the skull, 10^6 points: 0.64 s in arrival order, 0.14 s sorted)
+            face, ctr = np.ascontiguousarray(face, dtype=np.int64), np.ascontiguousarray(ctr)
+            _kernel.place(face, ctr, t.key, t.rot, t.face, self.surface.geometries[inst.geometry].faces,
+                          t.world_vertices(0), points, b, _face_order(face))
+            return self._finish(start, face, b, points, want_bary)
+        state = self._state(face, ctr)
+        j = (ctr & np.uint64((1 << COUNT_BITS) - 1)) * np.uint64(LANES)
+        u = np.empty((len(face), 3 if self._barycentric else 2))
+        for k in range(u.shape[1]):
+            u[:, k] = to_unit(lane(state, j + np.uint64(2 + k)))
+        if self._barycentric:
+            w = _rotated_rows(self.weight.corner_weights(self.table.part[face], self.table.face[face]),
+                              self.table.rot[face], width=1)
+            b = self.weight.barycentric(w, u)
+        else:
+            b = square_to_triangle(u)
+        points = _interpolate(t.corner_columns(face), b)
+        return self._finish(start, face, b, points, want_bary)
+
+    def _finish(self, start, face, b, points, want_bary):
+        t = self.table
+        out_bary = None
+        if want_bary:
+            canon = np.empty((len(face), 3))
+            canon[:, 1:] = b
+            canon[:, 0] = 1.0 - b[:, 0] - b[:, 1]
+            rot = t.rot[face].astype(np.int64)
+            out_bary = np.empty_like(canon)
+            rows = np.arange(len(face))
+            for k in range(3):  # canonical corner k is the face's corner (k + rot) % 3
+                out_bary[rows, (k + rot) % 3] = canon[:, k]
+        if len(self.surface.instances) == 1:
+            instance = np.broadcast_to(np.int64(0), (len(face),))  # one value, no memory
+        else:
+            instance = t.part[face].astype(np.int64)
+        return RawChunk(start, points, t.face[face], instance, out_bary)
+
+    @property
+    def _barycentric(self):
+        return self.weight is not None and hasattr(self.weight, "barycentric")
+
+    def draw(self, start: int, stop: int) -> RawChunk:
+        """Points ``start .. stop - 1`` in arrival order."""
+        return self._place(self.used[start:stop], self.ctr[start:stop], start)
+
+
+class VertexColorRates:
+    """``--weight vertex-color:C`` for the stable source: rate area times the face's mean
+    weight, positions by the weighting's exact in-face mixture warp."""
+
+    def __init__(self, weight):
+        from . import weighting
+
+        # {geometry: (F, 3) corner weights}, and the mixture warp (w (n, 3), u (n, 3)) -> (n, 2)
+        self._w = weight.corner_w if hasattr(weight, "corner_w") else weight._corner_w
+        self.barycentric = getattr(weighting, "barycentric", None) or weight.barycentric
+        self.surface = weight.surface
+
+    def face_weights_of(self, k, inst):
+        return self._w[inst.geometry]
+
+    def corner_weights(self, part, face):
+        """(n, 3) corner weights of faces ``face`` (n,) of instances ``part`` (n,)."""
+        out = np.empty((len(face), 3))
+        for k in np.unique(part):
+            rows = np.flatnonzero(part == k)
+            out[rows] = self._w[self.surface.instances[k].geometry][face[rows]]
+        return out
+
+
+class TextureRates:
+    """``--weight texture:C`` for the stable source: arrivals at rate area times the
+    weight's bound over the geometry, each kept with probability weight / bound (a
+    thinned Poisson process: rate area times weight, face by face)."""
+
+    def __init__(self, weight):
+        self._weight = weight
+        self._bound = weight._bound
+        self._inst_bound = np.array([weight._bound[i.geometry] for i in weight.surface.instances])
+
+    def face_weights_of(self, k, inst):
+        return np.full(len(self._weight.surface.geometries[inst.geometry].faces), self._bound[inst.geometry])
+
+    def accept(self, raw, u):
+        return u * self._inst_bound[raw.instance] < self._weight.weight(raw)
+
+
+def stable_weight(surface, spec):
+    """The stable source's form of ``--weight spec``."""
+    from .weighting import TextureWeight, VertexColorWeight, parse_weight
+
+    source, channel = parse_weight(spec)
+    if source == "vertex-color":
+        return VertexColorRates(VertexColorWeight(surface, channel, spec))
+    return TextureRates(TextureWeight(surface, channel, spec))

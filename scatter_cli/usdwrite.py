@@ -1,0 +1,181 @@
+"""USD output (optional extra ``usd``: usd-core): a ``UsdGeomPoints`` prim, or with
+``orient`` a ``UsdGeomPointInstancer`` with one placeholder prototype.
+
+USD arrays live in memory whole (a stage cannot be streamed), so the writer gathers the
+points into preallocated arrays and refuses up front a count that would not fit. Points
+are ``point3f``: float64 runs store them relative to a double-precision translate (the
+centre of the sampled box) so large coordinates keep their precision.
+
+Layout under the default prim ``/Scatter`` (an Xform):
+- ``Points``: ``points``, primvars ``normals``, ``displayColor``/``displayOpacity``, ``st``,
+  ``face_index``, ``bary``, ``object_index`` (vertex interpolation), ``extent``;
+- with orient, ``Instancer``: ``positions``, ``orientations`` (quath, what every reader
+  knows) and ``orientationsf`` (quatf, full precision), ``protoIndices`` all 0, the same
+  primvars per instance, and ``prototypes`` -> ``Instancer/Prototypes/Placeholder``, a
+  cone along +Z sized to the point spacing, for the user to retarget.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+
+import numpy as np
+
+from .errors import ScatterError
+from .writers import _Writer
+
+# Bytes held per point per value while the stage is built and saved: the gathered
+# NumPy array, the Vt array, and the serialised copy.
+COPIES = 3
+DEFAULT_UP_AXIS, DEFAULT_METERS_PER_UNIT = "Y", 1.0
+PRIMVARS = {  # key -> (primvar name, Sdf value type name, columns taken)
+    "normal": ("normals", "Normal3fArray", slice(0, 3)),
+    "bary": ("bary", "Float3Array", slice(0, 3)),
+    "uv": ("st", "TexCoord2fArray", slice(0, 2)),
+    "face": ("face_index", "IntArray", None),
+    "object": ("object_index", "IntArray", None),
+}
+
+
+def _pxr():
+    try:
+        from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+    except ImportError:
+        raise ScatterError("USD output needs usd-core: pip install 'scatter-cli[usd]'") from None
+    return Gf, Sdf, Usd, UsdGeom, Vt
+
+
+def available_memory():
+    """Bytes of memory available to this process now (MemAvailable), or None when unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def check_fits(count, layout, available=None):
+    """Refuse, in one line, a count whose stage would not fit in the memory available."""
+    per_point = sum(dt.itemsize * len(cols) for _, cols, dt in layout) + (16 if any(
+        k == "orient" for k, _, _ in layout) else 0)
+    need = COPIES * per_point * count
+    available = available_memory() if available is None else available
+    if available is not None and need > available:
+        raise ScatterError(f"USD output is built in memory (it cannot stream): {count:,} points need about "
+                           f"{need / 1e9:.3g} GB, more than the {available / 1e9:.3g} GB available; "
+                           "write PLY, PCD or LAS instead, or split the run with --shard")
+
+
+class UsdWriter(_Writer):
+    def __init__(self, stream, layout, count, path=None, up_axis=None, meters_per_unit=None, spacing=None):
+        super().__init__(stream, layout, count)
+        _pxr()
+        check_fits(count, layout)
+        self.path = None if path is None or str(path) == "-" else os.fspath(path)
+        self.up_axis = up_axis or DEFAULT_UP_AXIS
+        self.meters_per_unit = meters_per_unit or DEFAULT_METERS_PER_UNIT
+        self.spacing = spacing
+        self.report = {"usd": {"up_axis": self.up_axis, "meters_per_unit": self.meters_per_unit,
+                               "from_input": up_axis is not None or meters_per_unit is not None}}
+        self.data = {key: np.empty((count, len(cols)), dtype=dt) for key, cols, dt in layout}
+
+    def write(self, samples):
+        a, b = self.written, self.written + len(samples)
+        for key, cols, _ in self.layout:
+            src = samples.points if key == "points" else samples.attributes[key]
+            self.data[key][a:b] = src.reshape(len(samples), len(cols))
+        self.written = b
+
+    def finish(self):
+        super().finish()
+        stage = self.stage()
+        if self.path is None or self.path.lower().endswith(".usda"):
+            self.stream.write(stage.GetRootLayer().ExportToString().encode())
+            return
+        self.stream.write(export_crate(stage))
+
+    def stage(self):
+        """The Usd.Stage holding the points."""
+        Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
+        stage = Usd.Stage.CreateInMemory()
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if self.up_axis == "Y" else UsdGeom.Tokens.z)
+        UsdGeom.SetStageMetersPerUnit(stage, self.meters_per_unit)
+        root = UsdGeom.Xform.Define(stage, "/Scatter")
+        stage.SetDefaultPrim(root.GetPrim())
+        points = self.data["points"]
+        if points.dtype == np.float64 and len(points):
+            lo, hi = points.min(axis=0), points.max(axis=0)
+            centre = 0.5 * (lo + hi)
+            root.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*centre.tolist()))
+            points = points - centre
+        local = np.ascontiguousarray(points, dtype=np.float32)
+        extent = Vt.Vec3fArray.FromNumpy(np.stack([local.min(axis=0), local.max(axis=0)]) if len(local)
+                                         else np.zeros((2, 3), np.float32))
+        if "orient" in self.data:
+            prim = self._instancer(stage, local, extent)
+        else:
+            prim = UsdGeom.Points.Define(stage, "/Scatter/Points")
+            prim.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(local))
+            prim.CreateExtentAttr(extent)
+        self._primvars(prim)
+        return stage
+
+    def _instancer(self, stage, local, extent):
+        Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
+        inst = UsdGeom.PointInstancer.Define(stage, "/Scatter/Instancer")
+        inst.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(local))
+        q = np.ascontiguousarray(self.data["orient"], dtype=np.float32)  # Gf's memory order: x y z, then w
+        if hasattr(inst, "CreateOrientationsfAttr"):  # usd-core releases before 2024 lack it
+            inst.CreateOrientationsfAttr(Vt.QuatfArray.FromNumpy(q))
+        inst.CreateOrientationsAttr(Vt.QuathArray.FromNumpy(q.astype(np.float16)))
+        inst.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(np.zeros(len(local), dtype=np.int32)))
+        UsdGeom.Scope.Define(stage, "/Scatter/Instancer/Prototypes")
+        cone = UsdGeom.Cone.Define(stage, "/Scatter/Instancer/Prototypes/Placeholder")
+        size = self.spacing or 1.0
+        cone.CreateAxisAttr(UsdGeom.Tokens.z)
+        cone.CreateHeightAttr(size)
+        cone.CreateRadiusAttr(size / 4)
+        cone.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(-size / 4, -size / 4, -size / 2),
+                                             Gf.Vec3f(size / 4, size / 4, size / 2)]))
+        cone.AddTranslateOp().Set(Gf.Vec3d(0, 0, size / 2))  # base on the surface, tip along the normal
+        inst.CreatePrototypesRel().SetTargets([cone.GetPath()])
+        return inst
+
+    def _primvars(self, prim):
+        Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
+        api = UsdGeom.PrimvarsAPI(prim)
+        vertex = UsdGeom.Tokens.vertex
+        for key, (name, type_name, cols) in PRIMVARS.items():
+            if key not in self.data:
+                continue
+            values = self.data[key] if cols is None else self.data[key][:, cols]
+            value_type = getattr(Sdf.ValueTypeNames, type_name)
+            if cols is None:
+                values = np.ascontiguousarray(values[:, 0], dtype=np.int32)
+            else:
+                values = np.ascontiguousarray(values, dtype=np.float32)
+            api.CreatePrimvar(name, value_type, vertex).Set(value_type.type.pythonClass.FromNumpy(values))
+        if "color" in self.data:
+            c = self.data["color"].astype(np.float32) / 255.0
+            api.CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray, vertex).Set(
+                Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(c[:, :3])))
+            api.CreatePrimvar("displayOpacity", Sdf.ValueTypeNames.FloatArray, vertex).Set(
+                Vt.FloatArray.FromNumpy(np.ascontiguousarray(c[:, 3])))
+
+
+def export_crate(stage):
+    """The stage's root layer as .usdc bytes (crate files are written by file name only)."""
+    fd, tmp = tempfile.mkstemp(suffix=".usdc")
+    os.close(fd)
+    try:
+        if not stage.GetRootLayer().Export(tmp):
+            raise ScatterError("USD could not encode the stage as .usdc")
+        with open(tmp, "rb") as f:
+            return f.read()
+    finally:
+        os.unlink(tmp)

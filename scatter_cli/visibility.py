@@ -1,0 +1,136 @@
+"""Visibility from outside: rays from surface points, against the surface, in Embree.
+
+A point is exterior when one of its rays leaves the surface's bounding sphere without
+hitting a face. Each point tries, in turn and until one gets out: its face's normal,
+the opposite direction, then the K directions of a fixed spherical design (a Fibonacci
+lattice) turned by a uniformly random rotation of its own. A ray starts a few float32
+roundings off the face, on the side it goes to, so that it does not hit its own face.
+Embree works in float32: the scene is centred on its bounding box first.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .errors import ScatterError
+
+# Design directions after the two normal rays (docs/exterior.md: false drops against K).
+DESIGN_SIZE = 64
+# Ray origins sit this many float32 roundings (at the scene's radius) off the face.
+OFFSET_ROUNDINGS = 16
+INSTALL_HINT = "--exterior needs Embree: pip install 'scatter-cli[exterior]'"
+
+
+def fibonacci_sphere(k: int) -> np.ndarray:
+    """(k, 3) float64 unit vectors spread evenly over the sphere (a Fibonacci lattice)."""
+    i = np.arange(k, dtype=np.float64) + 0.5
+    z = 1.0 - 2.0 * i / k
+    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    phi = i * (math.pi * (3.0 - math.sqrt(5.0)))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def random_rotations(u) -> np.ndarray:
+    """(n, 4) unit quaternions (x, y, z, w), uniform over rotations, from ``u`` (n, 3) in [0, 1)."""
+    a, b = np.sqrt(1.0 - u[:, 0]), np.sqrt(u[:, 0])
+    t1, t2 = 2 * math.pi * u[:, 1], 2 * math.pi * u[:, 2]
+    return np.stack([a * np.sin(t1), a * np.cos(t1), b * np.sin(t2), b * np.cos(t2)], axis=1)
+
+
+def rotate(q, v) -> np.ndarray:
+    """(n, 3): the unit vector ``v`` (3,) turned by each quaternion ``q`` (n, 4)."""
+    xyz, w = q[:, :3], q[:, 3:]
+    t = 2.0 * np.cross(xyz, v)
+    return v + w * t + np.cross(xyz, t)
+
+
+def _embree():
+    try:
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+    except ImportError:
+        raise ScatterError(INSTALL_HINT) from None
+    return rtcore_scene, TriangleMesh
+
+
+class Occluder:
+    """Every finite face of a surface, in world space, in one Embree scene.
+
+    ``normals`` (F, 3) float64 unit world-space normals, row ``offsets[instance] + face``.
+    """
+
+    def __init__(self, surface, design_size: int | None = None, normal_rays: bool = True,
+                 offset_roundings: float | None = None):
+        rtcore_scene, TriangleMesh = _embree()
+        self.design = fibonacci_sphere(DESIGN_SIZE if design_size is None else design_size)
+        self.normal_rays = normal_rays
+        world = [surface.world_vertices(inst) for inst in surface.instances]
+        faces = [surface.geometries[inst.geometry].faces for inst in surface.instances]
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for v in world:
+            ok = v[np.isfinite(v).all(axis=1)]
+            if len(ok):
+                lo, hi = np.minimum(lo, ok.min(axis=0)), np.maximum(hi, ok.max(axis=0))
+        self.center = (lo + hi) / 2 if np.isfinite(lo).all() else np.zeros(3)
+        self.scene = rtcore_scene.EmbreeScene(robust=True)  # watertight: no ray slips between two faces
+        self.offsets = np.cumsum([0] + [len(f) for f in faces])
+        self.normals = np.zeros((int(self.offsets[-1]), 3))
+        radius = 0.0
+        for k, (v, f) in enumerate(zip(world, faces)):
+            local = v - self.center
+            finite = np.isfinite(local).all(axis=1)
+            good = finite[f].all(axis=1)
+            tri = local[f]
+            n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            with np.errstate(invalid="ignore", divide="ignore"):
+                n /= np.linalg.norm(n, axis=1, keepdims=True)
+            self.normals[self.offsets[k]:self.offsets[k + 1]] = np.where(np.isfinite(n), n, 0.0)
+            if good.any():
+                radius = max(radius, float(np.abs(local[finite]).max()))
+                TriangleMesh(self.scene, np.where(finite[:, None], local, 0.0).astype(np.float32),
+                             f[good].astype(np.int32))
+        self.radius = radius
+        # Embree builds its tree at the first query: build it now (one ray)
+        self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED")
+        # float32 spacing at the largest coordinate, times the roundings
+        roundings = OFFSET_ROUNDINGS if offset_roundings is None else offset_roundings
+        self.offset = float(np.spacing(np.float32(radius or 1.0))) * roundings
+
+    def face_normals(self, face, instance):
+        """(n, 3) unit normals of faces ``face`` (n,) of instances ``instance`` (n,)."""
+        return self.normals[self.offsets[instance] + face]
+
+    def exterior(self, points, normals, u):
+        """Whether each point (n, 3) on a face of unit normal ``normals`` (n, 3) sees out:
+        ((n,) bool, rays cast). ``u`` (n, 3) uniforms in [0, 1) choose each point's
+        rotation of the design."""
+        origin = points - self.center
+        out = np.zeros(len(points), dtype=bool)
+        todo = np.arange(len(points))
+        rays = 0
+        if self.normal_rays:
+            for sign in (1.0, -1.0):
+                rays += len(todo)
+                todo = self._cast(origin, normals, sign * normals[todo], todo, out)
+        spin = random_rotations(u)
+        for d in self.design:
+            if not len(todo):
+                break
+            rays += len(todo)
+            todo = self._cast(origin, normals, rotate(spin[todo], d), todo, out)
+        return out, rays
+
+    def _cast(self, origin, normals, d, todo, out):
+        """Cast rays ``d`` (m, 3) from points ``todo`` (m,); mark those that get out in
+        ``out``, return the others."""
+        if not len(todo):
+            return todo
+        n = normals[todo]
+        side = np.where(np.einsum("ij,ij->i", d, n) < 0, -self.offset, self.offset)
+        start = origin[todo] + side[:, None] * n
+        hit = self.scene.run(start.astype(np.float32), np.ascontiguousarray(d, dtype=np.float32), query="OCCLUDED")
+        free = hit == -1
+        out[todo[free]] = True
+        return todo[~free]

@@ -1,0 +1,332 @@
+"""One mesh at a time in a long-lived child process, with its failures kept to that mesh.
+
+The child (``python -m scatter_cli.worker``) imports NumPy and trimesh once, then reads
+jobs, one JSON line each, from standard input, samples each mesh to its output itself
+(``api.prepare`` and the writers, exactly as ``scatter sample`` does) and answers one JSON
+line. The parent side, :class:`Lane`, hands it one job at a time and watches it: a job
+past its timeout or its memory limit is killed with its process, a crash (segfault, OOM
+kill) is seen as the pipe closing; either way that job fails, its temporary output is
+removed and the next job gets a fresh child. Both engines use it: the local one runs
+``-j`` lanes, the Dask one a lane per Dask worker thread.
+
+The memory limit is checked by polling the child's resident set size (``/proc/PID/statm``)
+every ``POLL`` seconds rather than with ``RLIMIT_AS``: an address-space limit counts
+reservations that are not memory (thread stacks, glibc's 64 MB malloc arenas per thread,
+files mapped by the PLY reader), so a limit in MB would fail good meshes or need a fudge
+factor; resident memory is what the OOM killer and ``top`` count. The cost is that a
+spike shorter than the poll interval goes unseen.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import select
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+POLL = 0.05  # seconds between checks of a running job's time and memory
+_PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+
+
+class WorkerLost(Exception):
+    """The child stopped before answering: the message says why (one line)."""
+
+
+# ---------------------------------------------------------------- the child ----
+
+def serve():
+    """The child's loop: a setup line, then one job line in, one result line out."""
+    answer = os.fdopen(os.dup(1), "w", buffering=1)
+    os.dup2(2, 1)  # stray prints go to standard error, not into the answers
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent decides
+    _die_with_parent()
+    setup = json.loads(sys.stdin.readline() or "null")
+    if setup is None:
+        return
+    _warm_up()
+    answer.write('{"ready": true}\n')
+    warn = None if setup.get("quiet") else (lambda m: print(f"warning: {m}", file=sys.stderr, flush=True))
+    for line in sys.stdin:
+        job = json.loads(line)
+        answer.write(json.dumps(sample_file(job["input"], job["output"], job["format"], setup, warn)) + "\n")
+        _trim_heap()
+
+
+def sample_file(input, output, fmt, setup, warn=None):
+    """Sample ``input`` to ``output`` in format ``fmt`` as ``scatter sample INPUT -o OUTPUT`` does.
+
+    ``setup``: ``{"options": keyword arguments of api.prepare, "ascii": bool}``.
+
+    Returns ``{"error": None or one line, "count", "faces", "area"}``.
+    """
+    from . import api
+    from .errors import ScatterError
+    from .writers import write_samples
+
+    try:
+        folder = os.path.dirname(output)
+        if folder:
+            os.makedirs(folder, exist_ok=True)
+        run = api.prepare(input, warn=warn, **setup["options"])
+        write_samples(run.chunks(), output, fmt, run.layout, run.size, setup.get("ascii", False))
+        return {"error": None, "count": run.size, "faces": int(run.info["faces"]), "area": float(run.info["area"])}
+    except ScatterError as exc:
+        message = str(exc)
+    except MemoryError:
+        message = "out of memory"
+    except OSError as exc:
+        message = f"{exc.strerror or exc}"
+    except Exception as exc:  # a bug or a reader's surprise: this mesh fails, the worker goes on
+        message = f"internal error: {type(exc).__name__}: {exc}"
+    return {"error": name_the_file(message, input, output), "count": None, "faces": None, "area": None}
+
+
+def name_the_file(message, input, output=None):
+    """``message`` as one line that says which file it is about."""
+    message = (message.strip().splitlines() or [""])[0]
+    if input in message or (output and output in message):
+        return message
+    return f"{input}: {message}"
+
+
+def _warm_up():
+    from . import api, writers  # noqa: F401  (NumPy, the sampler and the writers)
+    from .process import import_trimesh_lean
+
+    import_trimesh_lean()  # as the command line imports it: SciPy hidden
+
+
+def _die_with_parent():
+    """Ask Linux to kill this child when its parent dies, so none is left working for nobody."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except Exception:
+        return
+    if os.getppid() == 1:  # the parent died before prctl
+        os._exit(1)
+
+
+def _trim_heap():
+    """Hand freed memory back to the system, so a worker's footprint does not ratchet up."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).malloc_trim(0)
+    except Exception:
+        pass
+
+
+# ---------------------------------------------------------------- the parent side ----
+
+class WorkerProcess:
+    """One child; ``run(job)`` sends it one job and waits for its answer."""
+
+    def __init__(self, setup, env=None):
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "scatter_cli.worker"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0,
+        )
+        self.proc.stdin.write((json.dumps(setup) + "\n").encode())
+        self.ready = False
+        self.output = None  # the output of the job in flight
+        self.killed_for = None
+
+    def wait_ready(self):
+        """Wait for the child's imports (start-up counts against no job's time limit)."""
+        if not self.ready:
+            self._read_line(None, None)
+            self.ready = True
+
+    def run(self, input, output, fmt, timeout=None, max_memory=None):
+        self.wait_ready()
+        self.output = output
+        try:
+            self.proc.stdin.write((json.dumps({"input": input, "output": output, "format": fmt}) + "\n").encode())
+        except OSError:
+            raise WorkerLost(self._death()) from None
+        answer = json.loads(self._read_line(timeout, max_memory))
+        self.output = None
+        return answer
+
+    def _read_line(self, timeout, max_memory):
+        started = time.monotonic()
+        out = self.proc.stdout
+        buf = b""
+        while True:
+            ready, _, _ = select.select([out], [], [], POLL)
+            if ready:
+                block = os.read(out.fileno(), 65536)
+                if not block:
+                    raise WorkerLost(self._death())
+                buf += block
+                if buf.endswith(b"\n"):
+                    return buf
+                continue
+            if self.killed_for:
+                raise WorkerLost(self._death())
+            if timeout is not None and time.monotonic() - started > timeout:
+                self.kill(f"timed out after {timeout:g} s")
+                raise WorkerLost(self._death())
+            if max_memory is not None:
+                rss = resident_bytes(self.proc.pid)
+                if rss > max_memory * 2**20:
+                    self.kill(f"exceeded --max-memory {max_memory:g} MB (resident {rss / 2**20:.0f} MB)")
+                    raise WorkerLost(self._death())
+
+    def kill(self, reason="stopped"):
+        self.killed_for = self.killed_for or reason
+        try:
+            self.proc.kill()
+        except OSError:
+            pass
+
+    def _death(self):
+        code = self.proc.wait()
+        if self.killed_for:
+            return self.killed_for
+        if code < 0:
+            try:
+                name = signal.Signals(-code).name
+            except ValueError:
+                name = f"signal {-code}"
+            hint = " (out of memory?)" if -code == signal.SIGKILL else ""
+            return f"its worker was killed by {name}{hint}"
+        return f"its worker exited with status {code}"
+
+    def close(self):
+        try:
+            self.proc.stdin.close()
+        except OSError:
+            pass
+        try:
+            self.proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def resident_bytes(pid) -> int:
+    try:
+        with open(f"/proc/{pid}/statm") as f:
+            return int(f.read().split()[1]) * _PAGE
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+def remove_temps(output):
+    """Delete the temporary files ``writers.open_output`` makes for ``output``
+    (``.NAME.XXXXXXXX.part`` beside it) that a killed worker or run left behind."""
+    folder, base = os.path.split(os.path.abspath(output))
+    pattern = re.compile(r"\." + re.escape(base) + r"\.[A-Za-z0-9_]{8}\.part\Z")
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return
+    for name in names:
+        if pattern.match(name):
+            try:
+                os.unlink(os.path.join(folder, name))
+            except OSError:
+                pass
+
+
+class StaleTemps:
+    """Temporary files of earlier, killed runs, listed once per output folder.
+
+    ``clear(output)`` deletes those of ``output``: a directory of a million outputs is
+    listed once, not once per mesh.
+    """
+
+    PATTERN = re.compile(r"\.(.+)\.[A-Za-z0-9_]{8}\.part\Z")
+
+    def __init__(self):
+        self.folders = {}
+        self.lock = threading.Lock()
+
+    def clear(self, output):
+        folder, base = os.path.split(os.path.abspath(output))
+        with self.lock:
+            if folder not in self.folders:
+                self.folders[folder] = self._scan(folder)
+            names = self.folders[folder].pop(base, ())
+        for name in names:
+            try:
+                os.unlink(os.path.join(folder, name))
+            except OSError:
+                pass
+
+    def _scan(self, folder):
+        found = {}
+        try:
+            with os.scandir(folder) as it:
+                for entry in it:
+                    m = self.PATTERN.match(entry.name)
+                    if m:
+                        found.setdefault(m.group(1), []).append(entry.name)
+        except OSError:
+            pass
+        return found
+
+
+class Lane:
+    """Runs jobs one after another in a child, replacing it when a job kills it."""
+
+    def __init__(self, setup, env=None, timeout=None, max_memory=None, skip_existing=False, stale=None):
+        self.setup, self.env = setup, env
+        self.timeout, self.max_memory = timeout, max_memory
+        self.skip_existing = skip_existing
+        self.stale = stale if stale is not None else StaleTemps()
+        self.worker = None
+        self.stopped = False
+
+    def process(self, input, output, fmt):
+        """The report record of one mesh (``input``, ``output``, ``status``, ``error``, ...)."""
+        t = time.perf_counter()
+        self.stale.clear(output)
+        if self.skip_existing and os.path.isfile(output):
+            return record(input, output, "skipped", None, seconds=time.perf_counter() - t)
+        try:
+            if self.worker is None:
+                self.worker = WorkerProcess(self.setup, self.env)
+                self.worker.wait_ready()
+                t = time.perf_counter()
+            answer = self.worker.run(input, output, fmt, self.timeout, self.max_memory)
+        except WorkerLost as lost:
+            self.worker = None
+            remove_temps(output)
+            if self.stopped:
+                raise
+            answer = {"error": name_the_file(str(lost), input), "count": None, "faces": None, "area": None}
+        status = "failed" if answer["error"] else "written"
+        return record(input, output, status, answer["error"], answer["count"], answer["faces"], answer["area"],
+                      time.perf_counter() - t)
+
+    def stop(self):
+        """Kill the child now (an interrupted batch); the job in flight raises WorkerLost."""
+        self.stopped = True
+        worker = self.worker
+        if worker is not None:
+            worker.kill("interrupted")
+            if worker.output:
+                remove_temps(worker.output)
+
+    def close(self):
+        if self.worker is not None:
+            self.worker.close()
+            self.worker = None
+
+
+def record(input, output, status, error, count=None, faces=None, area=None, seconds=0.0):
+    return {"input": input, "output": output, "status": status, "error": error, "count": count,
+            "faces": faces, "area": area, "seconds": round(seconds, 6)}
+
+
+if __name__ == "__main__":
+    serve()

@@ -1,0 +1,97 @@
+"""Helpers of the batch tests: a small collection, what `scatter sample` writes for it,
+and the process that holds a FIFO open."""
+
+import os
+import shutil
+import signal
+import time
+
+from .conftest import SAMPLES, run_scatter
+
+GOOD = ["icosahedron_binary.stl", "moebius-160-10.ply", "hemisphere.off", "narrow_triangles.obj",
+        "boxvertexcolors.glb"]
+# the output format of each good mesh: its stem ends with it ({stem} drops only the mesh suffix)
+FORMAT_OF = dict(zip(GOOD, ["ply", "csv", "xyz", "npy", "ply"]))
+OPTIONS = ["-n", "300", "-a", "normal,face"]
+
+
+def collection(folder):
+    """The good meshes copied to ``folder`` as NAME.FORMAT.SUFFIX: returns their paths."""
+    folder.mkdir(exist_ok=True)
+    paths = []
+    for name in GOOD:
+        stem, suffix = os.path.splitext(name)
+        paths.append(folder / f"{stem}.{FORMAT_OF[name]}{suffix}")
+        shutil.copy(SAMPLES / name, paths[-1])
+    return paths
+
+
+def reference(tmp_path, paths, *extra):
+    """What `scatter sample MESH -o OUT` writes for each mesh: {output name: bytes}.
+
+    The first through a subprocess, the others through the command's own entry point in
+    this process (the same code, without paying Python's start-up for each).
+    """
+    out = {}
+    for i, p in enumerate(paths):
+        name = os.path.splitext(p.name)[0]
+        target = tmp_path / "ref" / name
+        target.parent.mkdir(exist_ok=True)
+        argv = ["sample", str(p), *OPTIONS, *extra, "-o", str(target)]
+        if i == 0:
+            run_scatter(*argv, check=True)
+        else:
+            sample_in_process(argv)
+        out[name] = target.read_bytes()
+    return out
+
+
+def sample_in_process(argv):
+    from scatter_cli.cli import main
+
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        assert main(argv) == 0, argv
+    finally:
+        for s, h in handlers.items():
+            signal.signal(s, h)
+
+
+def outputs(folder):
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def no_temporary_files(folder):
+    return not [p for p in folder.rglob("*") if p.name.endswith(".part")]
+
+
+reader_fd = []
+
+
+def wait_for_reader(fifo, timeout=30):
+    """The pid of the process that opened ``fifo`` to read it (we open its writing end)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            reader_fd.append(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+            break
+        except OSError:
+            time.sleep(0.02)
+    else:
+        raise AssertionError("nobody opened the FIFO")
+    while time.monotonic() < deadline:
+        for pid in filter(str.isdigit, os.listdir("/proc")):
+            if int(pid) == os.getpid():
+                continue
+            try:
+                fds = os.listdir(f"/proc/{pid}/fd")
+            except OSError:
+                continue
+            for fd in fds:
+                try:
+                    if os.readlink(f"/proc/{pid}/fd/{fd}") == str(fifo):
+                        return int(pid)
+                except OSError:
+                    pass
+        time.sleep(0.02)
+    raise AssertionError("no reader of the FIFO found")

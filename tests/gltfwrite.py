@@ -1,0 +1,65 @@
+"""A minimal GLB writer for tests: meshes (positions and indices), nodes placing them, and
+optionally the meshes compressed with DracoPy (``KHR_draco_mesh_compression``).
+
+Written here rather than by trimesh's exporter so that the reader is checked against
+files it did not make itself.
+"""
+
+import json
+import struct
+
+import numpy as np
+
+DRACO = "KHR_draco_mesh_compression"
+
+
+def glb_bytes(meshes, nodes, *, draco=False, quantization_bits=14, preserve_order=True):
+    """meshes: [(vertices (V, 3), faces (F, 3))]; nodes: [(mesh index, (4, 4) matrix or None)]
+    with matrices acting on column vectors. Returns the bytes of a GLB file."""
+    blob, views, accessors, gltf_meshes = bytearray(), [], [], []
+
+    def view(data):
+        while len(blob) % 4:
+            blob.append(0)
+        views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": len(data)})
+        blob.extend(data)
+        return len(views) - 1
+
+    for vertices, faces in meshes:
+        v = np.ascontiguousarray(vertices, dtype=np.float32)
+        f = np.ascontiguousarray(faces, dtype=np.uint32)
+        pos = {"componentType": 5126, "count": len(v), "type": "VEC3",
+               "min": v.min(0).tolist(), "max": v.max(0).tolist()}
+        idx = {"componentType": 5125, "count": f.size, "type": "SCALAR"}
+        primitive = {"attributes": {"POSITION": len(accessors)}, "indices": len(accessors) + 1, "mode": 4}
+        if draco:
+            import DracoPy
+
+            data = DracoPy.encode(v, f, quantization_bits=quantization_bits, preserve_order=preserve_order)
+            decoded = DracoPy.decode(data)
+            pid = next(a["unique_id"] for a in decoded.attributes
+                       if a["attribute_type"] == DracoPy.AttributeType.POSITION)
+            pos["count"], idx["count"] = len(decoded.points), np.asarray(decoded.faces).size
+            primitive["extensions"] = {DRACO: {"bufferView": view(data), "attributes": {"POSITION": pid}}}
+        else:
+            pos["bufferView"] = view(v.tobytes())
+            idx["bufferView"] = view(f.tobytes())
+        accessors += [pos, idx]
+        gltf_meshes.append({"primitives": [primitive]})
+    gltf_nodes = []
+    for k, (mesh, matrix) in enumerate(nodes):
+        node = {"mesh": mesh, "name": f"node{k}"}
+        if matrix is not None:
+            node["matrix"] = np.asarray(matrix, dtype=np.float64).T.ravel().tolist()  # column-major
+        gltf_nodes.append(node)
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": list(range(len(nodes)))}],
+           "nodes": gltf_nodes, "meshes": gltf_meshes, "accessors": accessors, "bufferViews": views,
+           "buffers": [{"byteLength": len(blob)}]}
+    if draco:
+        doc["extensionsUsed"] = doc["extensionsRequired"] = [DRACO]
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    blob.extend(b"\0" * (-len(blob) % 4))
+    total = 12 + 8 + len(text) + 8 + len(blob)
+    return (struct.pack("<4sII", b"glTF", 2, total) + struct.pack("<I4s", len(text), b"JSON") + text
+            + struct.pack("<I4s", len(blob), b"BIN\0") + bytes(blob))

@@ -1,0 +1,127 @@
+"""``scatter_cli.batch``: the same bytes as ``scatter sample``, and one bad mesh fails alone."""
+
+import json
+import os
+import shutil
+import threading
+
+import numpy as np
+import pytest
+
+import scatter_cli
+from scatter_cli.errors import ScatterUsageError
+
+from .batchtools import collection, no_temporary_files, outputs, reader_fd, reference, wait_for_reader
+from .conftest import SAMPLES, triangles_mesh
+
+
+@pytest.fixture(scope="module")
+def meshes(tmp_path_factory):
+    base = tmp_path_factory.mktemp("meshes")
+    paths = collection(base / "in")
+    return base, paths, reference(base, paths), reference(base, paths[:2], "--ascii", "-f", "ply")
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_batch_writes_what_sample_writes(tmp_path, meshes, jobs):
+    base, paths, ref, _ = meshes
+    records = scatter_cli.batch([base / "in"], tmp_path / "out" / "{stem}", jobs=jobs, count=300,
+                                attributes="normal,face", report=tmp_path / "report.jsonl")
+    assert outputs(tmp_path / "out") == ref
+    assert [r["status"] for r in records] == ["written"] * len(paths)
+    assert [r["input"] for r in records] == sorted(str(p) for p in paths)
+    lines = [json.loads(line) for line in (tmp_path / "report.jsonl").read_text().splitlines()]
+    assert lines == records
+    assert set(lines[0]) == {"input", "output", "status", "error", "count", "faces", "area", "seconds"}
+
+
+def test_batch_ascii_ply(tmp_path, meshes):
+    base, paths, _, ref_ascii = meshes
+    scatter_cli.batch(paths[:2], str(tmp_path / "{stem}"), jobs=2, count=300, attributes="normal,face", ascii=True,
+                      format="ply")
+    assert outputs(tmp_path) == ref_ascii
+
+
+def test_template_fields_and_collisions(tmp_path):
+    tree = tmp_path / "in"
+    (tree / "a" / "b").mkdir(parents=True)
+    shutil.copy(SAMPLES / "icosahedron_binary.stl", tree / "a" / "b" / "x.stl")
+    shutil.copy(SAMPLES / "icosahedron_binary.stl", tree / "a" / "x.stl")
+    (tree / "notes.txt").write_text("not a mesh")
+    records = scatter_cli.batch([tree], str(tmp_path / "out" / "{rel}-{index}-{name}.csv"), jobs=1, count=5)
+    assert [os.path.relpath(r["output"], tmp_path / "out") for r in records] == \
+        ["a/b/x-0-x.stl.csv", "a/x-1-x.stl.csv"]
+    with pytest.raises(ScatterUsageError, match="would both write"):
+        scatter_cli.batch([tree], str(tmp_path / "flat" / "{stem}.csv"), count=5)
+    with pytest.raises(ScatterUsageError, match="field"):
+        scatter_cli.batch([tree], str(tmp_path / "{size}.csv"), count=5)
+    with pytest.raises(ScatterUsageError, match="format"):
+        scatter_cli.batch([tree], str(tmp_path / "{rel}.obj"), count=5)
+    assert not (tmp_path / "flat").exists()
+
+
+def bad_meshes(folder):
+    """{path: what its error says} for meshes that must fail, written into ``folder``."""
+    folder.mkdir(exist_ok=True)
+    bad = {}
+    (folder / "garbage.stl").write_bytes(np.random.default_rng(1).bytes(300))
+    bad["garbage.stl"] = "garbage.stl"
+    (folder / "empty.obj").write_bytes(b"")
+    bad["empty.obj"] = "empty"
+    flat = triangles_mesh([[[0, 0, 0], [1, 1, 1], [2, 2, 2]]] * 3)
+    flat.export(folder / "zero-area.ply")
+    bad["zero-area.ply"] = "area"
+    (folder / "non-finite.obj").write_text("v nan nan nan\n" * 3 + "f 1 2 3\n")
+    bad["non-finite.obj"] = "non-finite|no area|no faces"
+    os.symlink(folder / "nowhere.ply", folder / "dangling.ply")
+    bad["dangling.ply"] = "no such file"
+    return bad
+
+
+def test_bad_meshes_fail_alone(tmp_path, meshes):
+    base, paths, ref, _ = meshes
+    bad = bad_meshes(tmp_path / "bad")
+    os.mkfifo(tmp_path / "bad" / "fifo.ply")  # nobody writes to it: only --timeout ends it
+    bad["fifo.ply"] = "timed out after 6 s"
+    hog = tmp_path / "bad" / "hog.stl"  # its area makes --density ask for 2.5 million points
+    mesh = scatter_cli.load_surface(str(SAMPLES / "icosahedron_binary.stl"))
+    big = triangles_mesh(mesh.geometries[0].vertices[mesh.geometries[0].faces] * 70.0)
+    big.export(hog)
+    bad["hog.stl"] = "exceeded --max-memory 200 MB"
+    small = tmp_path / "small"
+    small.mkdir()
+    for p in paths[:2]:  # area about 10: 100 points a mesh at density 10
+        shutil.copy(p, small / p.name)
+    inputs = [small / p.name for p in paths[:2]] + sorted((tmp_path / "bad").iterdir())
+    records = scatter_cli.batch(inputs, str(tmp_path / "out" / "{stem}.ply"), jobs=2, density=10.0, poisson=True,
+                                timeout=6, max_memory=200)
+    failed = {os.path.basename(r["input"]): r["error"] for r in records if r["status"] == "failed"}
+    assert set(failed) == set(bad)
+    for name, why in bad.items():
+        assert name in failed[name]
+        assert any(w in failed[name] for w in why.split("|")), failed[name]
+        assert "\n" not in failed[name]
+    written = sorted(p.name for p in (tmp_path / "out").iterdir())
+    assert written == sorted(f"{os.path.splitext(p.name)[0]}.ply" for p in paths[:2])
+    assert no_temporary_files(tmp_path)
+
+
+def test_a_worker_killed_mid_batch_fails_its_mesh_alone(tmp_path, meshes):
+    base, paths, ref, _ = meshes
+    fifo = tmp_path / "in" / "fifo.csv.ply"
+    fifo.parent.mkdir()
+    os.mkfifo(fifo)
+    inputs = [paths[0], fifo, *paths[1:]]
+    result = {}
+    thread = threading.Thread(target=lambda: result.update(records=scatter_cli.batch(
+        inputs, str(tmp_path / "out" / "{stem}"), jobs=2, count=300, attributes="normal,face")))
+    thread.start()
+    reader = wait_for_reader(fifo)
+    os.kill(reader, 9)
+    os.close(reader_fd.pop())
+    thread.join(60)
+    records = result["records"]
+    assert [r["status"] for r in records] == ["written", "failed"] + ["written"] * (len(paths) - 1)
+    assert "fifo.csv.ply" in records[1]["error"] and "SIGKILL" in records[1]["error"]
+    assert outputs(tmp_path / "out") == ref
+    assert no_temporary_files(tmp_path)

@@ -1,0 +1,126 @@
+"""`scatter batch`, `scatter sample --shard` and `scatter merge` as a user's shell runs them."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+
+import pytest
+
+from .conftest import SAMPLES, popen_user, run_scatter, scatter_command
+from .batchtools import outputs, reader_fd, wait_for_reader
+
+MESHES = ["icosahedron_binary.stl", "moebius-160-10.ply", "hemisphere.off", "narrow_triangles.obj"]
+
+
+def start_batch(*args):
+    """`scatter batch ARGS` in its own session (so the test can kill its whole group)."""
+    return popen_user(scatter_command("batch", *args), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                      start_new_session=True)
+
+
+def folder_with_fifo(tmp_path):
+    """a, b, c (a FIFO nobody writes to yet), d, e: with -j 1 the batch stops at c."""
+    src = tmp_path / "in"
+    src.mkdir()
+    for letter, name in zip("abde", MESHES):
+        shutil.copy(SAMPLES / name, src / f"{letter}{os.path.splitext(name)[1]}")
+    os.mkfifo(src / "c.ply")
+    return src
+
+
+def test_resume_after_sigkill_gives_the_uninterrupted_outputs(tmp_path):
+    src = folder_with_fifo(tmp_path)
+    out = tmp_path / "out"
+    args = [src, "-o", f"{out}/{{stem}}.ply", "-n", "200", "-a", "normal", "-j", "1"]
+    proc = start_batch(*args)
+    wait_for_reader(src / "c.ply")
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    os.close(reader_fd.pop())
+    assert sorted(os.listdir(out)) == ["a.ply", "b.ply"]
+    # what a run killed while writing leaves: temporary files beside the outputs
+    (out / ".d.ply.k1ll3d_1.part").write_bytes(b"ply\nhalf a file")
+    (out / ".a.ply.k1ll3d_2.part").write_bytes(b"ply\nhalf a file")
+    os.unlink(src / "c.ply")
+    shutil.copy(SAMPLES / "spot_triangulated.obj", src / "c.obj")
+    done = run_scatter("batch", *args, "--skip-existing", "--report", tmp_path / "report.jsonl")
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.decode().strip().splitlines()[-1].startswith("batch: 3 written, 2 skipped, 0 failed in ")
+    report = [json.loads(line) for line in (tmp_path / "report.jsonl").read_text().splitlines()]
+    assert [r["status"] for r in report] == ["skipped", "skipped", "written", "written", "written"]
+    whole = run_scatter("batch", src, "-o", f"{tmp_path}/whole/{{stem}}.ply", "-n", "200", "-a", "normal")
+    assert whole.returncode == 0
+    assert outputs(out) == outputs(tmp_path / "whole")  # no .part left either
+
+
+def test_sigterm_stops_the_batch_keeping_finished_outputs(tmp_path):
+    src = folder_with_fifo(tmp_path)
+    out = tmp_path / "out"
+    proc = start_batch(src, "-o", f"{out}/{{stem}}.csv", "-n", "50", "-j", "1", "--report", tmp_path / "r.jsonl")
+    wait_for_reader(src / "c.ply")
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    os.close(reader_fd.pop())
+    assert proc.returncode == 143, err
+    assert err.decode().strip().splitlines()[-1] == "error: terminated"
+    assert sorted(os.listdir(out)) == ["a.csv", "b.csv"]
+    assert [json.loads(line)["input"][-5:] for line in (tmp_path / "r.jsonl").read_text().splitlines()] == \
+        ["a.stl", "b.ply"]
+
+
+def test_exit_codes_and_error_lines(tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(SAMPLES / MESHES[0], src / "good.stl")
+    (src / "bad.obj").write_text("this is not a mesh\n")
+    failed = run_scatter("batch", src, "-o", f"{tmp_path}/out/{{stem}}.xyz", "-n", "10", "-j", "2")
+    assert failed.returncode == 1
+    lines = failed.stderr.decode().splitlines()
+    assert [line for line in lines if line.startswith("error:")] == [lines[0]] and "bad.obj" in lines[0]
+    assert lines[-1].startswith("batch: 1 written, 0 skipped, 1 failed in ")
+    assert "Traceback" not in failed.stderr.decode()
+    collide = run_scatter("batch", src / "good.stl", src / "bad.obj", "-o", f"{tmp_path}/x.ply")
+    assert collide.returncode == 2 and b"would both write" in collide.stderr
+    nothing = run_scatter("batch", "--from-list", "-", "-o", f"{tmp_path}/{{stem}}.ply")
+    assert nothing.returncode == 2
+    no_scheduler = run_scatter("batch", src, "-o", f"{tmp_path}/d/{{stem}}.ply", "--engine", "dask",
+                               env={"DASK_SCHEDULER_ADDRESS": ""})
+    assert no_scheduler.returncode == 2 and b"--scheduler" in no_scheduler.stderr
+
+
+def test_from_list_on_standard_input(tmp_path):
+    paths = [SAMPLES / m for m in MESHES[:2]]
+    listing = "".join(f"{p}\n" for p in paths).encode()
+    done = run_scatter("batch", "--from-list", "-", "-o", f"{tmp_path}/{{index}}-{{stem}}.npy", "-n", "20",
+                       input=listing)
+    assert done.returncode == 0, done.stderr
+    assert sorted(os.listdir(tmp_path)) == ["0-icosahedron_binary.npy", "1-moebius-160-10.npy"]
+
+
+# every format against the API in test_shards.py; here the commands, on two of them
+@pytest.mark.parametrize("suffix,extra", [("ply", []), ("csv", [])])
+def test_cli_shards_merge_into_the_whole_run(tmp_path, suffix, extra):
+    mesh = SAMPLES / "moebius-160-10.ply"
+    common = ["-n", "1001", "-a", "normal", *extra]
+    run_scatter("sample", mesh, *common, "-o", tmp_path / f"whole.{suffix}", check=True)
+    parts = []
+    for k in range(3):
+        parts.append(tmp_path / f"part{k}.{suffix}")
+        run_scatter("sample", mesh, *common, "--shard", f"{k}/3", "-o", parts[-1], check=True)
+    run_scatter("merge", *parts, "-o", tmp_path / f"merged.{suffix}", check=True)
+    assert (tmp_path / f"merged.{suffix}").read_bytes() == (tmp_path / f"whole.{suffix}").read_bytes()
+
+
+def test_cli_shard_usage_errors(tmp_path):
+    mesh = SAMPLES / "moebius-160-10.ply"
+    for bad in (["--poisson"], ["--radius", "0.1"]):
+        proc = run_scatter("sample", mesh, "-n", "10", "--shard", "0/2", *bad)
+        assert proc.returncode == 2 and b"--shard" in proc.stderr
+    proc = run_scatter("sample", mesh, "-n", "10", "--shard", "2/2")
+    assert proc.returncode == 2
+    run_scatter("sample", mesh, "-n", "10", "-o", tmp_path / "a.ply", check=True)
+    run_scatter("sample", mesh, "-n", "10", "-a", "normal", "-o", tmp_path / "b.ply", check=True)
+    proc = run_scatter("merge", tmp_path / "a.ply", tmp_path / "b.ply", "-o", tmp_path / "m.ply")
+    assert proc.returncode == 1 and b"b.ply" in proc.stderr and not (tmp_path / "m.ply").exists()

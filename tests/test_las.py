@@ -1,0 +1,128 @@
+"""LAS / LAZ output read back by laspy: coordinates within the stated quantisation,
+colours, Extra Bytes, header bounds and counts; a georeferenced terrain to 0.1 mm."""
+
+import io
+import shutil
+
+import numpy as np
+import pytest
+
+import scatter_cli.api as api
+from scatter_cli.api import sampled_bounds
+from scatter_cli.errors import ScatterError
+from scatter_cli.sampling import chunk_ranges
+from scatter_cli.writers import run_precision, write_samples
+
+from .conftest import SAMPLES
+
+laspy = pytest.importorskip("laspy")
+
+
+def write(path, mesh=SAMPLES / "boxvertexcolors.glb", n=3000, attributes="normal,color,face,orient", span=None,
+          **kw):
+    fmt = str(path).rsplit(".", 1)[1]
+    run = api.prepare(mesh, n, attributes=attributes, seed=6, precision=run_precision(fmt, "auto"), **kw)
+    a, b = span or (0, run.count)
+    chunks = (run._job(a + i, a + j) for i, j in chunk_ranges(b - a, 1000))
+    report = write_samples(chunks, path, fmt, run.layout, b - a, bounds=sampled_bounds(run.plan))
+    return run.collect(), report
+
+
+def terrain():
+    """A 2 km x 1.5 km height field placed at UTM-like coordinates (~3e5 m east, ~1e5 m north)."""
+    import trimesh
+
+    x, y = np.meshgrid(np.linspace(0, 2000, 21), np.linspace(0, 1500, 16))
+    z = 300 + 40 * np.sin(x / 300) * np.cos(y / 200)
+    v = np.stack([x.ravel() + 345_678.25, y.ravel() + 123_456.5, z.ravel()], axis=1)
+    i = np.arange(21 * 16).reshape(16, 21)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel(), i[1:, :-1].ravel()
+    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return trimesh.Trimesh(v, faces, process=False)
+
+
+@pytest.mark.parametrize("suffix", ["las", "laz"])
+def test_laspy_reads_coordinates_colours_and_extra_bytes(tmp_path, suffix):
+    s, report = write(tmp_path / f"t.{suffix}")
+    las = laspy.read(tmp_path / f"t.{suffix}")
+    q = report["las"]
+    xyz = np.stack([las.x, las.y, las.z], axis=1)
+    assert np.abs(xyz - s.points).max() <= q["scale"][0] / 2 * (1 + 1e-9)
+    assert q["max_error_of_diagonal"] <= 1e-6 and q["scale"][0] <= 1e-4
+    assert las.header.point_format.id == 7 and las.header.point_count == len(s)
+    np.testing.assert_array_equal(np.stack([las.red, las.green, las.blue], 1), s.color[:, :3].astype(np.uint16) * 257)
+    np.testing.assert_array_equal(las.alpha, s.color[:, 3])
+    np.testing.assert_array_equal(las.face_index, s.face)
+    np.testing.assert_array_equal(np.stack([las.nx, las.ny, las.nz], 1), s.normal.astype(np.float32))
+    np.testing.assert_array_equal(las.qw, s.orient[:, 3].astype(np.float32))
+    assert list(las.point_format.extra_dimension_names) == ["nx", "ny", "nz", "qx", "qy", "qz", "qw",
+                                                            "face_index", "alpha"]
+    np.testing.assert_array_equal(las.header.mins, xyz.min(axis=0))
+    np.testing.assert_array_equal(las.header.maxs, xyz.max(axis=0))
+    assert las.header.point_format.size == 36 + 4 * 8 + 1
+    assert list(las.header.number_of_points_by_return[:2]) == [len(s), 0]
+
+
+def test_format_6_without_colour(tmp_path):
+    s, _ = write(tmp_path / "t.las", attributes="")
+    las = laspy.read(tmp_path / "t.las")
+    assert las.header.point_format.id == 6 and las.header.point_format.size == 30
+    assert las.header.version.minor == 4
+
+
+def test_terrain_coordinates_within_a_tenth_of_a_millimetre(tmp_path):
+    s, report = write(tmp_path / "terrain.las", mesh=terrain(), n=5000, attributes="")
+    assert s.points.dtype == np.float64
+    las = laspy.read(tmp_path / "terrain.las")
+    error = np.abs(np.stack([las.x, las.y, las.z], axis=1) - s.points).max()
+    assert error < 1e-4
+    # the test can tell: float32 coordinates of the same points are off by more than that
+    assert np.abs(s.points.astype(np.float32) - s.points).max() > 1e-4
+
+
+def test_same_bytes_for_any_chunk_size(tmp_path):
+    for k, chunk in enumerate((None, 333)):
+        run = api.prepare(SAMPLES / "boxvertexcolors.glb", 2000, attributes="color,normal", seed=1,
+                          precision="float64", chunk_size=chunk)
+        write_samples(run.chunks(), tmp_path / f"{k}.laz", "laz", run.layout, run.count,
+                      bounds=sampled_bounds(run.plan))
+    assert (tmp_path / "0.laz").read_bytes() == (tmp_path / "1.laz").read_bytes()
+
+
+@pytest.mark.parametrize("suffix", ["las", "laz"])
+def test_shards_merge_to_the_run(tmp_path, suffix):
+    from scatter_cli.las import merge_las
+
+    write(tmp_path / f"whole.{suffix}")
+    write(tmp_path / f"a.{suffix}", span=(0, 1234))
+    write(tmp_path / f"b.{suffix}", span=(1234, 3000))
+    merge_las([tmp_path / f"a.{suffix}", tmp_path / f"b.{suffix}"], tmp_path / f"m.{suffix}")
+    assert (tmp_path / f"m.{suffix}").read_bytes() == (tmp_path / f"whole.{suffix}").read_bytes()
+
+
+def test_standard_output_is_refused():
+    run = api.prepare(SAMPLES / "boxvertexcolors.glb", 10, precision="float64")
+    stream = io.BytesIO()
+    stream.seekable = lambda: False
+    from scatter_cli.las import LasWriter
+
+    writer = LasWriter(stream, run.layout, 10, sampled_bounds(run.plan))
+    with pytest.raises(ScatterError, match="needs a file"):
+        writer.header()
+
+
+def test_without_laspy_one_line_saying_what_to_install(tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "laspy", None)
+    with pytest.raises(ScatterError, match=r"pip install 'scatter-cli\[las\]'"):
+        write(tmp_path / "t.las", n=10)
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.skipif(shutil.which("pdal") is None, reason="pdal not installed")
+def test_pdal_info_accepts_the_file(tmp_path):
+    write(tmp_path / "t.laz")
+    from .conftest import run_user
+
+    assert run_user(["pdal", "info", str(tmp_path / "t.laz")]).returncode == 0

@@ -1,0 +1,220 @@
+"""The fast readers give what trimesh gives (process=False), or hand the file to trimesh.
+
+"Gives": per instance, the same triangles with the same corner positions in the same
+order, and the same sampled bytes. Each case also checks that the fast path answered,
+so a reader that handed everything to trimesh would fail.
+"""
+
+import functools
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+import scatter_cli
+from scatter_cli.readers import read_mesh
+from scatter_cli.surface import load_surface
+
+from .conftest import SAMPLES, run_scatter, run_user
+from .fuzz_inputs import SEEDS
+
+SHARED = Path("/work/shared/meshes")
+MESHES = sorted({p.name: p for d in (SHARED, SAMPLES) if d.is_dir() for p in d.iterdir()
+                 if p.suffix in (".ply", ".obj", ".stl", ".off", ".glb")}.values())
+FORMATS = {"obj": ("obj", {}), "off": ("off", {}), "ply-ascii": ("ply", {"encoding": "ascii"}),
+           "ply-binary": ("ply", {}), "stl-ascii": ("stl", {"file_type": "stl_ascii"}), "stl-binary": ("stl", {})}
+
+
+def world_corners(surface):
+    """Per instance, (F, 3, 3) float64 world corners, in face order."""
+    return [surface.world_vertices(i)[surface.geometries[i.geometry].faces] for i in surface.instances]
+
+
+def assert_same_load(path):
+    fast = load_surface(path, plain=True)
+    slow = load_surface(path)
+    a, b = world_corners(fast), world_corners(slow)
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        assert x.shape == y.shape and x.tobytes() == y.tobytes()
+    assert [i.name for i in fast.instances] == [i.name for i in slow.instances]
+
+
+def assert_same_samples(path):
+    fast = scatter_cli.sample(path, count=3000, seed=5, attributes="face,bary,object")
+    slow = scatter_cli.sample(load_surface(path), count=3000, seed=5, attributes="face,bary,object")
+    assert fast.points.tobytes() == slow.points.tobytes()
+    for k in ("face", "bary", "object"):
+        assert fast.attributes[k].tobytes() == slow.attributes[k].tobytes()
+
+
+@functools.lru_cache(maxsize=None)
+def positions_and_faces(mesh_path):
+    mesh = trimesh.load(mesh_path, force="mesh", process=False)
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
+
+
+def resave(mesh_path, fmt, tmp_path, most_faces=3000):
+    """The mesh's first ``most_faces`` faces (positions and faces only) saved in ``fmt``:
+    large text files would make the trimesh side of the comparison slow."""
+    suffix, options = FORMATS[fmt]
+    vertices, faces = positions_and_faces(mesh_path)
+    used, faces = np.unique(faces[:most_faces], return_inverse=True)
+    mesh = trimesh.Trimesh(vertices[used], faces.reshape(-1, 3), process=False)
+    path = tmp_path / f"{mesh_path.stem}.{suffix}"
+    mesh.export(path, **options)
+    return path
+
+
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+@pytest.mark.parametrize("mesh", MESHES, ids=[m.name for m in MESHES])
+def test_resaved_meshes_load_and_sample_as_with_trimesh(mesh, fmt, tmp_path):
+    path = resave(mesh, fmt, tmp_path)
+    assert read_mesh(path, path.suffix[1:]) is not None
+    assert_same_load(path)
+    assert_same_samples(path)
+
+
+@pytest.mark.parametrize("name", sorted(SEEDS))
+def test_fuzz_seeds_read_as_with_trimesh(name, tmp_path):
+    suffix, data = SEEDS[name]
+    path = tmp_path / f"seed.{suffix}"
+    path.write_bytes(data)
+    assert read_mesh(path, suffix) is not None
+    assert_same_load(path)
+    assert_same_samples(path)
+
+
+V8 = "".join(f"v {i * 0.5} {(i * i) % 7 - 2.25} {i % 3}e-1\n" for i in range(9))
+OBJ_CASES = {
+    "triangles": V8 + "f 1 2 3\nf 4 5 6\nf 7 8 9\n",
+    "all quads": V8 + "f 1 2 3 4\nf 5 6 7 8\nf 2 4 6 8\n",
+    "all pentagons": V8 + "f 1 2 3 4 5\nf 5 6 7 8 9\n",
+    "mixed sizes": V8 + "f 1 2 3 4\nf 5 6 7\nf 1 2 3 4 5 6\nf 9 8 7 6\n",
+    "quads read line by line": V8 + "vt 0 0\nf 1/1 2/1 3/1 4/1\nf 5 6 7 8\nf 9 8 7 6\n",
+    "negative": V8 + "f -1 -2 -3\nf 1 -4 2\n",
+    "negative before later vertices": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nv 5 5 5\nv 6 5 5\n",
+    "v/vt": V8 + "vt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\nf 4/3 5/2 6/1 7/1\nf 7/1 8/2 9/3\n",
+    "v//vn": V8 + "vn 0 0 1\nf 1//1 2//1 3//1\nf 3//1 4//1 5//1\n",
+    "v/vt/vn": V8 + "vt 0 0\nvn 0 0 1\nf 1/1/1 2/1/1 3/1/1 4/1/1\nf 5/1/1 6/1/1 7/1/1 8/1/1\n",
+    "vertex colours": "".join(f"v {i} {i % 2} {i % 3} 0.5 0.5 0.5\n" for i in range(5)) + "f 1 2 3\nf 3 4 5\n",
+    "groups and objects": V8 + "o a\ng one\nf 1 2 3\ng two\ns 1\nf 4 5 6\no b\nf 7 8 9\n",
+    "materials": V8 + "mtllib none.mtl\nusemtl red\nf 1 2 3\nusemtl blue\nf 2 3 4 5\nusemtl red\nf 4 5 6\n"
+                      "f 6 7 8 9\nusemtl green\nf 7 8 9\n",
+    "faces before the first material": V8 + "f 1 2 3\nf 3 4 5\nusemtl a\nf 4 5 6 7\nf 1 2 3 4\n",
+    "crlf": (V8 + "f 1 2 3\nf 4 5 6 7\n").replace("\n", "\r\n"),
+    "comments and blank lines": "# made by hand\n\n" + V8 + "\n# faces\nf 1 2 3\n  \nf 4 5 6\n",
+    "continuations": V8 + "f 1 2 \\\n3\nf 4 \\\n5 \\\n6\n",
+    "continuation inside a number": V8.replace("v 1.0", "v 1\\\n.0") + "f 1 2 3\nf 4 5 6\n",
+    "no final newline": V8 + "f 1 2 3\nf 4 5 6",
+    "exponents and signs": "v +1e0 -2.5E-3 .5\nv 1. 0 -0\nv 3 4 1e-310\nv 0.1234567890123456789012 1e22 1e23\n"
+                           "f 1 2 3\nf 2 3 4\n",
+}
+OFF_CASES = {
+    "triangles": "OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 2 3\n",
+    "triangles and quads": "OFF\n6 3 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n1 0 1\n4 0 1 2 3\n3 0 1 4\n4 1 5 4 0\n",
+    "pentagons": "OFF\n6 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n1 0 1\n5 0 1 2 3 4\n5 1 2 3 4 5\n",
+    "counts on the keyword line": "OFF 4 1 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 1 2 3\n",
+    "no newline after the keyword": "OFF4 1 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 1 2 3",
+    "colours and blank lines": "COFF\n\n4 1 0\n0 0 0 255 0 0\n1 0 0 0 0 0\n\n0 1 0 1 1 1\n0 0 1 9 9 9\n3 1 2 3 1 2 3\n",
+    "crlf": "OFF\r\n4 2 0\r\n0 0 0\r\n1 0 0\r\n0 1 0\r\n0 0 1\r\n3 0 1 2\r\n4 0 1 2 3\r\n",
+}
+PLY_HEAD = ("ply\nformat ascii 1.0\ncomment hand made\nelement vertex 6\nproperty {t} x\nproperty {t} y\n"
+            "property {t} z\nproperty uchar red\nelement face {n}\nproperty list uchar int vertex_indices\nend_header\n")
+PLY_V = "0 0 0 1\n1 0.1 0 2\n1 1 0.3 3\n0 1 0 4\n0 0 1.7 5\n1 0 1 6\n"
+PLY_CASES = {
+    "float": PLY_HEAD.format(t="float", n=2) + PLY_V + "3 0 1 2\n3 2 3 4\n",
+    "double": PLY_HEAD.format(t="double", n=2) + PLY_V + "3 0 1 2\n3 2 3 4\n",
+    "triangles and quads": PLY_HEAD.format(t="float", n=3) + PLY_V + "4 0 1 2 3\n3 0 1 4\n4 1 5 4 0\n",
+    "all quads": PLY_HEAD.format(t="float", n=2) + PLY_V + "4 0 1 2 3\n4 1 5 4 0\n",
+    "crlf body": PLY_HEAD.format(t="float", n=2) + (PLY_V + "3 0 1 2\n3 2 3 4\n").replace("\n", "\r\n"),
+}
+STL_FACET = "facet normal 0 0 1\n outer loop\n  vertex {0}\n  vertex {1}\n  vertex {2}\n endloop\nendfacet\n"
+STL_CASES = {
+    "named": "solid part\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1.5 0") + STL_FACET.format("0 0 0", "1 0 0", "0 0 2")
+             + "endsolid part\n",
+    "upper case, crlf": ("SOLID\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0").upper() + "ENDSOLID\n").replace("\n", "\r\n"),
+    "no final newline": "solid\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0") + "endsolid",
+}
+CASES = ([("obj", k, v) for k, v in OBJ_CASES.items()] + [("off", k, v) for k, v in OFF_CASES.items()]
+         + [("ply", k, v) for k, v in PLY_CASES.items()] + [("stl", k, v) for k, v in STL_CASES.items()])
+
+
+@pytest.mark.parametrize("suffix,case,text", CASES, ids=[f"{s}-{c}" for s, c, _ in CASES])
+def test_format_rules_match_trimesh(suffix, case, text, tmp_path):
+    path = tmp_path / f"m.{suffix}"
+    path.write_bytes(text.encode())
+    assert read_mesh(path, suffix) is not None
+    assert_same_load(path)
+    assert_same_samples(path)
+
+
+HANDED_OFF = {
+    "obj": ["v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n",  # index 0
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n",  # out of range
+            "v 0 0 0\rv 1 0 0\rv 0 1 0\rf 1 2 3\r",  # lone CR
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2\nf 1 2 3\n",  # a line element
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2 3\n",  # mixed reference forms
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\n  f 1 2 3\n",  # indented: trimesh does not see it
+            "v 0 0 0\nv 1 0 0\nv 0 1 0 1 1 1\nf 1 2 3\n",  # vertex rows of different lengths
+            "v 0 0 0\nv 1 0 0\nv 0 1 nan\nf 1 2 3\n",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3 # comment\n",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\n# usemtl x\nf 1 2 3\n"],
+    "off": ["OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n", "OFF\n# c\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+            "OFF\n5 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n2 2 0\n3 0 1 2\n5 0 1 2 3 4\n", "NOFF\n3 1\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"],
+    "stl": ["solid a\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0") + "endsolid a\nsolid b\n"
+            + STL_FACET.format("0 0 0", "1 0 0", "0 0 1") + "endsolid b\n",
+            "solid vertex\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0") + "endsolid\n",
+            "solid\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0") + "\n"],
+    "ply": [PLY_HEAD.format(t="float", n=2) + PLY_V + "3 0 1 2\n\n3 2 3 4\n",
+            PLY_HEAD.format(t="float", n=2) + PLY_V + "3 0 1 2\n5 0 1 2 3 4\n"],
+}
+HANDED = [(s, t) for s, ts in HANDED_OFF.items() for t in ts]
+
+
+@pytest.mark.parametrize("suffix,text", HANDED, ids=[f"{s}-{k}" for s, ts in HANDED_OFF.items() for k in range(len(ts))])
+def test_constructs_outside_the_subset_go_to_trimesh(suffix, text, tmp_path):
+    path = tmp_path / f"m.{suffix}"
+    path.write_bytes(text.encode())
+    assert read_mesh(path, suffix) is None
+
+
+def test_the_command_writes_the_same_bytes_either_way(tmp_path):
+    path = tmp_path / "m.obj"
+    path.write_bytes(OBJ_CASES["materials"].encode())
+    outs = []
+    for env in ({}, {"SCATTER_NUMPY": "1"}):  # without the compiled readers: trimesh loads it
+        out = tmp_path / f"out{len(outs)}.ply"
+        run_scatter("sample", path, "-n", "2000", "-a", "face,bary,object", "-o", out, env=env, check=True)
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]
+
+
+@pytest.mark.parametrize("suffix", ["obj", "off", "stl"])
+def test_a_plain_text_job_never_imports_trimesh(suffix, tmp_path):
+    path = tmp_path / f"m.{suffix}"
+    path.write_bytes((OBJ_CASES["materials"] if suffix == "obj" else OFF_CASES["triangles and quads"] if suffix == "off"
+                      else STL_CASES["named"]).encode())
+    args = ["sample", str(path), "-n", "100", "-a", "face", "-o", str(tmp_path / "o.ply")]
+    code = f"import sys\nfrom scatter_cli import cli\nassert cli.main({args!r}) == 0\nprint('trimesh' in sys.modules)"
+    proc = run_user([sys.executable, "-c", code], text=True)
+    assert proc.stdout.strip() == "False", proc.stderr
+
+
+def test_numbers_convert_as_python_floats_do():
+    """Every path of the number parser (exact small, exact 128-bit, strtod) rounds correctly."""
+    from scatter_cli import _creaders
+
+    rng = np.random.default_rng(1)
+    x = rng.standard_normal(6000) * 10.0 ** rng.integers(-30, 30, 6000)
+    toks = ["9007199254740993", "9007199254740993e-19", "0.1", "1" * 19, "1" * 19 + "e-19", "18446744073709551615",
+            "2.2250738585072011e-308", "4.9e-324", "1" * 300, "-0", "0.000", "1e22", "1e23", "123456789012345678901e-40"]
+    toks += [repr(float(v)) for v in x] + ["%.17g" % v for v in x] + ["%.19f" % v for v in x[:2000]]
+    toks += ["%.3e" % v for v in x[:2000]] + ["%.20g" % v for v in x[:2000]]
+    toks = toks[: len(toks) // 9 * 9]
+    text = "solid\n" + "".join(f"vertex {toks[i]} {toks[i + 1]} {toks[i + 2]}\n" for i in range(0, len(toks), 3))
+    got = _creaders.read_stl_ascii((text + "endsolid\n").encode()).ravel()
+    want = np.array([float(t) for t in toks])
+    assert got.view(np.int64).tolist() == want.view(np.int64).tolist()

@@ -1,0 +1,111 @@
+"""USD output read back by usd-core: points and primvars, instancer orientations, and the
+stage passing usd-core's validators (what usdchecker runs)."""
+
+import numpy as np
+import pytest
+
+import scatter_cli.api as api
+from scatter_cli.errors import ScatterError
+from scatter_cli.writers import write_samples
+
+from .conftest import SAMPLES
+
+pxr = pytest.importorskip("pxr")
+from pxr import Usd, UsdGeom  # noqa: E402
+
+
+def write(path, attributes, n=400, precision="auto", mesh=SAMPLES / "boxtextured.glb"):
+    run = api.prepare(mesh, n, attributes=attributes, seed=9, precision=precision)
+    report = write_samples(run.chunks(), path, "usd", run.layout, run.count, spacing=0.05)
+    return run.collect(), report
+
+
+def validation_errors(stage):
+    """What usdchecker finds: UsdValidation's validators, or the older ComplianceChecker."""
+    try:
+        from pxr import UsdValidation
+    except ImportError:
+        from pxr import UsdUtils
+
+        checker = UsdUtils.ComplianceChecker()
+        checker.CheckCompliance(stage.GetRootLayer().realPath)
+        return checker.GetErrors() + checker.GetFailedChecks()
+    context = UsdValidation.ValidationContext(UsdValidation.ValidationRegistry().GetOrLoadAllValidators())
+    return [e.GetMessage() for e in context.Validate(stage)]
+
+
+def primvar(prim, name):
+    return np.asarray(UsdGeom.PrimvarsAPI(prim).GetPrimvar(name).Get())
+
+
+@pytest.mark.parametrize("suffix", ["usda", "usdc"])
+def test_points_and_primvars_read_back(tmp_path, suffix):
+    s, report = write(tmp_path / f"t.{suffix}", "normal,color,uv,face")
+    stage = Usd.Stage.Open(str(tmp_path / f"t.{suffix}"))
+    prim = stage.GetPrimAtPath("/Scatter/Points")
+    np.testing.assert_array_equal(np.asarray(UsdGeom.Points(prim).GetPointsAttr().Get()), s.points)
+    np.testing.assert_array_equal(primvar(prim, "normals"), s.normal)
+    np.testing.assert_array_equal(primvar(prim, "st"), s.uv)
+    np.testing.assert_array_equal(primvar(prim, "face_index"), s.face)
+    np.testing.assert_allclose(primvar(prim, "displayColor"), s.color[:, :3] / 255.0, atol=1e-7)
+    np.testing.assert_allclose(primvar(prim, "displayOpacity"), s.color[:, 3] / 255.0, atol=1e-7)
+    assert UsdGeom.GetStageUpAxis(stage) == "Y" and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    assert report["usd"]["from_input"] is False
+    assert stage.GetDefaultPrim().GetPath() == "/Scatter"
+    assert validation_errors(stage) == []
+
+
+def test_validators_can_fail(tmp_path):
+    write(tmp_path / "t.usda", "normal")
+    stage = Usd.Stage.Open(str(tmp_path / "t.usda"))
+    stage.ClearDefaultPrim()
+    stage.Save()
+    assert validation_errors(Usd.Stage.Open(str(tmp_path / "t.usda")))
+
+
+def test_instancer_orientations(tmp_path):
+    s, _ = write(tmp_path / "t.usdc", "normal,orient")
+    stage = Usd.Stage.Open(str(tmp_path / "t.usdc"))
+    inst = UsdGeom.PointInstancer(stage.GetPrimAtPath("/Scatter/Instancer"))
+    np.testing.assert_array_equal(np.asarray(inst.GetPositionsAttr().Get()), s.points)
+    quatf = inst.GetOrientationsfAttr().Get()
+    q = np.array([list(x.GetImaginary()) + [x.GetReal()] for x in quatf])
+    np.testing.assert_array_equal(q, s.orient)
+    quath = inst.GetOrientationsAttr().Get()
+    np.testing.assert_allclose([list(x.GetImaginary()) + [x.GetReal()] for x in quath], s.orient, atol=1e-3)
+    assert set(np.asarray(inst.GetProtoIndicesAttr().Get())) == {0}
+    target = inst.GetPrototypesRel().GetTargets()
+    assert len(target) == 1 and stage.GetPrimAtPath(target[0]).IsValid()
+    xf = np.array(inst.ComputeInstanceTransformsAtTime(Usd.TimeCode.Default(), Usd.TimeCode.Default(),
+                                                       UsdGeom.PointInstancer.ExcludeProtoXform))
+    np.testing.assert_allclose(xf[:, 2, :3], s.normal, atol=1e-3)  # row 2: the image of +Z
+    np.testing.assert_allclose(xf[:, 3, :3], s.points, atol=1e-6)
+    assert validation_errors(stage) == []
+
+
+def test_float64_points_sit_under_a_double_translate(tmp_path):
+    from .test_las import terrain
+
+    s, _ = write(tmp_path / "t.usda", "", mesh=terrain(), precision="float64")
+    stage = Usd.Stage.Open(str(tmp_path / "t.usda"))
+    world = np.array(UsdGeom.Xformable(stage.GetPrimAtPath("/Scatter")).ComputeLocalToWorldTransform(0))
+    local = np.asarray(UsdGeom.Points(stage.GetPrimAtPath("/Scatter/Points")).GetPointsAttr().Get(), np.float64)
+    error = np.abs(local + world[3, :3] - s.points).max()
+    assert error < 1e-3 < np.abs(s.points.astype(np.float32) - s.points).max()
+
+
+def test_a_count_beyond_memory_is_refused_and_leaves_no_file(tmp_path, monkeypatch):
+    import scatter_cli.usdwrite as usdwrite
+
+    monkeypatch.setattr(usdwrite, "available_memory", lambda: 10_000)
+    with pytest.raises(ScatterError, match=r"USD output is built in memory .* 1,000 points"):
+        write(tmp_path / "t.usdc", "normal", n=1000)
+    assert not list(tmp_path.iterdir())
+
+
+def test_without_usd_core_one_line_saying_what_to_install(tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "pxr", None)
+    with pytest.raises(ScatterError, match=r"pip install 'scatter-cli\[usd\]'"):
+        write(tmp_path / "t.usda", "", n=10)
