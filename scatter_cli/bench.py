@@ -136,6 +136,8 @@ class Variant:
 def _place_float32(plan, used, b):
     """Points from (used, b) in float32 arithmetic: float32 corners and weights,
     v0 + b1 (v1 - v0) + b2 (v2 - v0) rounded at each step. (n, 3) float32."""
+    from .sampling import interpolate_corners
+
     part = plan.parts[0]
     tri32 = plan.__dict__.get("_tri32")
     if tri32 is None:
@@ -145,11 +147,7 @@ def _place_float32(plan, used, b):
     t = np.take(tri32, face, axis=0).T
     b1, b2 = b[:, 0].astype(np.float32), b[:, 1].astype(np.float32)
     points = np.empty((len(used), 3), dtype=np.float32)
-    for c in range(3):
-        col = (t[3 + c] - t[c]) * b1
-        col += (t[6 + c] - t[c]) * b2
-        col += t[c]
-        points[:, c] = col
+    interpolate_corners(t, b1, b2, points)
     return points
 
 

@@ -230,12 +230,17 @@ def _corner_points(tri, rows, b, points):
     Column by column on 1-D arrays: several times faster than (n, 3) broadcasting.
     Adding v0 last keeps the rounding at the scale of the triangle, not of v0.
     """
-    t = np.take(tri, rows, axis=0).T
     b1, b2 = np.ascontiguousarray(b[:, 0]), np.ascontiguousarray(b[:, 1])
+    interpolate_corners(np.take(tri, rows, axis=0).T, b1, b2, points)
+
+
+def interpolate_corners(cols, b1, b2, points):
+    """points (n, 3) = v0 + b1 (v1 - v0) + b2 (v2 - v0) from 9 corner columns ``cols``
+    (9, n) and weights b1, b2 (n,), in the arithmetic of their dtype; v0 added last."""
     for c in range(3):
-        col = (t[3 + c] - t[c]) * b1
-        col += (t[6 + c] - t[c]) * b2
-        col += t[c]
+        col = (cols[3 + c] - cols[c]) * b1
+        col += (cols[6 + c] - cols[c]) * b2
+        col += cols[c]
         points[:, c] = col
 
 

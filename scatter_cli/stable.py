@@ -29,7 +29,7 @@ import numpy as np
 
 from . import native
 from .errors import ScatterError, ScatterUsageError
-from .sampling import RawChunk, in_blocks
+from .sampling import RawChunk, in_blocks, interpolate_corners
 from .surface import apply_matrix
 from .warps import square_to_triangle
 
@@ -341,14 +341,9 @@ def _rotated_rows(tri, rot, width=3):
 
 def _interpolate(cols, b):
     """(n, 3) float64 points ``v0 + b1 (v1 - v0) + b2 (v2 - v0)`` from 9 corner columns
-    (n,), rounded as the random method's (sampling._corner_points)."""
+    (n,), rounded as the random method's (sampling.interpolate_corners)."""
     points = np.empty((len(b), 3))
-    b1, b2 = np.ascontiguousarray(b[:, 0]), np.ascontiguousarray(b[:, 1])
-    for c in range(3):
-        col = (cols[3 + c] - cols[c]) * b1
-        col += (cols[6 + c] - cols[c]) * b2
-        col += cols[c]
-        points[:, c] = col
+    interpolate_corners(cols, np.ascontiguousarray(b[:, 0]), np.ascontiguousarray(b[:, 1]), points)
     return points
 
 
