@@ -93,7 +93,7 @@ def test_a_dask_worker_killed_mid_batch(tmp_path, cluster, meshes):
     os.kill(dask_worker, signal.SIGKILL)
     gone(reader)  # the sampling process dies with its Dask worker
     os.close(reader_fd.pop())
-    wait_for_reader(fifo)  # the task again, on the other worker
+    wait_for_reader(fifo, timeout=120)  # the task again, on the other worker (Dask may take a while to notice)
     with os.fdopen(reader_fd.pop(), "wb") as f:
         os.set_blocking(f.fileno(), True)
         f.write((SAMPLES / "narrow_triangles.obj").read_bytes())
