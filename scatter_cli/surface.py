@@ -129,7 +129,10 @@ def _read_plain(path, input_format):
     parts = read_mesh(path, (input_format or os.path.splitext(path)[1].lstrip(".")).lower())
     if parts is None:
         return None
-    if len(parts) == 1:
+    if isinstance(parts, tuple):  # a GLB scene
+        geometries = [_checked_geometry(n, v, f, path) for n, v, f in parts[0]]
+        surface = Surface(geometries, [Instance(*i) for i in parts[1]], path, is_scene=True)
+    elif len(parts) == 1:
         surface = Surface([_checked_geometry(path, *parts[0], path)], [Instance(os.path.basename(path), 0)], path)
     else:
         base = os.path.basename(path)
@@ -232,7 +235,10 @@ def _from_scene(scene, source) -> Surface:
 
     geometries, index, instances = [], {}, []
     for node in scene.graph.nodes_geometry:
-        matrix, geom_name = scene.graph[node]
+        try:
+            matrix, geom_name = scene.graph[node]
+        except (ValueError, KeyError, AssertionError) as exc:  # a graph trimesh cannot walk, e.g. a cycle
+            raise ScatterError(f"{source}: malformed scene graph at node '{node}' ({str(exc).strip()[:200]})") from None
         mesh = scene.geometry.get(geom_name)
         if not isinstance(mesh, trimesh.Trimesh):
             continue
