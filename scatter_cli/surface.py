@@ -17,9 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ScatterError, ScatterUsageError
+from .inputs import INPUT_FORMATS, USD_FORMATS
 
-MESH_FORMATS = ("ply", "obj", "stl", "off", "glb", "gltf")
-USD_FORMATS = ("usd", "usda", "usdc", "usdz")  # read by usdread (optional extra `usd`)
 # Called before trimesh is first imported, when set: the command line imports it with
 # SciPy hidden (see cli.py). Nothing imports trimesh before a mesh needs it.
 import_trimesh = None
@@ -170,7 +169,7 @@ def _read_file(source, input_format):
                 raise ScatterError(f"{path}: no data in the pipe")
             file_obj = io.BytesIO(data)
     if file_type not in trimesh.available_formats():
-        raise ScatterUsageError(f"{path}: unknown mesh format '{file_type}' (try one of: {', '.join(MESH_FORMATS + USD_FORMATS)})")
+        raise ScatterUsageError(f"{path}: unknown mesh format '{file_type}' (try one of: {', '.join(INPUT_FORMATS)})")
     if file_type in ("glb", "gltf"):
         from .draco import check_decoder
 
