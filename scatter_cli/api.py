@@ -95,7 +95,7 @@ class Run:
 
     def spacing(self):
         """d_min, mean nearest-neighbour distance and rho of the output (thinning runs)."""
-        from .thinning import spacing_stats
+        from .spacing import spacing_stats
 
         return spacing_stats(self.kept.points, self.source.area)
 

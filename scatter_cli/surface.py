@@ -17,9 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ScatterError, ScatterUsageError
+from .inputs import INPUT_FORMATS, USD_FORMATS
 
-MESH_FORMATS = ("ply", "obj", "stl", "off", "glb", "gltf")
-USD_FORMATS = ("usd", "usda", "usdc", "usdz")  # read by usdread (optional extra `usd`)
 # Called before trimesh is first imported, when set: the command line imports it with
 # SciPy hidden (see cli.py). Nothing imports trimesh before a mesh needs it.
 import_trimesh = None
@@ -146,7 +145,10 @@ def _read_plain(path, input_format):
     parts = read_mesh(path, (input_format or os.path.splitext(path)[1].lstrip(".")).lower())
     if parts is None:
         return None
-    if len(parts) == 1:
+    if isinstance(parts, tuple):  # a GLB scene
+        geometries = [_checked_geometry(n, v, f, path) for n, v, f in parts[0]]
+        surface = Surface(geometries, [Instance(*i) for i in parts[1]], path, is_scene=True)
+    elif len(parts) == 1:
         surface = Surface([_checked_geometry(path, *parts[0], path)], [Instance(os.path.basename(path), 0)], path)
     else:
         base = os.path.basename(path)
@@ -184,7 +186,7 @@ def _read_file(source, input_format):
                 raise ScatterError(f"{path}: no data in the pipe")
             file_obj = io.BytesIO(data)
     if file_type not in trimesh.available_formats():
-        raise ScatterUsageError(f"{path}: unknown mesh format '{file_type}' (try one of: {', '.join(MESH_FORMATS + USD_FORMATS)})")
+        raise ScatterUsageError(f"{path}: unknown mesh format '{file_type}' (try one of: {', '.join(INPUT_FORMATS)})")
     if file_type in ("glb", "gltf"):
         from .draco import check_decoder
 
@@ -249,7 +251,10 @@ def _from_scene(scene, source) -> Surface:
 
     geometries, index, instances = [], {}, []
     for node in scene.graph.nodes_geometry:
-        matrix, geom_name = scene.graph[node]
+        try:
+            matrix, geom_name = scene.graph[node]
+        except (ValueError, KeyError, AssertionError) as exc:  # a graph trimesh cannot walk, e.g. a cycle
+            raise ScatterError(f"{source}: malformed scene graph at node '{node}' ({str(exc).strip()[:200]})") from None
         mesh = scene.geometry.get(geom_name)
         if not isinstance(mesh, trimesh.Trimesh):
             continue
