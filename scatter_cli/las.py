@@ -108,6 +108,8 @@ class LasWriter(_Writer):
         self._las = None
         self._records = None  # reused from chunk to chunk: the fields never written stay zero
         self._scratch = None
+        self._lo = np.full(3, np.iinfo(np.int64).max)
+        self._hi = np.full(3, np.iinfo(np.int64).min)
 
     def header(self):
         laspy = _laspy()
@@ -120,8 +122,6 @@ class LasWriter(_Writer):
         backend = laspy.LazBackend.LazrsParallel if self.compress else None
         self._las = laspy.open(self.stream, mode="w", header=self.header_, do_compress=self.compress,
                                laz_backend=backend, closefd=False)
-        self._lo = np.full(3, np.iinfo(np.int64).max)
-        self._hi = np.full(3, np.iinfo(np.int64).min)
 
     def write(self, samples):
         # laspy's point writer takes the records; the header's extents and counts are kept
