@@ -55,6 +55,16 @@ static inline int less(const double *x, const double *b)
     return (x[0] < b[0]) | ((x[0] == b[0]) & ((x[1] < b[1]) | ((x[1] == b[1]) & (x[2] < b[2]))));
 }
 
+/* The corner (0, 1 or 2) that is smallest in (x, y, z) order, the first of equal ones;
+ * without branches: which corner it is cannot be predicted. */
+static inline int smallest(const double *c0, const double *c1, const double *c2)
+{
+    int one = less(c1, c0);
+    const double *best = one ? c1 : c0;
+    int two = less(c2, best);
+    return two ? 2 : one;
+}
+
 PyDoc_STRVAR(faces_doc, "faces(vertices (V,3) f8, faces (F,3) i8, start, stop, seed_word, rot (F,) u1, key (F,) u8, "
                         "area (F,) f8): canonical rotation, key and area of faces start..stop-1 (stable.FaceTable).");
 
@@ -99,11 +109,7 @@ static PyObject *faces(PyObject *self, PyObject *args)
                 for (int a = 0; a < 3; a++)
                     c[k][a] = v[3 * vi + a] + 0.0;
             }
-            int r = 0;
-            if (less(c[1], c[r]))
-                r = 1;
-            if (less(c[2], c[r]))
-                r = 2;
+            int r = smallest(c[0], c[1], c[2]);
             for (int k = 0; k < 3; k++)
                 for (int a = 0; a < 3; a++)
                     t[q][3 * k + a] = c[(r + k) % 3][a];
@@ -151,7 +157,13 @@ static inline int64_t blocks_before(double tau, double length)
 
 static inline int poisson(double u, const double *cdf, int m)
 {
-    int c = 0; /* searchsorted(cdf, u, 'right'): entries <= u */
+    int c = 0; /* searchsorted(cdf, u, 'right'): entries <= u (cdf increases) */
+    if (m >= 8) { /* the first eight without a branch: almost every count is below 8 */
+        for (int k = 0; k < 8; k++)
+            c += cdf[k] <= u;
+        if (c < 8)
+            return c;
+    }
     while (c < m && cdf[c] <= u)
         c++;
     return c;
@@ -206,13 +218,11 @@ static PyObject *arrivals(PyObject *self, PyObject *args)
             }
             for (int j = 0; j < c; j++) {
                 double time = ((double)b + to_unit(lane(state, (uint64_t)(1 + LANES * j)))) * length;
-                if (time < tau) {
-                    if (n < cap) {
-                        t[n] = time;
-                        id[n] = base | ((uint64_t)b << COUNT_BITS) | (uint64_t)j;
-                    }
-                    n++;
+                if (n < cap) { /* written whether kept or not: the next one overwrites it */
+                    t[n] = time;
+                    id[n] = base | ((uint64_t)b << COUNT_BITS) | (uint64_t)j;
                 }
+                n += time < tau;
             }
         }
     }
@@ -509,17 +519,12 @@ static int place_block(const Place *p, const int32_t *at, npy_intp i0, npy_intp 
         }
         if (p->face_out)
             p->face_out[o] = fi[k];
-        const double *w[3] = {p->v + 3 * vi[k][0], p->v + 3 * vi[k][1], p->v + 3 * vi[k][2]};
-        int r = 0; /* the canonical rotation, as faces() finds it */
-        double z[3][3];
-        for (int q = 0; q < 3; q++)
-            for (int a = 0; a < 3; a++)
-                z[q][a] = w[q][a] + 0.0;
-        if (less(z[1], z[r]))
-            r = 1;
-        if (less(z[2], z[r]))
-            r = 2;
-        const double *c0 = w[r], *c1 = w[(r + 1) % 3], *c2 = w[(r + 2) % 3];
+        const double *w[5] = {p->v + 3 * vi[k][0], p->v + 3 * vi[k][1], p->v + 3 * vi[k][2]};
+        w[3] = w[0];
+        w[4] = w[1];
+        /* the canonical rotation, as faces() finds it (-0.0 and 0.0 compare equal) */
+        int r = smallest(w[0], w[1], w[2]);
+        const double *c0 = w[r], *c1 = w[r + 1], *c2 = w[r + 2];
         for (int a = 0; a < 3; a++) {
             double col = (c1[a] - c0[a]) * b1;
             col += (c2[a] - c0[a]) * b2;
