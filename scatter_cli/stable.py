@@ -228,7 +228,7 @@ class FaceTable:
         n = len(faces)
         rot, key, area = np.empty(n, np.uint8), np.empty(n, np.uint64), np.empty(n)
         word = seed_word(seed)
-        in_blocks(lambda i, j: _kernel.faces(vertices, faces, i, j, word, rot, key, area), n)
+        in_blocks(lambda i, j: _kernel.faces(vertices, faces, i, j, word, rot, key, area), n, 1 << 15)
         if n and area.min() > 0 and area.max() < np.inf:  # two reductions check most meshes
             return None, rot, key, area, float(np.sum(area))
         finite = np.isfinite(area)
@@ -453,7 +453,8 @@ def kernel_arrivals(table, tau, bits):
     """
     n = len(table)
     threads = native.worker_count()
-    pieces = 1 if threads == 1 or n < 2 * FACE_BLOCK else 4 * threads
+    work = n + tau * table.total  # faces and arrivals
+    pieces = 1 if threads == 1 or work < 1 << 16 or n < 4 * threads else 4 * threads
     cuts = np.linspace(0, n, pieces + 1).astype(np.int64).tolist()
     mean = [tau * float(np.sum(table.rate[a:b])) for a, b in zip(cuts[:-1], cuts[1:])]
     room = [int(m + 8 * math.sqrt(m) + 64) for m in mean]
@@ -474,7 +475,7 @@ def kernel_arrivals(table, tau, bits):
     raise AssertionError("arrivals: the counts changed between two passes")
 
 
-FINE_BITS = 10  # a coarse bucket of the kernel's arrival sort holds 2^FINE_BITS time keys
+FINE_BITS = 12  # a coarse bucket of the kernel's arrival sort holds 2^12 to 2^14 time keys, 256 or more of them
 
 
 def kernel_order(t, ids, starts, counts, key, bits, tau):
@@ -483,17 +484,19 @@ def kernel_order(t, ids, starts, counts, key, bits, tau):
     face key, counter) as :func:`arrival_order` sorts them.
 
     A counting sort on the time key ``floor(t * K / tau)`` (K about m), in two levels on the
-    worker threads: each thread scatters its runs into coarse buckets of 2^FINE_BITS keys
-    (at its own positions within each), then each coarse bucket, small enough for the
+    worker threads: each thread scatters its runs into a few hundred coarse buckets (at its
+    own positions within each), then each coarse bucket, small enough for the
     cache, is sorted on the rest of its key and exactly within equal keys.
     """
     m = int(counts.sum())
-    coarse = 1 << max(0, (m >> FINE_BITS).bit_length())  # about 1 to 2 arrivals a key
-    total = coarse << FINE_BITS
+    key_bits = max(1, m.bit_length())  # about 1 to 2 arrivals a key
+    fine_bits = min(key_bits, max(FINE_BITS, key_bits - 8), FINE_BITS + 2)
+    coarse = 1 << (key_bits - fine_bits)
+    total = coarse << fine_bits
     scale = total / float(tau)
     threads = native.worker_count() if m >= 1 << 16 else 1
     groups = [np.arange(k, len(starts), threads) for k in range(threads)]
-    runs = [(t, ids, starts[g], counts[g], scale, FINE_BITS, total) for g in groups]
+    runs = [(t, ids, starts[g], counts[g], scale, fine_bits, total) for g in groups]
     with ThreadPoolExecutor(max_workers=threads) as pool:
         hist = np.zeros((threads, coarse), np.int64)
         list(pool.map(lambda k: _kernel.order_count(*runs[k], hist[k]), range(threads)))
@@ -506,7 +509,7 @@ def kernel_order(t, ids, starts, counts, key, bits, tau):
         del t, ids
         cuts = np.searchsorted(bounds, np.linspace(0, m, threads + 1)).tolist()
         cuts[0], cuts[-1] = 0, coarse
-        dups = pool.map(lambda k: _kernel.order_sort(t_out, id_out, bounds, cuts[k], cuts[k + 1], scale, FINE_BITS,
+        dups = pool.map(lambda k: _kernel.order_sort(t_out, id_out, bounds, cuts[k], cuts[k + 1], scale, fine_bits,
                                                      total, key, bits), range(threads))
         return t_out, id_out, any(list(dups))
 
