@@ -18,7 +18,7 @@ from .methods import SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
 from .sampling import SamplePlan, chunk_ranges, run_chunks
 from .sources import Source, ThinnedSource, make_source, thinned
-from .surface import Surface, apply_matrix, load_surface
+from .surface import Surface, load_surface, transformed_columns
 
 METHODS = ("random", "stratified", "sobol")
 PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object", "orient"}
@@ -95,7 +95,7 @@ class Run:
 
     def spacing(self):
         """d_min, mean nearest-neighbour distance and rho of the output (thinning runs)."""
-        from .thinning import spacing_stats
+        from .spacing import spacing_stats
 
         return spacing_stats(self.kept.points, self.source.area)
 
@@ -381,21 +381,49 @@ def check_shard(shard, poisson=False, radius=None):
 
 
 def sampled_bounds(plan: SamplePlan):
-    """(2, 3) float64 min and max over the world-space vertices of the faces that get points."""
+    """(2, 3) float64 min and max over the world-space vertices of the faces that get points.
+
+    The instances of a geometry that use all its faces are bounded together: its
+    referenced vertices under all their matrices at once, (k, V) values at a time."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    whole = {}  # geometry -> matrices of the parts that use every face (None: identity)
     for part in plan.parts:
         if not part.count:  # an instance none of whose faces can get points
             continue
-        g = plan.surface.geometries[plan.surface.instances[part.instance].geometry]
-        faces = g.faces if part.faces is None else g.faces[part.faces]
-        referenced = np.zeros(len(g.vertices), dtype=bool)
-        referenced[faces.ravel()] = True
-        v = g.vertices if referenced.all() else g.vertices[referenced]
-        if part.matrix is not None:
-            v = apply_matrix(part.matrix, v)
-        lo = np.minimum(lo, [v[:, c].min() for c in range(3)])
-        hi = np.maximum(hi, [v[:, c].max() for c in range(3)])
+        gi = plan.surface.instances[part.instance].geometry
+        if part.faces is None:
+            whole.setdefault(gi, []).append(part.matrix)
+            continue
+        g = plan.surface.geometries[gi]
+        box = _box(_referenced(g.vertices, g.faces[part.faces]), [part.matrix])
+        lo, hi = np.minimum(lo, box[0]), np.maximum(hi, box[1])
+    for gi, matrices in whole.items():
+        g = plan.surface.geometries[gi]
+        box = _box(_referenced(g.vertices, g.faces), matrices)
+        lo, hi = np.minimum(lo, box[0]), np.maximum(hi, box[1])
     return np.stack([lo, hi])
+
+
+def _referenced(vertices, faces):
+    """The rows of ``vertices`` (V, 3) that ``faces`` (F, 3) use."""
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    return vertices if used.all() else vertices[used]
+
+
+def _box(v, matrices):
+    """(2, 3) min and max of points ``v`` (n, 3) under each of ``matrices`` ((4, 4) or
+    None for identity), as :func:`surface.apply_matrix` places them, bit for bit."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    if any(m is None for m in matrices):
+        lo, hi = v.min(axis=0), v.max(axis=0)
+    moved = [m[:3] for m in matrices if m is not None]
+    step = max(1, (1 << 20) // max(len(v), 1))
+    for s in range(0, len(moved), step):
+        cols = transformed_columns(np.stack(moved[s : s + step]), v)
+        lo = np.minimum(lo, [c.min() for c in cols])
+        hi = np.maximum(hi, [c.max() for c in cols])
+    return lo, hi
 
 
 def float32_error_bound(bounds) -> float:
