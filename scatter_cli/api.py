@@ -208,6 +208,7 @@ def _exterior_source(base, occluder, seed, area, info, count=None, candidates=No
     source = ExteriorSource(base, occluder, seed, area, count=count, candidates=candidates)
     info.update(count=source.count, exterior=source.stats)
     info["timings"]["exterior"] = time.perf_counter() - t
+    info["timings"]["enclosure"] = source.enclosure_seconds
     return source
 
 
