@@ -16,7 +16,7 @@ from .attributes import AttributeMaker
 from .errors import ScatterUsageError
 from .methods import SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
-from .sampling import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
+from .sampling import SamplePlan, chunk_ranges, run_chunks
 from .sources import Source, StratifiedSource, ThinnedSource, make_source, thinned
 from .surface import Surface, load_surface, transformed_columns
 
@@ -146,7 +146,7 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     if stable:
         source, plan, dtype, info = _stable_source(surface, count, density, radius, weight, seed, maker, precision,
                                                    warn, t1 - t0)
-        chunk_size = chunk_size or DEFAULT_CHUNK
+        chunk_size = chunk_size or plan.default_chunk
     else:
         plan, weighting, area = plan_surface(surface, weight, warn)
         count = point_count(count, density, area, method)
@@ -221,7 +221,7 @@ def _exterior_source(base, occluder, seed, area, info, count=None, candidates=No
 def _stable_source(surface, count, density, radius, weight, seed, maker, precision, warn, load_time):
     """(source, used faces, dtype, info) of ``--stable``: the points come from
     :class:`scatter_cli.stable.StableSource`."""
-    from .stable import StableSource, stable_weight
+    from .stable import StableSource, dart_thrown, stable_weight
 
     t = time.perf_counter()
     exact = density is None and radius is None
@@ -229,6 +229,8 @@ def _stable_source(surface, count, density, radius, weight, seed, maker, precisi
                           density=density, radius=radius, want_bary=maker.needs_bary,
                           weight=stable_weight(surface, weight) if weight else None, max_candidates=MAX_CANDIDATES)
     plan = source.table  # the used faces, for the bounds that choose the precision
+    if radius is not None:
+        source = dart_thrown(source, radius)
     if plan.non_finite and warn:
         warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
     dtype = choose_precision(plan, precision, warn)
