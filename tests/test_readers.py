@@ -230,3 +230,42 @@ def test_numbers_convert_as_python_floats_do():
     got = _creaders.read_stl_ascii((text + "endsolid\n").encode()).ravel()
     want = np.array([float(t) for t in toks])
     assert got.view(np.int64).tolist() == want.view(np.int64).tolist()
+
+
+def big_ascii_stl(facets=48000, seed=0):
+    """About 13 MB of ASCII STL: large enough for the reader to split it into parts."""
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal((facets, 3, 3))
+    rows = ["facet normal 0 0 1\n outer loop\n" + "".join("  vertex %r %r %r\n" % tuple(v) for v in f.tolist())
+            + " endloop\nendfacet\n" for f in x]
+    return rows
+
+
+@pytest.mark.parametrize("case", ["plain", "crlf", "endsolid early", "endsolid early, then other bytes",
+                                  "a second solid late", "a bad line late"])
+def test_ascii_stl_read_in_parts_is_read_as_in_one(case):
+    """The reader splits a large file at line breaks and reads the parts on threads; the
+    parts decide in file order, so the result is the one-part result in every case."""
+    from scatter_cli import _creaders
+
+    rows = big_ascii_stl()
+    k = len(rows) // 5
+    if case == "endsolid early":
+        rows[k] = "endsolid\n"
+    elif case == "endsolid early, then other bytes":
+        rows[k] = "endsolid\n"
+        rows[-k] = rows[-k].replace("outer", "\x80uter")
+    elif case == "a second solid late":
+        rows[-k] = "endsolid\nsolid b\n"
+    elif case == "a bad line late":
+        rows[-k] = rows[-k].replace("outer loop", "outer loop 1")
+        rows[-k] = rows[-k].replace("vertex", "vertexx", 1)
+    text = "solid a\n" + "".join(rows) + ("" if "endsolid early" in case else "endsolid a\n")
+    data = (text.replace("\n", "\r\n") if case == "crlf" else text).encode()
+    one = _creaders.read_stl_ascii(data, 1)
+    want = {"endsolid early": 3 * k, "plain": 3 * len(rows), "crlf": 3 * len(rows)}.get(case)
+    assert (one is None) if want is None else len(one) == want
+    for threads in (2, 3):
+        parts = _creaders.read_stl_ascii(data, threads)
+        assert (parts is None) == (one is None)
+        assert one is None or parts.tobytes() == one.tobytes()
