@@ -844,11 +844,12 @@ static int64_t *triangulate(polys *q, int64_t *nf)
         np_ = (int64_t)(q->poly.len / (8 * (size_t)k));
     }
     *nf = nt + 2 * nq + np_ * (k - 2);
-    int64_t *out = malloc((size_t)*nf * 24 + 1), *o = out;
+    /* the triangles' list grows into the result (a large realloc moves pages, not bytes) */
+    int64_t *out = realloc(q->tri.data, (size_t)*nf * 24 + 1), *o = out;
     if (!out)
         return NULL;
-    if (q->tri.len) /* no memcpy from NULL, even of 0 bytes (UBSan finding) */
-        memcpy(o, q->tri.data, q->tri.len);
+    q->tri.data = NULL;
+    q->tri.len = q->tri.cap = 0;
     o += 3 * nt;
     const int64_t *qd = (const int64_t *)q->quad.data;
     for (int64_t i = 0; i < nq; i++, o += 3)
