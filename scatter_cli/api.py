@@ -16,9 +16,9 @@ from .attributes import AttributeMaker
 from .errors import ScatterUsageError
 from .methods import SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
-from .sampling import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
+from .sampling import SamplePlan, chunk_ranges, run_chunks
 from .sources import Source, ThinnedSource, make_source, thinned
-from .surface import Surface, apply_matrix, load_surface
+from .surface import Surface, load_surface, transformed_columns
 
 METHODS = ("random", "stratified", "sobol")
 PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object", "orient"}
@@ -146,7 +146,7 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     if stable:
         source, plan, dtype, info = _stable_source(surface, count, density, radius, weight, seed, maker, precision,
                                                    warn, t1 - t0)
-        chunk_size = chunk_size or DEFAULT_CHUNK
+        chunk_size = chunk_size or plan.default_chunk
     else:
         plan, weighting, area = plan_surface(surface, weight, warn)
         count = point_count(count, density, area, method)
@@ -208,13 +208,14 @@ def _exterior_source(base, occluder, seed, area, info, count=None, candidates=No
     source = ExteriorSource(base, occluder, seed, area, count=count, candidates=candidates)
     info.update(count=source.count, exterior=source.stats)
     info["timings"]["exterior"] = time.perf_counter() - t
+    info["timings"]["enclosure"] = source.enclosure_seconds
     return source
 
 
 def _stable_source(surface, count, density, radius, weight, seed, maker, precision, warn, load_time):
     """(source, used faces, dtype, info) of ``--stable``: the points come from
     :class:`scatter_cli.stable.StableSource`."""
-    from .stable import StableSource, stable_weight
+    from .stable import StableSource, dart_thrown, stable_weight
 
     t = time.perf_counter()
     exact = density is None and radius is None
@@ -222,6 +223,8 @@ def _stable_source(surface, count, density, radius, weight, seed, maker, precisi
                           density=density, radius=radius, want_bary=maker.needs_bary,
                           weight=stable_weight(surface, weight) if weight else None, max_candidates=MAX_CANDIDATES)
     plan = source.table  # the used faces, for the bounds that choose the precision
+    if radius is not None:
+        source = dart_thrown(source, radius)
     if plan.non_finite and warn:
         warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
     dtype = choose_precision(plan, precision, warn)
@@ -379,21 +382,49 @@ def check_shard(shard, poisson=False, radius=None):
 
 
 def sampled_bounds(plan: SamplePlan):
-    """(2, 3) float64 min and max over the world-space vertices of the faces that get points."""
+    """(2, 3) float64 min and max over the world-space vertices of the faces that get points.
+
+    The instances of a geometry that use all its faces are bounded together: its
+    referenced vertices under all their matrices at once, (k, V) values at a time."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    whole = {}  # geometry -> matrices of the parts that use every face (None: identity)
     for part in plan.parts:
         if not part.count:  # an instance none of whose faces can get points
             continue
-        g = plan.surface.geometries[plan.surface.instances[part.instance].geometry]
-        faces = g.faces if part.faces is None else g.faces[part.faces]
-        referenced = np.zeros(len(g.vertices), dtype=bool)
-        referenced[faces.ravel()] = True
-        v = g.vertices if referenced.all() else g.vertices[referenced]
-        if part.matrix is not None:
-            v = apply_matrix(part.matrix, v)
-        lo = np.minimum(lo, [v[:, c].min() for c in range(3)])
-        hi = np.maximum(hi, [v[:, c].max() for c in range(3)])
+        gi = plan.surface.instances[part.instance].geometry
+        if part.faces is None:
+            whole.setdefault(gi, []).append(part.matrix)
+            continue
+        g = plan.surface.geometries[gi]
+        box = _box(_referenced(g.vertices, g.faces[part.faces]), [part.matrix])
+        lo, hi = np.minimum(lo, box[0]), np.maximum(hi, box[1])
+    for gi, matrices in whole.items():
+        g = plan.surface.geometries[gi]
+        box = _box(_referenced(g.vertices, g.faces), matrices)
+        lo, hi = np.minimum(lo, box[0]), np.maximum(hi, box[1])
     return np.stack([lo, hi])
+
+
+def _referenced(vertices, faces):
+    """The rows of ``vertices`` (V, 3) that ``faces`` (F, 3) use."""
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    return vertices if used.all() else vertices[used]
+
+
+def _box(v, matrices):
+    """(2, 3) min and max of points ``v`` (n, 3) under each of ``matrices`` ((4, 4) or
+    None for identity), as :func:`surface.apply_matrix` places them, bit for bit."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    if any(m is None for m in matrices):
+        lo, hi = v.min(axis=0), v.max(axis=0)
+    moved = [m[:3] for m in matrices if m is not None]
+    step = max(1, (1 << 20) // max(len(v), 1))
+    for s in range(0, len(moved), step):
+        cols = transformed_columns(np.stack(moved[s : s + step]), v)
+        lo = np.minimum(lo, [c.min() for c in cols])
+        hi = np.maximum(hi, [c.max() for c in cols])
+    return lo, hi
 
 
 def float32_error_bound(bounds) -> float:

@@ -128,6 +128,33 @@ def _reason(exc):
     return text[:200] or type(exc).__name__
 
 
+class _Placed:
+    """Meshes placed in a frame: ``geometry`` (r,) int64, ``matrix`` (r, 4, 4) float64
+    row-vector matrices into the frame, ``names`` and ``aliases`` (r strings each)."""
+
+    def __init__(self, geometry, matrix, names, aliases):
+        self.geometry = np.asarray(geometry, dtype=np.int64).reshape(-1)
+        self.matrix = np.asarray(matrix, dtype=np.float64).reshape(-1, 4, 4)
+        self.names, self.aliases = list(names), list(aliases)
+
+    @staticmethod
+    def join(parts):
+        if len(parts) == 1:
+            return parts[0]
+        return _Placed(np.concatenate([p.geometry for p in parts] + [np.empty(0, np.int64)]),
+                       np.concatenate([p.matrix for p in parts] + [np.empty((0, 4, 4))]),
+                       [n for p in parts for n in p.names], [a for p in parts for a in p.aliases])
+
+
+def compose(a, b):
+    """``a @ b`` for stacks of 4x4 matrices (broadcast), as a fixed sequence of element-wise
+    products and sums: the same bits whatever the stack's size or the BLAS installed."""
+    out = a[..., :, 0, None] * b[..., None, 0, :]
+    for k in range(1, 4):
+        out += a[..., :, k, None] * b[..., None, k, :]
+    return out
+
+
 class _StageReader:
     def __init__(self, stage, source, plain):
         from pxr import Usd, UsdGeom
@@ -139,24 +166,27 @@ class _StageReader:
         self.geometries: list[Geometry] = []
         self.index: dict[str, int] = {}
         self.in_prototype: set[int] = set()
-        self.subtrees: dict[tuple, list] = {}
+        self.subtrees: dict[tuple, _Placed] = {}
         self.skip_purposes = {UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy}
 
     def surface(self):
         """(Surface, aliases): aliases[k] is the prim path of instance k's mesh as authored."""
         placed = self._walk(self.stage.GetPseudoRoot(), None)
-        instances, aliases = [], []
-        for g, m, name, alias in placed:
+        for g, name in zip(placed.geometry.tolist(), placed.names):
             if g in self.in_prototype:  # /__Prototype_1/... is no name a user knows
                 self.geometries[g].name = name
                 self.in_prototype.discard(g)
-            instances.append(Instance(name, g, None if np.array_equal(m, np.eye(4)) else np.ascontiguousarray(m.T)))
-            aliases.append(alias)
-        return Surface(self.geometries, instances, self.source, is_scene=True), aliases
+        identity = (placed.matrix == np.eye(4)).all(axis=(1, 2)).tolist()
+        columns = np.ascontiguousarray(placed.matrix.transpose(0, 2, 1))  # column-vector matrices
+        instances = [Instance(name, g, None if same else columns[k])
+                     for k, (name, g, same) in enumerate(zip(placed.names, placed.geometry.tolist(), identity))]
+        surface = Surface(self.geometries, instances, self.source, is_scene=True)
+        surface.up_axis, surface.meters_per_unit = stage_units(self.stage)
+        return surface, placed.aliases
 
-    # -- placements: [(geometry, (4, 4) row-vector matrix, name, alias)] ------------------
+    # -- placements -----------------------------------------------------------------------
 
-    def _walk(self, root, base):
+    def _walk(self, root, base) -> _Placed:
         """Meshes under ``root`` (itself included), each with the matrix that maps its points
         into the frame of ``base`` (an ancestor prim; None: world space)."""
         out = []
@@ -166,14 +196,14 @@ class _StageReader:
                 it.PruneChildren()
             elif prim.IsInstance():
                 it.PruneChildren()
-                out += self._instance(prim, base)
+                out.append(self._instance(prim, base))
             elif prim.IsA(self.UsdGeom.PointInstancer):
                 it.PruneChildren()
-                out += self._point_instances(prim, base)
+                out.append(self._point_instances(prim, base))
             elif prim.IsA(self.UsdGeom.Mesh):
                 path = str(prim.GetPath())
-                out.append((self._geometry(prim), self._matrix(prim, base), path, path))
-        return out
+                out.append(_Placed([self._geometry(prim)], self._matrix(prim, base), [path], [path]))
+        return _Placed.join(out) if out else _Placed([], [], [], [])
 
     def _matrix(self, prim, base):
         if base is None:
@@ -201,20 +231,50 @@ class _StageReader:
         """An instanceable prim: its prototype's meshes under the prim's matrix."""
         proto = prim.GetPrototype()
         if not proto:
-            return []
+            return _Placed([], [], [], [])
         at = self._matrix(prim, base)
         old, new = str(proto.GetPath()), str(prim.GetPath())
         inner = self._subtree(proto, None)  # a prototype is a root prim: its own frame
-        for g, *_ in inner:
-            self.in_prototype.add(g)
-        return [(g, m @ at, new + name[len(old):], alias) for g, m, name, alias in inner]
+        self.in_prototype.update(inner.geometry.tolist())
+        return _Placed(inner.geometry, compose(inner.matrix, at), [new + n[len(old):] for n in inner.names],
+                       inner.aliases)
 
     def _point_instances(self, prim, base):
-        """A point instancer: each instance's prototype meshes under the instance matrix."""
+        """A point instancer: in instance order, each instance's prototype meshes under the
+        instance matrix (arrays over all instances at once)."""
+        where = str(prim.GetPath())
+        xf, index, shown, targets = self._instancer_arrays(prim, where)
+        protos = [self._prototype(self.stage.GetPrimAtPath(t)) for t in targets]
+        sizes = np.array([len(p.geometry) for p in protos] + [0], dtype=np.int64)
+        table = _Placed.join(protos + [_Placed([], [], [], [])])  # every prototype's meshes, end to end
+        suffixes = [s for p in protos for s in p.names]
+        first = np.cumsum(sizes) - sizes
+        rows = np.flatnonzero(shown & (sizes[index] > 0))
+        counts = sizes[index[rows]]
+        instance = np.repeat(rows, counts)  # (r,) the instance of each placement
+        start = np.cumsum(counts) - counts
+        entry = first[index[instance]] + np.arange(len(instance)) - np.repeat(start, counts)
+        # the prototype's own transform is in its entries' matrices (ExcludeProtoXform)
+        matrix = compose(compose(table.matrix[entry], xf[instance]), self._matrix(prim, base))
+        entries = entry.tolist()
+        names = [f"{where}[{i}]{suffixes[e]}" for i, e in zip(instance.tolist(), entries)]
+        return _Placed(table.geometry[entry], matrix, names, [table.aliases[e] for e in entries])
+
+    def _prototype(self, proto):
+        """A point instancer's prototype: its meshes in the frame of its parent, named by
+        their path below that parent."""
+        if not proto:
+            return _Placed([], [], [], [])
+        parent = proto.GetParent()
+        cut = 0 if parent.IsPseudoRoot() else len(str(parent.GetPath()))
+        inner = self._subtree(proto, parent)
+        return _Placed(inner.geometry, inner.matrix, [n[cut:] for n in inner.names], inner.aliases)
+
+    def _instancer_arrays(self, prim, where):
+        """(transforms (n, 4, 4), prototype index (n,), shown (n,) bool, prototype paths)."""
         UsdGeom = self.UsdGeom
         pi = UsdGeom.PointInstancer(prim)
         targets = pi.GetPrototypesRel().GetTargets()
-        where = str(prim.GetPath())
         try:
             xf = pi.ComputeInstanceTransformsAtTime(
                 self.time, self.time, UsdGeom.PointInstancer.ExcludeProtoXform, UsdGeom.PointInstancer.IgnoreMask
@@ -230,20 +290,7 @@ class _StageReader:
             raise ScatterError(f"{self.source}: point instancer {where}: prototype index out of range")
         mask = pi.ComputeMaskAtTime(self.time)
         shown = np.asarray(mask, dtype=bool) if len(mask) == len(index) else np.ones(len(index), dtype=bool)
-        world = self._matrix(prim, base)
-        out = []
-        for k, target in enumerate(targets):
-            proto = self.stage.GetPrimAtPath(target)
-            rows = np.flatnonzero(shown & (index == k))
-            if not proto or not len(rows):
-                continue
-            parent = proto.GetParent()
-            cut = 0 if parent.IsPseudoRoot() else len(str(parent.GetPath()))
-            # the prototype's own transform is in its subtree's matrices (ExcludeProtoXform)
-            for g, m, name, alias in self._subtree(proto, parent):
-                placed = m @ xf[rows] @ world  # (r, 4, 4): instance matrices in one product
-                out += [(g, placed[j], f"{where}[{i}]{name[cut:]}", alias) for j, i in enumerate(rows.tolist())]
-        return out
+        return xf, index, shown, targets
 
     # -- geometry -------------------------------------------------------------------------
 
@@ -274,6 +321,14 @@ class _StageReader:
             return Geometry(path, points, corners[tri])
         topo = _Topology(counts, corners, tri, polygon, len(points))
         return _with_primvars(path, mesh, points, topo, self.time)
+
+
+def stage_units(stage):
+    """(up axis "Y" or "Z", metres per unit) of a stage: as authored, else USD's fallbacks
+    (Y up, 0.01: centimetres), which is what the stage's coordinates mean."""
+    from pxr import UsdGeom
+
+    return str(UsdGeom.GetStageUpAxis(stage)), float(UsdGeom.GetStageMetersPerUnit(stage))
 
 
 def _array(value, dtype, width=None):
@@ -412,5 +467,5 @@ def select_paths(surface: Surface, paths, aliases) -> Surface:
         raise ScatterUsageError(f"{surface.source}: no mesh at or under {', '.join(map(repr, missing))} "
                                 f"(meshes: {shown or 'none'})")
     kept = sorted(set().union(*hits.values()))
-    return Surface(surface.geometries, [surface.instances[k] for k in kept], surface.source, surface.is_scene)
+    return surface.keeping([surface.instances[k] for k in kept])
 
