@@ -145,7 +145,7 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     maker = AttributeMaker(surface, names, seed)
     if stable:
         source, plan, dtype, info = _stable_source(surface, count, density, radius, weight, seed, maker, precision,
-                                                   warn, t1 - t0)
+                                                   warn, t1 - t0, exterior)
         chunk_size = chunk_size or plan.default_chunk
     else:
         plan, weighting, area = plan_surface(surface, weight, warn)
@@ -212,19 +212,19 @@ def _exterior_source(base, occluder, seed, area, info, count=None, candidates=No
     return source
 
 
-def _stable_source(surface, count, density, radius, weight, seed, maker, precision, warn, load_time):
+def _stable_source(surface, count, density, radius, weight, seed, maker, precision, warn, load_time, exterior):
     """(source, used faces, dtype, info) of ``--stable``: the points come from
-    :class:`scatter_cli.stable.StableSource`."""
+    :class:`scatter_cli.stable.StableSource`; with ``--exterior``, its exterior arrivals
+    (the N earliest, those before D, or the candidates of ``--radius``), in arrival order."""
     from .stable import StableSource, dart_thrown, stable_weight
 
     t = time.perf_counter()
     exact = density is None and radius is None
-    source = StableSource(surface, seed, count=(10000 if count is None else count) if exact else None,
-                          density=density, radius=radius, want_bary=maker.needs_bary,
+    n = 10000 if count is None else count
+    source = StableSource(surface, seed, count=n if exact and not exterior else None, density=density, radius=radius,
+                          stream=exact and exterior, want_bary=maker.needs_bary,
                           weight=stable_weight(surface, weight) if weight else None, max_candidates=MAX_CANDIDATES)
     plan = source.table  # the used faces, for the bounds that choose the precision
-    if radius is not None:
-        source = dart_thrown(source, radius)
     if plan.non_finite and warn:
         warn(f"{surface.source}: skipped {plan.non_finite:,} faces with non-finite vertices")
     dtype = choose_precision(plan, precision, warn)
@@ -233,8 +233,14 @@ def _stable_source(surface, count, density, radius, weight, seed, maker, precisi
             "timings": {"load": load_time, "plan": time.perf_counter() - t}}
     if weight:
         info["weight"] = weight
+    if exterior:
+        occluder = _occluder(surface, info)
+        source = _exterior_source(source, occluder, seed, source.area, info, count=n if exact else None,
+                                  candidates=None if exact else source.count)
     if radius is not None:
         info["radius"] = radius
+        source = dart_thrown(source, radius)
+        info["count"] = source.count
     return source, plan, dtype, info
 
 
@@ -336,8 +342,6 @@ def check_options(count=None, density=None, seed=0, method="random", precision="
     if stable and poisson:
         raise ScatterUsageError("--stable does not combine with --poisson (--radius gives a Poisson-disk set that "
                                 "stays put)")
-    if stable and exterior:
-        raise ScatterUsageError("--stable does not combine with --exterior yet")
     if exterior and method == "stratified":
         raise ScatterUsageError("--exterior does not combine with --method stratified (its strata are fixed by N); "
                                 "use random or sobol")

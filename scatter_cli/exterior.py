@@ -44,10 +44,12 @@ def rotation_uniforms(seed: int, start: int, stop: int):
     return np.random.Generator(bits).random((stop - start, 3))
 
 
-def classify(occluder, chunk: RawChunk, seed: int):
-    """((n,) bool exterior, rays cast) for the candidates of ``chunk``."""
+def classify(occluder, chunk: RawChunk, seed: int, u=None):
+    """((n,) bool exterior, rays cast) for the candidates of ``chunk``; ``u`` (n, 3): their
+    ray rotations' uniforms, when the source draws them (else from the candidate's index)."""
     normals = occluder.face_normals(chunk.face, chunk.instance)
-    u = rotation_uniforms(seed, chunk.start, chunk.start + len(chunk.points))
+    if u is None:
+        u = rotation_uniforms(seed, chunk.start, chunk.start + len(chunk.points))
     return occluder.exterior(chunk.points, normals, u, occluder.is_enclosed(chunk.face, chunk.instance))
 
 
@@ -143,7 +145,9 @@ class ExteriorSource:
     def _classify_block(self, b, limit):
         start, stop = b * BLOCK, int(min((b + 1) * BLOCK, limit))
         chunk = self.base.draw(start, stop)
-        mask, rays = classify(self.occluder, chunk, self.seed)
+        # a source whose candidates carry their own streams (--stable) draws their rotations
+        u = self.base.ray_uniforms(start, stop) if hasattr(self.base, "ray_uniforms") else None
+        mask, rays = classify(self.occluder, chunk, self.seed, u)
         return mask, rays, self.occluder.offsets[chunk.instance] + chunk.face
 
     def draw(self, start: int, stop: int) -> RawChunk:
