@@ -16,7 +16,7 @@ from .attributes import AttributeMaker
 from .errors import ScatterUsageError
 from .methods import SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
-from .sampling import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
+from .sampling import SamplePlan, chunk_ranges, run_chunks
 from .sources import Source, ThinnedSource, make_source, thinned
 from .surface import Surface, load_surface, transformed_columns
 
@@ -145,8 +145,8 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     maker = AttributeMaker(surface, names, seed)
     if stable:
         source, plan, dtype, info = _stable_source(surface, count, density, radius, weight, seed, maker, precision,
-                                                   warn, t1 - t0)
-        chunk_size = chunk_size or DEFAULT_CHUNK
+                                                   warn, t1 - t0, exterior)
+        chunk_size = chunk_size or plan.default_chunk
     else:
         plan, weighting, area = plan_surface(surface, weight, warn)
         count = point_count(count, density, area, method)
@@ -208,18 +208,21 @@ def _exterior_source(base, occluder, seed, area, info, count=None, candidates=No
     source = ExteriorSource(base, occluder, seed, area, count=count, candidates=candidates)
     info.update(count=source.count, exterior=source.stats)
     info["timings"]["exterior"] = time.perf_counter() - t
+    info["timings"]["enclosure"] = source.enclosure_seconds
     return source
 
 
-def _stable_source(surface, count, density, radius, weight, seed, maker, precision, warn, load_time):
+def _stable_source(surface, count, density, radius, weight, seed, maker, precision, warn, load_time, exterior):
     """(source, used faces, dtype, info) of ``--stable``: the points come from
-    :class:`scatter_cli.stable.StableSource`."""
-    from .stable import StableSource, stable_weight
+    :class:`scatter_cli.stable.StableSource`; with ``--exterior``, its exterior arrivals
+    (the N earliest, those before D, or the candidates of ``--radius``), in arrival order."""
+    from .stable import StableSource, dart_thrown, stable_weight
 
     t = time.perf_counter()
     exact = density is None and radius is None
-    source = StableSource(surface, seed, count=(10000 if count is None else count) if exact else None,
-                          density=density, radius=radius, want_bary=maker.needs_bary,
+    n = 10000 if count is None else count
+    source = StableSource(surface, seed, count=n if exact and not exterior else None, density=density, radius=radius,
+                          stream=exact and exterior, want_bary=maker.needs_bary,
                           weight=stable_weight(surface, weight) if weight else None, max_candidates=MAX_CANDIDATES)
     plan = source.table  # the used faces, for the bounds that choose the precision
     if plan.non_finite and warn:
@@ -230,8 +233,14 @@ def _stable_source(surface, count, density, radius, weight, seed, maker, precisi
             "timings": {"load": load_time, "plan": time.perf_counter() - t}}
     if weight:
         info["weight"] = weight
+    if exterior:
+        occluder = _occluder(surface, info)
+        source = _exterior_source(source, occluder, seed, source.area, info, count=n if exact else None,
+                                  candidates=None if exact else source.count)
     if radius is not None:
         info["radius"] = radius
+        source = dart_thrown(source, radius)
+        info["count"] = source.count
     return source, plan, dtype, info
 
 
@@ -333,8 +342,6 @@ def check_options(count=None, density=None, seed=0, method="random", precision="
     if stable and poisson:
         raise ScatterUsageError("--stable does not combine with --poisson (--radius gives a Poisson-disk set that "
                                 "stays put)")
-    if stable and exterior:
-        raise ScatterUsageError("--stable does not combine with --exterior yet")
     if exterior and method == "stratified":
         raise ScatterUsageError("--exterior does not combine with --method stratified (its strata are fixed by N); "
                                 "use random or sobol")

@@ -14,7 +14,7 @@ import os
 
 import numpy as np
 
-from .native import kernel
+from .native import kernel, worker_count
 from .plyread import _TYPES, _contents
 
 _STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
@@ -72,7 +72,7 @@ def _stl(data):
             vertices.reshape(count, 3, 3)[...] = corners  # one pass from the strided records
             return [(vertices, np.arange(3 * count, dtype=np.int64).reshape(-1, 3))]
     c = kernel("_creaders")
-    vertices = c and c.read_stl_ascii(data)
+    vertices = c and c.read_stl_ascii(data, worker_count())  # large files: parts on several threads
     if vertices is None or vertices is False:
         return None
     return [(vertices, np.arange(len(vertices), dtype=np.int64).reshape(-1, 3))]

@@ -226,6 +226,7 @@ def test_exterior_area_estimate_and_face_counts(box_file):
     report = describe(box_file, exterior=True)["exterior"]
     assert abs(report["area"] - 54.0) < 4 * report["area_se"]
     assert (report["faces_exterior"], report["faces_mixed"], report["faces_hidden"]) == (108, 0, 12)
+    assert report["faces_enclosed"] == 12  # the inner box, whole
     proc = run_scatter("sample", box_file, "--exterior", "-n", "10", "-f", "csv", "-o", "/dev/null", "--stats", "-", check=True)
     stats_ = json.loads(proc.stderr)["exterior"]
     assert abs(stats_["exterior_area"] - 54.0) < 4 * stats_["exterior_area_se"]
