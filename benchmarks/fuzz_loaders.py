@@ -1,6 +1,6 @@
-"""Fuzz the mesh loaders with mutated PLY/OBJ/STL/OFF bytes: one command, prints results.
+"""Fuzz the mesh loaders with mutated PLY/OBJ/STL/OFF/GLB bytes: one command, prints results.
 
-    PYTHONPATH=. python benchmarks/fuzz_loaders.py [--inputs 20000] [--seed 0]
+    PYTHONPATH=. python benchmarks/fuzz_loaders.py [--inputs 20000] [--seed 0] [--only glb ...]
 
 Every input must load and sample, or fail with a ScatterError (one-line `error:`); and
 where the fast readers (scatter_cli/readers.py) answer, trimesh must load the same
@@ -28,9 +28,10 @@ def main():
     ap.add_argument("--inputs", type=int, default=20000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--save", default="fuzz-crashes")
+    ap.add_argument("--only", nargs="*", help="seed names to mutate (default: all)")
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
-    names = sorted(SEEDS)
+    names = sorted(args.only or SEEDS)
     outcomes = collections.Counter()
     crashes = collections.Counter()
     t0 = time.perf_counter()

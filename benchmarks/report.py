@@ -36,58 +36,50 @@ def status_cell(row):
     return "skipped: " + row["skipped"] if "skipped" in row else "error: " + row.get("error", "?")
 
 
-def uniform_table(rows, meshes):
-    out = ["| mesh | N | method | median | runs | first run | / ours | / floor | "
-           "peak extra MB | out MB (f32) + mesh MB |",
-           "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
-    mesh_mb = {m["name"]: m["mesh_arrays_mb"] for m in meshes}
+def table(header, rows, cells):
+    """Markdown lines: ``header`` (column names), then a row per measurement: its mesh,
+    N and method, then ``cells(row)``; a measurement that did not run says why."""
+    out = ["| " + " | ".join(header) + " |", "|---|---:|---|" + "---:|" * (len(header) - 3)]
     for row in rows:
-        if "median_s" not in row:
-            out.append(f"| {row['mesh']} | {row['n']:,} | {row['method']} | {status_cell(row)} "
-                       "| | | | | | |")
-            continue
+        n = f"{row['n']:,}" if row["n"] else "-"
+        rest = [status_cell(row)] + [""] * (len(header) - 4) if "median_s" not in row else cells(row)
+        out.append("| " + " | ".join([row["mesh"], n, row["method"]] + rest) + " |")
+    return out
+
+
+def uniform_table(rows, meshes):
+    mesh_mb = {m["name"]: m["mesh_arrays_mb"] for m in meshes}
+
+    def cells(row):
         ours = find_row(rows, row["mesh"], row["n"], "ours")
         floor = find_row(rows, row["mesh"], row["n"], "floor")
         target = row["n"] * 12 / 2**20 + mesh_mb[row["mesh"]]
-        out.append(f"| {row['mesh']} | {row['n']:,} | {row['method']} | {fmt_s(row['median_s'])} "
-                   f"| {row['runs']} | {fmt_s(row['first_s'])} "
-                   f"| {ratio(row['median_s'], ours and ours['median_s'])} "
-                   f"| {ratio(row['median_s'], floor and floor['median_s'])} "
-                   f"| {row['peak_extra_mb']:.0f} | {target:.0f} |")
-    return out
+        return [fmt_s(row["median_s"]), str(row["runs"]), fmt_s(row["first_s"]),
+                ratio(row["median_s"], ours and ours["median_s"]), ratio(row["median_s"], floor and floor["median_s"]),
+                f"{row['peak_extra_mb']:.0f}", f"{target:.0f}"]
+
+    return table(["mesh", "N", "method", "median", "runs", "first run", "/ ours", "/ floor", "peak extra MB",
+                  "out MB (f32) + mesh MB"], rows, cells)
 
 
 def e2e_table(rows):
-    out = ["| mesh | N | command | median wall | runs | / ours | peak RSS MB | points written |",
-           "|---|---:|---|---:|---:|---:|---:|---:|"]
-    for row in rows:
-        n = f"{row['n']:,}" if row["n"] else "-"
-        if "median_s" not in row:
-            out.append(f"| {row['mesh']} | {n} | {row['method']} | {status_cell(row)} | | | | |")
-            continue
+    def cells(row):
         ours = find_row(rows, row["mesh"], row["n"], "ours")
-        out.append(f"| {row['mesh']} | {n} | {row['method']} | {fmt_s(row['median_s'])} "
-                   f"| {row['runs']} | {ratio(row['median_s'], ours and ours['median_s'])} "
-                   f"| {fmt_mb(row['peak_rss_mb'])} | {fmt_count(row.get('count'))} |")
-    return out
+        return [fmt_s(row["median_s"]), str(row["runs"]), ratio(row["median_s"], ours and ours["median_s"]),
+                fmt_mb(row["peak_rss_mb"]), fmt_count(row.get("count"))]
+
+    return table(["mesh", "N", "command", "median wall", "runs", "/ ours", "peak RSS MB", "points written"], rows, cells)
 
 
 def poisson_table(rows):
-    out = ["| mesh | N asked | method | median | runs | points returned | rho | peak extra MB |",
-           "|---|---:|---|---:|---:|---:|---:|---:|"]
-    for row in rows:
-        n = f"{row['n']:,}" if row["n"] else "-"
-        if "median_s" not in row:
-            out.append(f"| {row['mesh']} | {n} | {row['method']} | {status_cell(row)} | | | | |")
-            continue
-        peak = row.get("peak_extra_mb", row.get("peak_rss_mb"))
-        rho_cell = f"{row['rho']:.3f}" if row.get("rho") is not None else "-"
+    def cells(row):
+        rho = f"{row['rho']:.3f}" if row.get("rho") is not None else "-"
         if row.get("warning"):
-            rho_cell += " (" + row["warning"] + ")"
-        out.append(f"| {row['mesh']} | {n} | {row['method']} | {fmt_s(row['median_s'])} "
-                   f"| {row['runs']} | {fmt_count(row.get('count'))} | {rho_cell} "
-                   f"| {fmt_mb(peak)} |")
-    return out
+            rho += " (" + row["warning"] + ")"
+        return [fmt_s(row["median_s"]), str(row["runs"]), fmt_count(row.get("count")), rho,
+                fmt_mb(row.get("peak_extra_mb", row.get("peak_rss_mb")))]
+
+    return table(["mesh", "N asked", "method", "median", "runs", "points returned", "rho", "peak extra MB"], rows, cells)
 
 
 def markdown_report(report):

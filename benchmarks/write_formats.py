@@ -1,16 +1,27 @@
-"""Write time per output format against binary PLY, and peak memory against the count.
+"""Write time per output format against binary PLY and against the LAZ compressor alone,
+and peak memory against the count: every figure of issue 16's benchmark in one run.
 
-    PYTHONPATH=. python benchmarks/write_formats.py [--count 10000000] [--runs 3] [--out benchmarks/write-formats-results.md]
+    PYTHONPATH=. python benchmarks/write_formats.py [--count 10000000] [--runs 5] [--out benchmarks/write-formats-results.md]
 
-1. Time (printed first): N points of samples/boxvertexcolors.glb are sampled once and held as chunks
+1. Memory (measured first): peak RSS (VmHWM) of a fresh process that samples and writes
+   N/10, N and 3N points (streamed, the whole pipeline): flat in the count means the same
+   peak for all. USD holds every point by design (it cannot stream) and is measured for the
+   record, at N/10 and N only.
+2. Time: N points of samples/boxvertexcolors.glb are sampled once and held as chunks
    (2^17 points each); each format then writes the same chunks to a file in a temporary
-   folder (on the same disk as the repo), alternating formats, --runs rounds; medians,
-   and the ratio to binary PLY of the same round. Two layouts: xyz only, and xyz +
-   normal + color. float32 coordinates for PLY/PCD/USD (what auto picks here); LAS/LAZ
-   quantise float64 points (what the run gives them).
-2. Memory (measured first): peak RSS (VmHWM) of a fresh process that samples and writes N/10 and N points
-   (streamed, the whole pipeline): flat in the count means the same peak for both.
-   USD holds every point by design (it cannot stream) and is measured for the record.
+   folder (on the same disk as the repo), alternating formats, --runs rounds; medians of
+   wall and CPU seconds (the process's user + system time, all threads: less sensitive to
+   other jobs on the machine), and the ratio to binary PLY of the same round. Two layouts:
+   xyz only, and xyz + normal + color. float32 coordinates for PLY/PCD/USD (what auto
+   picks here); LAS/LAZ quantise float64 points (what the run gives them). Three
+   references, in the same rounds:
+   - ``lazrs alone``: the very point records our LAZ writer makes, built beforehand and
+     held in memory, compressed through laspy's writer (LazBackend.LazrsParallel, the
+     backend ours uses) in the same chunks: the compressor's own speed. ``laz`` rows give
+     their ratio to it;
+   - ``lazrs alone, 1 thread``: the same with LazBackend.Lazrs;
+   - ``las bytes``: as many bytes as the LAS file has, written in 4 MiB blocks from one
+     buffer: the part of a LAS write that is the file system's, whatever the format code does.
 """
 
 from __future__ import annotations
@@ -56,78 +67,143 @@ def sampled_chunks(count, attrs, precision):
     return list(run.chunks()), run.layout, sampled_bounds(run.plan)
 
 
+def held_records(chunks, layout, count, bounds):
+    """The LAS point records of ``chunks``, as our writer makes them (one array per chunk)."""
+    from scatter_cli.las import LasWriter
+
+    writer = LasWriter(None, layout, count, bounds)
+    return [writer.records(c).copy() for c in chunks], writer.header_
+
+
+def lazrs_alone(backend_name):
+    def write(records, header, out):
+        import laspy
+
+        backend = getattr(laspy.LazBackend, backend_name)
+        with laspy.open(out, mode="w", header=header, do_compress=True, laz_backend=backend) as f:
+            for r in records:
+                f.point_writer.write_points(laspy.PackedPointRecord(r, header.point_format))
+
+    return write
+
+
+def raw_bytes(size, out, block=1 << 22):
+    data = memoryview(bytes(block))
+    with open(out, "wb") as f:
+        for start in range(0, size, block):
+            f.write(data[: min(block, size - start)])
+
+
+REFERENCES = {"lazrs alone": lazrs_alone("LazrsParallel"), "lazrs alone, 1 thread": lazrs_alone("Lazrs"),
+              "las bytes": None}
+
+
+def timed(fn):
+    wall, cpu = time.perf_counter(), time.process_time()
+    fn()
+    return time.perf_counter() - wall, time.process_time() - cpu
+
+
 def time_formats(count, runs, folder):
     from scatter_cli.writers import write_samples
 
     rows = []
     for name, attrs in LAYOUTS.items():
         data = {p: sampled_chunks(count, attrs, p) for p in ("float32", "float64")}
-        times = {fmt: [] for fmt, _ in FORMATS}
+        records, header = held_records(*data["float64"][:2], count, data["float64"][2])
+        names = [fmt for fmt, _ in FORMATS] + list(REFERENCES)
         sizes = {}
+        wall, cpu = ({k: [] for k in names} for _ in range(2))
         for _ in range(runs):
             for fmt, suffix in FORMATS:
                 chunks, layout, bounds = data["float64" if fmt in ("las", "laz") else "float32"]
                 out = os.path.join(folder, f"bench.{suffix}")
-                t = time.perf_counter()
-                write_samples(chunks, out, fmt, layout, count, bounds=bounds)
-                times[fmt].append(time.perf_counter() - t)
+                w, c = timed(lambda: write_samples(chunks, out, fmt, layout, count, bounds=bounds))
+                wall[fmt].append(w), cpu[fmt].append(c)
                 sizes[fmt] = os.path.getsize(out)
                 os.unlink(out)
-        ply = statistics.median(times["ply"])
-        for fmt, _ in FORMATS:
-            med = statistics.median(times[fmt])
-            ratios = [t / p for t, p in zip(times[fmt], times["ply"])]
-            rows.append({"layout": name, "format": fmt, "seconds": med, "ratio_to_ply": statistics.median(ratios),
-                         "mb": sizes[fmt] / 1e6, "mpoints_per_s": count / med / 1e6, "all": times[fmt]})
-        del data
-        print(f"{name}: PLY {ply:.2f} s", file=sys.stderr)
+            for ref, write in REFERENCES.items():
+                out = os.path.join(folder, "bench-ref.laz")
+                if write is None:
+                    w, c = timed(lambda: raw_bytes(sizes["las"], out))
+                else:
+                    w, c = timed(lambda: write(records, header, out))
+                wall[ref].append(w), cpu[ref].append(c)
+                sizes[ref] = os.path.getsize(out)
+                os.unlink(out)
+        for fmt in names:
+            rows.append({"layout": name, "format": fmt, "seconds": statistics.median(wall[fmt]),
+                         "cpu_seconds": statistics.median(cpu[fmt]),
+                         "ratio_to_ply": median_ratio(wall[fmt], wall["ply"]),
+                         "cpu_ratio_to_ply": median_ratio(cpu[fmt], cpu["ply"]),
+                         "ratio_to_lazrs": median_ratio(wall[fmt], wall["lazrs alone"]) if fmt == "laz" else None,
+                         "cpu_ratio_to_lazrs": median_ratio(cpu[fmt], cpu["lazrs alone"]) if fmt == "laz" else None,
+                         "mb": sizes[fmt] / 1e6, "mpoints_per_s": count / statistics.median(wall[fmt]) / 1e6,
+                         "all": wall[fmt], "all_cpu": cpu[fmt]})
+        del data, records
+        print(f"{name}: PLY {statistics.median(wall['ply']):.2f} s", file=sys.stderr)
     return rows
 
 
+def median_ratio(times, base):
+    return statistics.median(t / b for t, b in zip(times, base))
+
+
 def peak_memory(count, folder):
+    """Peak RSS (MB) of sampling and writing N/10, N and 3N points (USD: N/10 and N only)."""
     rows = []
     code = CHILD.format(root=ROOT, mesh=MESH)
     for name, attrs in LAYOUTS.items():
         for fmt, suffix in FORMATS:
             peaks = []
-            for n in (count // 10, count):
+            for n in memory_counts(count, fmt):
                 out = os.path.join(folder, f"mem.{suffix}")
                 res = subprocess.run([sys.executable, "-c", code, fmt, suffix, str(n), attrs, out], check=True,
                                      capture_output=True, text=True)
                 peaks.append(float(res.stdout.strip()))
                 os.unlink(out)
-            rows.append({"layout": name, "format": fmt, "peak_mb_small": peaks[0], "peak_mb_large": peaks[1]})
-            print(f"{name} {fmt}: {peaks[0]:.0f} -> {peaks[1]:.0f} MB", file=sys.stderr)
+            rows.append({"layout": name, "format": fmt, "counts": memory_counts(count, fmt), "peak_mb": peaks})
+            print(f"{name} {fmt}: {' -> '.join(f'{p:.0f}' for p in peaks)} MB", file=sys.stderr)
     return rows
+
+
+def memory_counts(count, fmt):
+    return [count // 10, count] + ([] if fmt == "usd" else [3 * count])
 
 
 def markdown(count, runs, timing, memory):
     lines = [f"# Write time per format, {count:,} points (medians of {runs} alternating rounds)", "",
-             "| layout | format | seconds | x binary PLY | Mpoints/s | file MB |", "|---|---|---|---|---|---|"]
+             "| layout | format | seconds | x binary PLY | CPU seconds | CPU x PLY | x lazrs alone (wall / CPU) "
+             "| Mpoints/s | file MB |", "|---|---|---|---|---|---|---|---|---|"]
     for r in timing:
+        vs = f"{r['ratio_to_lazrs']:.2f} / {r['cpu_ratio_to_lazrs']:.2f}" if r["ratio_to_lazrs"] else ""
         lines.append(f"| {r['layout']} | {r['format']} | {r['seconds']:.2f} | {r['ratio_to_ply']:.2f} | "
-                     f"{r['mpoints_per_s']:.1f} | {r['mb']:.0f} |")
-    lines += ["", f"# Peak RSS of sample + write, {count // 10:,} against {count:,} points", "",
-              "| layout | format | peak MB (N/10) | peak MB (N) |", "|---|---|---|---|"]
+                     f"{r['cpu_seconds']:.2f} | {r['cpu_ratio_to_ply']:.2f} | {vs} | {r['mpoints_per_s']:.1f} | "
+                     f"{r['mb']:.0f} |")
+    lines += ["", f"# Peak RSS of sample + write, {count // 10:,}, {count:,} and {3 * count:,} points", "",
+              "| layout | format | peak MB (N/10) | peak MB (N) | peak MB (3N) |", "|---|---|---|---|---|"]
     for r in memory:
-        lines.append(f"| {r['layout']} | {r['format']} | {r['peak_mb_small']:.0f} | {r['peak_mb_large']:.0f} |")
+        peaks = [f"{p:.0f}" for p in r["peak_mb"]] + ["not measured"] * (3 - len(r["peak_mb"]))
+        lines.append(f"| {r['layout']} | {r['format']} | {' | '.join(peaks)} |")
     return "\n".join(lines) + "\n"
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--count", type=int, default=10_000_000)
-    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--out", default=os.path.join(ROOT, "benchmarks", "write-formats-results.md"))
     args = ap.parse_args()
+    load = os.getloadavg()
     with tempfile.TemporaryDirectory(dir=ROOT) as folder:
         memory = peak_memory(args.count, folder)
         timing = time_formats(args.count, args.runs, folder)
-    text = markdown(args.count, args.runs, timing, memory)
+    load = [round(x, 1) for x in load + os.getloadavg()]
+    text = markdown(args.count, args.runs, timing, memory) + f"\nLoad average (1, 5, 15 min) at the start and the end: {load[:3]}, {load[3:]}\n"
     with open(args.out, "w") as f:
         f.write(text)
     with open(os.path.splitext(args.out)[0] + ".json", "w") as f:
-        json.dump({"count": args.count, "runs": args.runs, "timing": timing, "memory": memory}, f, indent=1)
+        json.dump({"count": args.count, "runs": args.runs, "load": load, "timing": timing, "memory": memory}, f, indent=1)
     print(text)
 
 

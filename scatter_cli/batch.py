@@ -15,8 +15,8 @@ import sys
 import time
 
 from .errors import ScatterUsageError
+from .inputs import MESH_SUFFIXES
 
-MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb", ".gltf", ".usd", ".usda", ".usdc", ".usdz")
 TEMPLATE_FIELDS = ("stem", "name", "rel", "index")
 ENGINES = ("local", "dask")
 # sample options that a batch passes to api.prepare as they are

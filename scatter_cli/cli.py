@@ -14,6 +14,7 @@ import typer
 
 from . import process
 from .errors import ScatterUsageError
+from .inputs import INPUT_FORMATS
 from .outputs import ASCII_FORMATS, ATTRIBUTES, FORMATS
 
 app = typer.Typer(
@@ -36,7 +37,7 @@ def _warner(quiet):
 
 
 MeshArg = Annotated[str, typer.Argument(metavar="MESH", help="Mesh file (PLY, OBJ, STL, OFF, GLB/GLTF, ...); '-' reads standard input.")]
-InputFormat = Annotated[Optional[str], typer.Option("--input-format", metavar="FORMAT", help="Mesh format when reading standard input or a pipe (ply, obj, stl, off, glb, gltf, usd, usda, usdc, usdz).")]
+InputFormat = Annotated[Optional[str], typer.Option("--input-format", metavar="FORMAT", help=f"Mesh format when reading standard input or a pipe ({', '.join(INPUT_FORMATS)}).")]
 Seed = Annotated[int, typer.Option("--seed", metavar="S", help="Random seed: same input, options and seed give the same bytes.")]
 Exterior = Annotated[bool, typer.Option("--exterior", help="Only the exterior surface: what can be seen from outside the mesh (needs embreex).")]
 Stable = Annotated[bool, typer.Option("--stable", help="Placement keyed to the faces themselves: points stay put when the mesh is edited elsewhere, renumbered or re-exported.")]

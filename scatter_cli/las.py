@@ -106,6 +106,10 @@ class LasWriter(_Writer):
         self.header_, self.step, self.offset, self.extras = make_header(layout, bounds)
         self.report = {"las": quantisation_report(self.step, self.offset, bounds)}
         self._las = None
+        self._records = None  # reused from chunk to chunk: the fields never written stay zero
+        self._scratch = None
+        self._lo = np.full(3, np.iinfo(np.int64).max)
+        self._hi = np.full(3, np.iinfo(np.int64).min)
 
     def header(self):
         laspy = _laspy()
@@ -118,40 +122,44 @@ class LasWriter(_Writer):
         backend = laspy.LazBackend.LazrsParallel if self.compress else None
         self._las = laspy.open(self.stream, mode="w", header=self.header_, do_compress=self.compress,
                                laz_backend=backend, closefd=False)
-        self._lo = np.full(3, np.iinfo(np.int64).max)
-        self._hi = np.full(3, np.iinfo(np.int64).min)
 
     def write(self, samples):
         # laspy's point writer takes the records; the header's extents and counts are kept
-        # here (LasWriter.write_points would sort every chunk's return numbers: a third of
-        # the write time, and each of our points is return 1 of 1).
-        rec = self.records(samples)
+        # here (LasWriter.write_points would sort every chunk's return numbers, and each of
+        # our points is return 1 of 1).
         if not len(samples):
             return
-        self._las.point_writer.write_points(rec)
+        records = self.records(samples)
+        self._las.point_writer.write_points(_laspy().PackedPointRecord(records, self.header_.point_format))
         self.written += len(samples)
-        for c, name in enumerate("XYZ"):
-            col = rec.array[name]
-            self._lo[c] = min(self._lo[c], int(col.min()))
-            self._hi[c] = max(self._hi[c], int(col.max()))
+
+    def _buffers(self, n):
+        """The record array (n,) and a float64 scratch column (n,), grown when a chunk is larger."""
+        if self._records is None or len(self._records) < n:
+            self._records = np.zeros(n, self.header_.point_format.dtype())
+            self._records["bit_fields"] = RETURN_1_OF_1
+            self._scratch = np.empty(n)
+        return self._records[:n], self._scratch[:n]
 
     def records(self, samples):
-        """The chunk as a laspy PackedPointRecord."""
-        laspy = _laspy()
+        """The chunk's point records (n,), in laspy's dtype of the point format; updates the
+        extents. The array is reused by the next chunk."""
         n = len(samples)
-        rec = laspy.PackedPointRecord.zeros(n, self.header_.point_format)
-        a = rec.array
-        p = samples.points
+        rec, scratch = self._buffers(n)
         for c, name in enumerate("XYZ"):
-            a[name] = np.rint((p[:, c] - self.offset[c]) / self.step)
-        a["bit_fields"] = RETURN_1_OF_1
+            q = quantise(samples.points[:, c], self.offset[c], self.step, scratch)
+            self._lo[c] = min(self._lo[c], int(q.min()))
+            self._hi[c] = max(self._hi[c], int(q.max()))
+            rec[name] = q
         if "color" in samples.attributes:
+            # 257 c has both bytes equal to c: byte copies, no arithmetic
             color = samples.attributes["color"]
-            for c, name in enumerate(("red", "green", "blue")):
-                a[name] = color[:, c]
-                a[name] *= 257
+            octets = rec.view(np.uint8).reshape(n, -1)
+            start = rec.dtype.fields["red"][1]  # red, green, blue: adjacent uint16
+            for c in range(6):
+                octets[:, start + c] = color[:, c // 2]
         for key, j, name, dt in self.extras:
-            a[name] = samples.attributes[key].reshape(n, -1)[:, j]
+            rec[name] = samples.attributes[key].reshape(n, -1)[:, j]
         return rec
 
     def finish(self):
@@ -165,6 +173,13 @@ class LasWriter(_Writer):
             h.maxs = self._hi * self.step + self.offset
         self._las.close()
         clear_creation_date(self.stream)
+
+
+def quantise(values, offset, step, out):
+    """rint((values - offset) / step) (n,) into the float64 array ``out`` (n,), returned."""
+    np.subtract(values, offset, out=out)
+    np.divide(out, step, out=out)
+    return np.rint(out, out=out)
 
 
 CREATION_DATE_AT = 90  # header bytes 90-93: creation day of year and year (uint16 each)

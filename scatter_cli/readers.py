@@ -1,11 +1,11 @@
-"""Fast readers for plain jobs: OBJ, OFF, ASCII PLY, ASCII and binary STL without trimesh.
+"""Fast readers for plain jobs: OBJ, OFF, PLY, STL and GLB without trimesh.
 
 Each reader gives the triangles trimesh gives with ``process=False`` (same corners, same
 order, same split into geometries), or None when the file holds anything it is not sure
 of; the caller then loads the file with trimesh, which also words the error for a
 malformed file. The text formats are parsed by the compiled ``_creaders`` (without it,
-or with SCATTER_NUMPY=1, they go to trimesh); binary STL is read with NumPy. The rules
-and the measurements behind the choice are in docs/loading.md.
+or with SCATTER_NUMPY=1, they go to trimesh); binary STL and GLB (gltfread.py) are
+read with NumPy. The rules and the measurements behind the choice are in docs/loading.md.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import os
 
 import numpy as np
 
-from .native import kernel
+from .native import kernel, worker_count
 from .plyread import _TYPES, _contents
 
 _STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
@@ -23,7 +23,9 @@ _MAX_HEADER = 1 << 16
 
 def read_mesh(path, file_type):
     """A list of (vertices (V, 3) float64, faces (F, 3) int64), one per geometry in
-    trimesh's order, or None (hand the file to trimesh)."""
+    trimesh's order; for a GLB, a scene: (geometries [(name, vertices, faces)], instances
+    [(name, geometry index, (4, 4) matrix or None)]) (gltfread.py); or None (hand the
+    file to trimesh)."""
     reader = _READERS.get(file_type)
     if reader is None:
         return None
@@ -70,7 +72,7 @@ def _stl(data):
             vertices.reshape(count, 3, 3)[...] = corners  # one pass from the strided records
             return [(vertices, np.arange(3 * count, dtype=np.int64).reshape(-1, 3))]
     c = kernel("_creaders")
-    vertices = c and c.read_stl_ascii(data)
+    vertices = c and c.read_stl_ascii(data, worker_count())  # large files: parts on several threads
     if vertices is None or vertices is False:
         return None
     return [(vertices, np.arange(len(vertices), dtype=np.int64).reshape(-1, 3))]
@@ -133,4 +135,10 @@ def _ascii_layout(head):
     return (end + len(b"end_header\n"), n_vertex, n_face, len(vprops), *columns, *(int(t == "f4") for t in kinds))
 
 
-_READERS = {"obj": _obj, "off": _off, "stl": _stl, "ply": _ply}
+def _glb(data):
+    from .gltfread import read_glb
+
+    return read_glb(data)
+
+
+_READERS = {"obj": _obj, "off": _off, "stl": _stl, "ply": _ply, "glb": _glb}

@@ -133,6 +133,7 @@ def thinned(candidates: Source, count: int | None = None, radius: float | None =
     ``timings`` of drawing and of thinning.
     """
     from . import thinning
+    from .spacing import relative_radius
 
     t = time.perf_counter()
     blocks = in_blocks(candidates.draw, candidates.count)
@@ -145,7 +146,7 @@ def thinned(candidates: Source, count: int | None = None, radius: float | None =
     source = ThinnedSource(_take(blocks, index), candidates)
     info = {"count": source.count, "candidates": candidates.count, "radius": radius}
     if d_min is not None:
-        info.update(d_min=d_min, rho=thinning.relative_radius(d_min, candidates.area, source.count))
+        info.update(d_min=d_min, rho=relative_radius(d_min, candidates.area, source.count))
     info["timings"] = {"candidates": t1 - t, "thinning": time.perf_counter() - t1}
     return source, info
 

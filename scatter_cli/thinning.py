@@ -14,7 +14,7 @@ import numpy as np
 from .exact_count import search_radius, trim_to_count
 from .greedy import PairGraph
 from .pairs import as_points, cross_pairs
-from .spacing import hex_spacing, nearest_distances, relative_radius, spacing_stats  # noqa: F401 (api.py reads the last two here)
+from .spacing import hex_spacing, nearest_distances
 
 
 def thin_by_radius(points, radius):

@@ -64,6 +64,20 @@ def _bonferroni(pvalues):
     return min(1.0, len(p) * min(p)) if p else 1.0
 
 
+def _per_slab_direction(tri, areas, directions, k, test):
+    """Lists (directions, statistics, dofs, p-values) of ``test(d, edges, prob) -> (stat,
+    dof, p)`` over the k equal-area slabs along each direction (default: 3 axes + 4
+    diagonals); p is None where pooling left one bin."""
+    dirs, stats, dofs, ps = [], [], [], []
+    for d, edges, prob in exact.slabs(tri, areas, default_directions() if directions is None else directions, k):
+        stat, dof, p = test(d, edges, prob)
+        dirs.append(d.tolist())
+        stats.append(stat)
+        dofs.append(dof)
+        ps.append(p if dof > 0 else None)
+    return dirs, stats, dofs, ps
+
+
 def region_test(points, tri, areas, k=32, directions=None, min_expected=5.0):
     """Test that points (n, 3) are uniform on the surface.
 
@@ -79,13 +93,8 @@ def region_test(points, tri, areas, k=32, directions=None, min_expected=5.0):
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
     n = len(pts)
-    stats, dofs, ps, dirs = [], [], [], []
-    for d, edges, prob in exact.slabs(tri, areas, default_directions() if directions is None else directions, k):
-        stat, dof, p = chi2_gof(exact.slab_counts(pts, d, edges), prob * n, min_expected)
-        dirs.append(d.tolist())
-        stats.append(stat)
-        dofs.append(dof)
-        ps.append(p if dof > 0 else None)
+    dirs, stats, dofs, ps = _per_slab_direction(
+        tri, areas, directions, k, lambda d, edges, prob: chi2_gof(exact.slab_counts(pts, d, edges), prob * n, min_expected))
     z_mean, z_cov = moment_z_scores(pts, tri, areas)
     p_z = normal_sf(np.concatenate((z_mean, z_cov))).tolist()
     return {
@@ -114,13 +123,9 @@ def two_sample_test(points_a, points_b, tri, areas, k=32, directions=None, min_e
     """
     a = np.asarray(points_a, dtype=float).reshape(-1, 3)
     b = np.asarray(points_b, dtype=float).reshape(-1, 3)
-    stats, dofs, ps, dirs = [], [], [], []
-    for d, edges, _ in exact.slabs(tri, areas, default_directions() if directions is None else directions, k):
-        stat, dof, p = chi2_two_sample(exact.slab_counts(a, d, edges), exact.slab_counts(b, d, edges), min_expected)
-        dirs.append(d.tolist())
-        stats.append(stat)
-        dofs.append(dof)
-        ps.append(p if dof > 0 else None)
+    dirs, stats, dofs, ps = _per_slab_direction(
+        tri, areas, directions, k,
+        lambda d, edges, _: chi2_two_sample(exact.slab_counts(a, d, edges), exact.slab_counts(b, d, edges), min_expected))
     ref, _, cov, tri_k, _ = exact.centred_moments(tri, areas)
     scale = float(np.ptp(tri_k.reshape(-1, 3), axis=0).max())
     se = np.maximum(np.sqrt(np.diag(cov) * (1.0 / len(a) + 1.0 / len(b))), 1e-12 * scale)

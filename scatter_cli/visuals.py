@@ -80,11 +80,14 @@ def uv_table(mesh):
 
 
 def vertex_normal_table(mesh):
-    """(V, 3) float64 vertex normals: the file's when it has them, else trimesh's
-    (face normals summed around each vertex, weighted by corner angle)."""
+    """(V, 3) float64 vertex normals: the file's when it has them, else
+    :func:`weighted_vertex_normals` (trimesh's own needs SciPy, which the command line
+    does not import, and without it takes time quadratic in the vertex count)."""
     if isinstance(mesh, VertexTables):
         return mesh.vertex_normals
-    return np.asarray(mesh.vertex_normals, dtype=np.float64)
+    if "vertex_normals" in mesh._cache:  # trimesh keeps the file's normals there
+        return np.asarray(mesh.vertex_normals, dtype=np.float64)
+    return weighted_vertex_normals(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64))
 
 
 def _placeholder(image):

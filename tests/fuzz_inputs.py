@@ -8,9 +8,12 @@ else would reach the user as an ``internal error`` (or, outside main(), a traceb
 
 from __future__ import annotations
 
+import json
 import struct
 
 import numpy as np
+
+from .gltfwrite import GLB
 
 TRI_V = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)]
 TRI_F = [(0, 1, 2), (0, 2, 3), (0, 3, 1), (1, 3, 2)]
@@ -74,6 +77,20 @@ def _ply_ascii_quads():
     return _ply_ascii().replace(b"element face 4", b"element face 3").replace(b"3 0 1 2\n3 0 2 3\n", b"4 0 1 2 3\n")
 
 
+def _glb():
+    """Nested nodes (matrix and TRS), a mesh placed twice, a mesh of two primitives,
+    interleaved positions and u16 indices: the fast GLB reader's harder rules."""
+    g = GLB()
+    quads = [(0, 1, 2), (2, 1, 4)]
+    g.doc["meshes"] = [{"name": "tet", "primitives": [g.primitive(TRI_V, TRI_F, 5123, 4)]},
+                       {"primitives": [g.primitive(TRI_V, TRI_F[:2]), g.primitive(TRI_V + [(1.0, 1.0, 0.5)], quads)]}]
+    g.doc["nodes"] = [{"name": "root", "translation": [1, 0, 0], "rotation": [0, 0, 0.38, 0.92], "children": [1, 2]},
+                      {"mesh": 0, "scale": [1, 2, 1]},
+                      {"mesh": 1, "matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 2, 1]}, {"mesh": 0}]
+    g.doc["scenes"] = [{"nodes": [0, 3]}]
+    return g.bytes()
+
+
 SEEDS = {
     "ply-ascii": ("ply", _ply_ascii()),
     "ply-ascii-quads": ("ply", _ply_ascii_quads()),
@@ -84,6 +101,7 @@ SEEDS = {
     "stl-ascii": ("stl", _stl_ascii()),
     "stl-binary": ("stl", _stl_binary()),
     "off": ("off", _off()),
+    "glb": ("glb", _glb()),
 }
 
 # Tokens that break parsers: special floats, huge and negative counts and indices, odd bytes.
@@ -132,7 +150,41 @@ def mutate(data: bytes, ops) -> bytes:
             b[p:p] = (b"\\\n", b"\\\r\n", b"\\")[arg % 3] * (1 + arg % 5000)
         elif kind == 11:  # a number of 10^5 digits
             b[p:p] = (b"1" * 100000, b"0." + b"0" * 100000 + b"1", b"9" * 50000 + b"e-50000")[arg % 3]
+        elif kind == 12:  # a GLB's JSON: one field set to an odd value (an offset, length, stride, count, ...)
+            b = bytearray(_glb_field(bytes(b), pos, arg))
     return bytes(b)
+
+
+ODD_VALUES = [-1, 0, 1, 2, 3, 4, 5, 7, 12, 255, 65535, 2**31, 2**32 + 4, 2**63, 1e300, 0.5, float("nan"), None, "x",
+              [], {}, True, "world", [0, 0], {"uri": "x.bin"}]
+
+
+def _glb_field(data, pos, arg):
+    """A GLB with one leaf of its JSON replaced by an odd value and the chunk lengths made
+    to fit the new JSON; bytes that are not a GLB with a parseable JSON are returned as they are."""
+    if len(data) < 20 or data[:4] != b"glTF":
+        return data
+    size = struct.unpack_from("<I", data, 12)[0]
+    try:
+        doc = json.loads(data[20 : 20 + size])
+    except ValueError:
+        return data
+    leaves = []
+
+    def walk(node):
+        for key in (range(len(node)) if isinstance(node, list) else node.keys() if isinstance(node, dict) else ()):
+            leaves.append((node, key))
+            walk(node[key])
+
+    walk(doc)
+    if not leaves:
+        return data
+    node, key = leaves[pos % len(leaves)]
+    node[key] = ODD_VALUES[arg % len(ODD_VALUES)]
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    rest = data[20 + size :]
+    return struct.pack("<4sII", b"glTF", 2, 20 + len(text) + len(rest)) + struct.pack("<I4s", len(text), b"JSON") + text + rest
 
 
 def random_ops(rng: np.random.Generator, max_ops=4):
@@ -141,7 +193,7 @@ def random_ops(rng: np.random.Generator, max_ops=4):
             for _ in range(k)]
 
 
-MUTATIONS = 12  # kinds of op in mutate()
+MUTATIONS = 13  # kinds of op in mutate()
 
 
 def differential(data: bytes, suffix: str, workdir) -> str:

@@ -15,6 +15,7 @@ from scatter_cli.errors import ScatterError, ScatterUsageError
 from scatter_cli.sampling import RawChunk
 from scatter_cli.surface import load_surface
 from scatter_cli.texture import CLAMP_TO_EDGE, MIRRORED_REPEAT, REPEAT, bilinear, wrap_index
+from scatter_cli.visuals import vertex_normal_table
 from scatter_cli.weighting import barycentric
 
 from .conftest import SAMPLES, run_scatter, scaled_scene
@@ -98,6 +99,20 @@ def test_smooth_normals_use_the_file_normals():
     want = g.vertex_normals[g.faces].mean(axis=1)
     want /= np.linalg.norm(want, axis=1, keepdims=True)
     np.testing.assert_allclose(got, want, atol=1e-9)
+
+
+def test_computed_vertex_normals_are_trimeshs(monkeypatch):
+    # Without file normals, smooth normals come from our own array code: trimesh's needs
+    # SciPy, which the command line hides, and its fallback is quadratic in the vertex count.
+    mesh = trimesh.load(SAMPLES / "skull.ply", process=False)
+    want = np.array(mesh.vertex_normals)  # trimesh's, through SciPy here
+    fresh = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
+    monkeypatch.setattr(trimesh.geometry, "weighted_vertex_normals",
+                        lambda *a, **k: pytest.fail("trimesh's vertex normals were computed"))
+    np.testing.assert_allclose(vertex_normal_table(fresh), want, atol=1e-12)
+    # the file's own normals win over computed ones
+    flipped = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_normals=-want, process=False)
+    np.testing.assert_allclose(vertex_normal_table(flipped), -want, atol=1e-12)
 
 
 def test_normal_and_smooth_normal_together_is_a_usage_error():

@@ -35,8 +35,12 @@ def _load(name):
 
 
 def run(mesh, seed=0, **kw):
-    """(source, RawChunk of all its points) for a trimesh mesh or a path."""
+    """(source, RawChunk of all its points) for a trimesh mesh or a path (with ``radius``:
+    the candidates' source and the dart-thrown set)."""
     src = StableSource(load_surface(mesh), seed, want_bary=True, **kw)
+    if "radius" in kw:
+        kept = stable.dart_thrown(src, kw["radius"])
+        return src, kept.draw(0, kept.count)
     return src, src.draw(0, src.count)
 
 
@@ -320,8 +324,7 @@ def test_radius_set_is_spaced_maximal_and_local():
     # maximal: every candidate lies within r of a kept point
     from scipy.spatial import cKDTree
 
-    _, face, ctr = src._candidates(src.horizon)
-    cand = src._place(face, ctr).points
+    cand = src.draw(0, src.count).points
     assert cKDTree(before.points).query(cand)[0].max() < r
 
     v2, f2 = edit_move(v, f)
