@@ -475,7 +475,7 @@ def kernel_arrivals(table, tau, bits):
     raise AssertionError("arrivals: the counts changed between two passes")
 
 
-FINE_BITS = 12  # a coarse bucket of the kernel's arrival sort holds 2^12 to 2^14 time keys, 256 or more of them
+FINE_BITS = 12  # a coarse bucket of the kernel's arrival sort holds 2^12 to 2^15 time keys
 
 
 def kernel_order(t, ids, starts, counts, key, bits, tau):
@@ -490,7 +490,7 @@ def kernel_order(t, ids, starts, counts, key, bits, tau):
     """
     m = int(counts.sum())
     key_bits = max(1, m.bit_length())  # about 1 to 2 arrivals a key
-    fine_bits = min(key_bits, max(FINE_BITS, key_bits - 8), FINE_BITS + 2)
+    fine_bits = min(key_bits, max(FINE_BITS, key_bits - 8), FINE_BITS + 3)
     coarse = 1 << (key_bits - fine_bits)
     total = coarse << fine_bits
     scale = total / float(tau)
