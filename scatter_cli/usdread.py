@@ -26,6 +26,7 @@ below the prototype's parent (``/World/trees[17]/oak/trunk``).
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import sys
 import tempfile
@@ -304,23 +305,44 @@ class _StageReader:
     def _read_mesh(self, prim, path):
         mesh = self.UsdGeom.Mesh(prim)
         t = self.time
-        # unauthored arrays are empty (a mesh without faces), arrays of the wrong shape an error
-        points = _array(mesh.GetPointsAttr().Get(t) or [], np.float64, 3)
-        counts = _array(mesh.GetFaceVertexCountsAttr().Get(t) or [], np.int64)
-        corners = _array(mesh.GetFaceVertexIndicesAttr().Get(t) or [], np.int64)
-        holes = _array(mesh.GetHoleIndicesAttr().Get(t), np.int64)
-        if points is None or counts is None or corners is None:
+        left = mesh.GetOrientationAttr().Get(t) == self.UsdGeom.Tokens.leftHanded
+        counts, corners, holes = self._polygons(mesh, path)
+        if self.plain:  # the faces, then the polygon arrays let go before the points come
+            faces, top = fan_faces(counts, corners, holes, left), _top(corners)
+            del counts, corners, holes
+            return Geometry(path, self._points(mesh, path, top), faces)
+        points = self._points(mesh, path, _top(corners))
+        topo = _Topology(counts, corners, holes, left, len(points))
+        return _with_primvars(path, mesh, points, topo, self.time)
+
+    def _polygons(self, mesh, path):
+        """(faceVertexCounts, faceVertexIndices, holeIndices or None) as integer arrays,
+        checked to add up; unauthored: empty (a mesh without faces)."""
+        t = self.time
+        # The largest array first, while nothing else is held: usd-core decodes it with a
+        # transient buffer of its own. They stay the Vt arrays' int32 (no copy).
+        corners = _array(mesh.GetFaceVertexIndicesAttr().Get(t) or [], np.int32)
+        counts = _array(mesh.GetFaceVertexCountsAttr().Get(t) or [], np.int32)
+        if counts is None or corners is None:
             raise ScatterError(f"{self.source}: mesh {path}: malformed points or faces")
         if (len(counts) and counts.min() < 0) or counts.sum() != len(corners):
             raise ScatterError(f"{self.source}: mesh {path}: faceVertexCounts do not add up to faceVertexIndices")
-        if len(corners) and (corners.min() < 0 or corners.max() >= len(points)):
+        if len(corners) and corners.min() < 0:
             raise ScatterError(f"{self.source}: mesh {path}: face vertex index out of range")
-        left = mesh.GetOrientationAttr().Get(t) == self.UsdGeom.Tokens.leftHanded
-        tri, polygon = triangulate(counts, holes, left)
-        if self.plain:
-            return Geometry(path, points, corners[tri])
-        topo = _Topology(counts, corners, tri, polygon, len(points))
-        return _with_primvars(path, mesh, points, topo, self.time)
+        return counts, corners, _array(mesh.GetHoleIndicesAttr().Get(t), np.int32)
+
+    def _points(self, mesh, path, top):
+        """(V, 3) float64 points; ``top``: the largest vertex index the faces use (-1: none)."""
+        points = _array(mesh.GetPointsAttr().Get(self.time) or [], np.float64, 3)
+        if points is None:
+            raise ScatterError(f"{self.source}: mesh {path}: malformed points or faces")
+        if top >= len(points):
+            raise ScatterError(f"{self.source}: mesh {path}: face vertex index out of range")
+        return points
+
+
+def _top(corners):
+    return int(corners.max()) if len(corners) else -1
 
 
 def stage_units(stage):
@@ -332,10 +354,13 @@ def stage_units(stage):
 
 
 def _array(value, dtype, width=None):
-    """A Vt array -> numpy (n,) or (n, width); None when unset or of the wrong shape."""
+    """A Vt array -> numpy (n,) or (n, width) of ``dtype`` (integers: any integer type, as
+    stored, no copy); None when unset or of the wrong shape."""
     if value is None:
         return None
-    a = np.asarray(value, dtype=dtype)
+    a = np.asarray(value)
+    if not (np.issubdtype(dtype, np.integer) and np.issubdtype(a.dtype, np.integer)):
+        a = a.astype(dtype, copy=False)
     if width is None:
         return a.reshape(-1) if a.ndim <= 1 else None
     if a.size == 0:
@@ -343,42 +368,96 @@ def _array(value, dtype, width=None):
     return a if a.ndim == 2 and a.shape[1] == width else None
 
 
-def triangulate(counts, holes=None, left_handed=False):
-    """Fan triangles of polygons, in polygon order.
+def fan_faces(counts, corners, holes=None, left_handed=False, block=1 << 16):
+    """(F, 3) int64 vertex indices of the fan triangles of polygons, in polygon order:
+    polygon k, at positions s .. s+c-1 of ``corners``, gives (s, s+j+1, s+j+2) for j = 0
+    .. c-3 (none for fewer than 3 corners, nor for a hole); ``left_handed`` swaps the last
+    two corners of each.
 
-    counts (P,) int64 corners per polygon; holes (H,) int64 polygons to drop or None.
-    Returns (tri (F, 3) int64 positions in faceVertexIndices, polygon (F,) int64).
+    counts (P,), corners (C,) and holes (H,) integer arrays (faceVertexCounts,
+    faceVertexIndices, holeIndices). Polygons of one size are a reshape; mixed sizes go
+    ``block`` polygons at a time, so no (F,) table is built beside the result.
     """
-    counts = np.asarray(counts, dtype=np.int64)
-    start = np.cumsum(counts) - counts
-    made = np.maximum(counts - 2, 0)
-    if holes is not None and len(holes):
-        holes = holes[(holes >= 0) & (holes < len(counts))]
-        made[holes] = 0
-    polygon = np.repeat(np.arange(len(counts)), made)
-    first = np.cumsum(made) - made
-    j = np.arange(len(polygon)) - first[polygon]
-    s = start[polygon]
-    tri = np.stack([s, s + j + 1, s + j + 2], axis=1)
+    hole = _hole_mask(counts, holes)
+    if len(counts) and counts.min() == counts.max() >= 3 and not hole.any():
+        c = int(counts[0])
+        grid = corners.reshape(len(counts), c)
+        faces = np.empty((len(counts), c - 2, 3), dtype=np.int64)
+        faces[:, :, 0] = grid[:, :1]
+        faces[:, :, 1] = grid[:, 1:-1]
+        faces[:, :, 2] = grid[:, 2:]
+        faces = faces.reshape(-1, 3)
+    else:
+        faces = np.empty((int(_made(counts, hole).sum()), 3), dtype=np.int64)
+        at = row = 0
+        for p in range(0, len(counts), block):
+            n = np.asarray(counts[p : p + block], dtype=np.int64)
+            made = _made(n, hole[p : p + block])
+            polygon = np.repeat(np.arange(len(n)), made)
+            s = (at + np.cumsum(n) - n)[polygon]
+            rows = faces[row : row + len(polygon)]
+            rows[:, 0] = corners[s]
+            s += np.arange(len(polygon)) - (np.cumsum(made) - made)[polygon]  # s + j
+            rows[:, 1] = corners[s + 1]
+            rows[:, 2] = corners[s + 2]
+            at += int(n.sum())
+            row += len(polygon)
     if left_handed:
-        tri[:, [1, 2]] = tri[:, [2, 1]]
-    return tri, polygon
+        second = faces[:, 1].copy()
+        faces[:, 1] = faces[:, 2]
+        faces[:, 2] = second
+    return faces
+
+
+def _hole_mask(counts, holes):
+    """(P,) bool: the polygons ``holes`` names (indices out of range ignored)."""
+    hole = np.zeros(len(counts), dtype=bool)
+    if holes is not None and len(holes):
+        hole[holes[(holes >= 0) & (holes < len(counts))]] = True
+    return hole
+
+
+def _made(counts, hole):
+    """(P,) int64 triangles each polygon's fan makes: corners - 2, none for a hole."""
+    made = np.maximum(np.asarray(counts, dtype=np.int64) - 2, 0)
+    made[hole] = 0
+    return made
 
 
 class _Topology:
-    """A mesh's polygons and triangles, for expanding primvars to the rows a table needs."""
+    """A mesh's polygons and triangles, for expanding primvars to the rows a table needs;
+    the per-triangle tables are made only when a primvar needs them."""
 
-    def __init__(self, counts, corners, tri, polygon, n_points):
-        self.counts, self.corners, self.tri, self.polygon, self.n_points = counts, corners, tri, polygon, n_points
-        self.polygon_of_corner = np.repeat(np.arange(len(counts)), counts)
+    def __init__(self, counts, corners, holes, left_handed, n_points):
+        self.counts, self.corners, self.n_points = counts, corners, n_points
+        self.hole, self.left_handed = _hole_mask(counts, holes), left_handed
+        self.triangles = int(_made(counts, self.hole).sum())
         self.sizes = {"constant": 1, "uniform": len(counts), "vertex": n_points, "varying": n_points,
                       "faceVarying": len(corners)}
+
+    def faces(self):
+        """(F, 3) int64 vertex indices of the triangles."""
+        return fan_faces(self.counts, self.corners, np.flatnonzero(self.hole), self.left_handed)
+
+    @functools.cached_property
+    def tri(self):
+        """(F, 3) int64 positions in faceVertexIndices of the triangles' corners."""
+        return fan_faces(self.counts, np.arange(len(self.corners)), np.flatnonzero(self.hole), self.left_handed)
+
+    @functools.cached_property
+    def polygon(self):
+        """(F,) int64 the polygon of each triangle."""
+        return np.repeat(np.arange(len(self.counts)), _made(self.counts, self.hole))
+
+    @functools.cached_property
+    def polygon_of_corner(self):
+        return np.repeat(np.arange(len(self.counts)), self.counts)
 
     def expand(self, values, interpolation, rows):
         """Primvar values (n, C) -> one row per ``rows`` ("point", "corner" or "triangle"),
         or None when that interpolation cannot give such rows."""
         if interpolation == "constant":
-            n = {"point": self.n_points, "corner": len(self.corners), "triangle": len(self.tri)}[rows]
+            n = {"point": self.n_points, "corner": len(self.corners), "triangle": self.triangles}[rows]
             return np.broadcast_to(values[:1], (n, values.shape[1]))
         if interpolation == "uniform":
             return {"corner": lambda: values[self.polygon_of_corner], "triangle": lambda: values[self.polygon]}.get(
@@ -438,12 +517,12 @@ def _with_primvars(path, mesh, points, topo, time):
     if rows == "corner":
         vertices, faces, point_of = points[topo.corners], topo.tri, topo.corners
     else:
-        vertices, faces, point_of = points, topo.corners[topo.tri], None
+        vertices, faces, point_of = points, topo.faces(), None
     tables = VertexTables(vertices, faces, uv=table(uv, 2), normals=table(normals, 3), point_of=point_of)
     if color:
         kind = {0: "constant_color", 1: "face_colors"}.get(color_rank, "vertex_colors")
         at = {0: "triangle", 1: "triangle"}.get(color_rank, rows)
-        rgba = np.empty((len(topo.tri) if at == "triangle" else len(vertices), 4))
+        rgba = np.empty((topo.triangles if at == "triangle" else len(vertices), 4))
         rgba[:, :3] = topo.expand(rgb[0], rgb[1], at)[:, :3] * 255.0
         rgba[:, 3] = 255.0 if alpha is None else topo.expand(alpha[0], alpha[1], at)[:, 0] * 255.0
         setattr(tables, kind, rgba[0] if kind == "constant_color" else rgba)

@@ -466,3 +466,21 @@ def test_instancer_plan_bounds_and_normals_as_one_instance_at_a_time(tmp_path):
         expected[rows] = n / np.sqrt(np.einsum("ij,ij->i", n, n))[:, None]
     np.testing.assert_array_equal(out.normal, expected)
     assert (out.object == s.instances.index(next(i for i in s.instances if i.name == "/W/trees[3]/p1"))).any()
+
+
+@pytest.mark.parametrize("block", [1, 3, 1 << 16])
+@pytest.mark.parametrize("sizes", [(3,), (4,), (5,), (0, 1, 2, 3, 4, 5, 7)])
+def test_fan_faces_are_the_documented_fans(sizes, block):
+    """Uniform polygons (a reshape) and mixed ones (in blocks of polygons) give the fans
+    of the documented order, holes dropped, left-handed corners swapped."""
+    from scatter_cli.usdread import fan_faces
+
+    rng = np.random.default_rng(len(sizes) + block)
+    counts = rng.choice(sizes, 50).astype(np.int32)
+    corners = rng.integers(0, 1000, counts.sum()).astype(np.int32)
+    holes = np.array([4, 17, 17, 60, -1], dtype=np.int32)  # a repeat and out-of-range ones ignored
+    for h in (None, holes):
+        dropped = () if h is None else (4, 17)
+        expected = corners[fan(counts, dropped)]
+        np.testing.assert_array_equal(fan_faces(counts, corners, h, block=block), expected)
+        np.testing.assert_array_equal(fan_faces(counts, corners, h, True, block=block), expected[:, [0, 2, 1]])

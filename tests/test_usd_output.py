@@ -98,9 +98,12 @@ def test_a_count_beyond_memory_is_refused_and_leaves_no_file(tmp_path, monkeypat
     import scatter_cli.usdwrite as usdwrite
 
     monkeypatch.setattr(usdwrite, "available_memory", lambda: 10_000)
-    with pytest.raises(ScatterError, match=r"USD output is built in memory .* 1,000 points"):
+    with pytest.raises(ScatterError, match=r"t\.usdc: USD output is built in memory .* 1,000 points"):
         write(tmp_path / "t.usdc", "normal", n=1000)
     assert not list(tmp_path.iterdir())
+    monkeypatch.setattr(usdwrite, "available_memory", lambda: 1000 * usdwrite.bytes_per_point(
+        api.prepare(SAMPLES / "boxtextured.glb", 1000, attributes="normal").layout))
+    write(tmp_path / "t.usdc", "normal", n=1000)  # just enough: written
 
 
 def test_without_usd_core_one_line_saying_what_to_install(tmp_path, monkeypatch):
