@@ -85,6 +85,7 @@ def wait_for_reader(fifo, timeout=30, over=None):
             if time.monotonic() > deadline:
                 raise AssertionError(f"nobody opened {fifo} in {timeout} s") from None
             time.sleep(0.02)
+    deadline = time.monotonic() + 30  # it has the FIFO open: only its pid is left to find
     while time.monotonic() < deadline:
         pid = fifo_reader(fifo)
         if pid is not None:
