@@ -271,6 +271,9 @@ class FaceTable:
         api.sampled_bounds reads (so a stable run builds no SamplePlan)."""
         from .sampling import Part
 
+        if self.identity:  # one instance, every face
+            inst = self.surface.instances[0]
+            return [Part(0, None, None, inst.matrix, self.surface.geometries[inst.geometry])]
         out = []
         bounds = np.searchsorted(self.part, np.arange(len(self.surface.instances) + 1))
         for k, inst in enumerate(self.surface.instances):
