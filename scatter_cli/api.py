@@ -17,7 +17,7 @@ from .errors import ScatterUsageError
 from .methods import SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
 from .sampling import SamplePlan, chunk_ranges, run_chunks
-from .sources import Source, ThinnedSource, make_source, thinned
+from .sources import Source, StratifiedSource, ThinnedSource, make_source, thinned
 from .surface import Surface, load_surface, transformed_columns
 
 METHODS = ("random", "stratified", "sobol")
@@ -136,9 +136,11 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     check_options(count, density, seed, method, precision, chunk_size, radius, poisson, weight, oversampling,
                   exterior, stable)
     shard = check_shard(shard, poisson, radius)
-    plain = not weight and set(names) <= PLAIN_ATTRIBUTES  # no colours, UVs or normals to read
+    # no colours, UVs or normals to read: the fast readers may load it (smooth normals too,
+    # from files whose normals trimesh would compute from the faces)
+    plain = not weight and set(names) <= PLAIN_ATTRIBUTES | {"smooth-normal"}
     surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects,
-                                                                  plain=plain)
+                                                                  plain=plain, smooth="smooth-normal" in names)
     t1 = time.perf_counter()
     for message in surface._cache.pop("warnings", ()) if warn else ():
         warn(message)
@@ -178,6 +180,8 @@ def _filtered_source(source_of, surface, area, info, count, density, poisson, ra
         if density is not None:  # the exterior points among the plain run's
             source = _exterior_source(base, occluder, seed, area, info, candidates=count)
             count = source.count
+        elif isinstance(base, StratifiedSource):  # its strata are fixed by the count: no stream to filter
+            return _exterior_source(source_of, occluder, seed, area, info, subset=count)
     n = candidate_count(area, count, radius, surface.source, oversampling) if thin else count
     if not exterior:
         source = source_of(n)
@@ -199,13 +203,17 @@ def _occluder(surface, info):
     return occluder
 
 
-def _exterior_source(base, occluder, seed, area, info, count=None, candidates=None):
+def _exterior_source(base, occluder, seed, area, info, count=None, candidates=None, subset=None):
     """The exterior points of ``base``'s stream: exactly ``count``, or those among its
-    first ``candidates``."""
-    from .exterior import ExteriorSource
+    first ``candidates``; or, ``base`` being ``source_of``, ``subset`` of the exterior
+    points of one of its bounded runs (:class:`~scatter_cli.exterior.ExteriorSubset`)."""
+    from .exterior import ExteriorSource, ExteriorSubset
 
     t = time.perf_counter()
-    source = ExteriorSource(base, occluder, seed, area, count=count, candidates=candidates)
+    if subset is not None:
+        source = ExteriorSubset(base, occluder, seed, area, subset)
+    else:
+        source = ExteriorSource(base, occluder, seed, area, count=count, candidates=candidates)
     info.update(count=source.count, exterior=source.stats)
     info["timings"]["exterior"] = time.perf_counter() - t
     info["timings"]["enclosure"] = source.enclosure_seconds
@@ -342,9 +350,6 @@ def check_options(count=None, density=None, seed=0, method="random", precision="
     if stable and poisson:
         raise ScatterUsageError("--stable does not combine with --poisson (--radius gives a Poisson-disk set that "
                                 "stays put)")
-    if exterior and method == "stratified":
-        raise ScatterUsageError("--exterior does not combine with --method stratified (its strata are fixed by N); "
-                                "use random or sobol")
     if count is not None:
         _check_sobol_count(method, count)
         if poisson:

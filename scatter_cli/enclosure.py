@@ -45,7 +45,7 @@ def components(count: int, a, b) -> np.ndarray:
         if not split.any():
             return label
         la, lb = la[split], lb[split]
-        label[np.maximum(la, lb)] = np.minimum(la, lb)  # roots hook to smaller roots: no cycle
+        np.minimum.at(label, np.maximum(la, lb), np.minimum(la, lb))  # roots hook to their smallest neighbour
         a, b = a[split], b[split]
         while True:
             up = label[label]
@@ -84,10 +84,21 @@ def closed_parts(vertices, faces):
 
     vertices (V, 3) float64, faces (F, 3) int64 -> (part (F,) int64 ids 0..P-1,
     closed (P,) bool: each of its edges used an even number of times, every vertex
-    finite). Vertices of equal coordinates are one."""
+    finite). Vertices of equal coordinates are one (welded, unless the faces' own
+    indices already close every part)."""
     if not len(faces):
         return np.zeros(0, np.int64), np.zeros(0, bool)
-    ids = weld(vertices)
+    shared = len(vertices) < 2 * len(faces)  # an indexed mesh, not a triangle soup
+    part, closed = _parts(np.arange(len(vertices)) if shared else weld(vertices), faces)
+    if shared and not closed.all():
+        part, closed = _parts(weld(vertices), faces)
+    finite = np.isfinite(vertices).all(axis=1)[faces].all(axis=1)
+    closed[part[~finite]] = False
+    return part, closed
+
+
+def _parts(ids, faces):
+    """closed_parts for vertex ids ``ids`` (V,) int64 (equal ids: one vertex)."""
     w = ids[faces]
     size = int(ids.max()) + 1
     key = np.concatenate([np.minimum(w[:, i], w[:, j]) * size + np.maximum(w[:, i], w[:, j])
@@ -100,10 +111,7 @@ def closed_parts(vertices, faces):
     closed = np.ones(len(roots), bool)
     odd = np.diff(np.r_[starts, len(key)]) % 2 == 1
     closed[vertex_part[edges[odd] // size]] = False
-    part = vertex_part[w[:, 0]]
-    finite = np.isfinite(vertices).all(axis=1)[faces].all(axis=1)
-    closed[part[~finite]] = False
-    return part, closed
+    return vertex_part[w[:, 0]], closed
 
 
 class Grid:

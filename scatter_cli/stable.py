@@ -436,6 +436,9 @@ def all_arrivals(table, tau):
 def counter_bits(table, tau):
     """Bits of the counter (block << COUNT_BITS | j) in an arrival id ``used face << bits |
     counter``, for the arrivals before ``tau``: room for the most blocks any face has."""
+    expected = tau * table.total
+    if not expected < 2.0**40:  # about 2^40 arrivals: past any memory
+        raise ScatterError(f"{table.surface.source}: --stable would keep {expected:.3g} arrivals: too many")
     most = int(_blocks_before(tau, BLOCK_MEAN / np.max(table.rate)))
     bits = COUNT_BITS + (2 * most + 1).bit_length()
     if bits + max(1, (len(table) - 1).bit_length()) > 63:
@@ -475,7 +478,7 @@ def kernel_arrivals(table, tau, bits):
     raise AssertionError("arrivals: the counts changed between two passes")
 
 
-FINE_BITS = 12  # a coarse bucket of the kernel's arrival sort holds 2^12 to 2^14 time keys, 256 or more of them
+FINE_BITS = 12  # a coarse bucket of the kernel's arrival sort holds 2^12 to 2^15 time keys
 
 
 def kernel_order(t, ids, starts, counts, key, bits, tau):
@@ -490,7 +493,7 @@ def kernel_order(t, ids, starts, counts, key, bits, tau):
     """
     m = int(counts.sum())
     key_bits = max(1, m.bit_length())  # about 1 to 2 arrivals a key
-    fine_bits = min(key_bits, max(FINE_BITS, key_bits - 8), FINE_BITS + 2)
+    fine_bits = min(key_bits, max(FINE_BITS, key_bits - 8), FINE_BITS + 3)
     coarse = 1 << (key_bits - fine_bits)
     total = coarse << fine_bits
     scale = total / float(tau)
@@ -673,7 +676,8 @@ class StableSource:
                 t, ids, bits, dup = self._sorted_arrivals(tau)
                 if dup:
                     raise ScatterError(f"{self.surface.source}: --stable could not tell duplicate faces apart")
-                self._epochs.append((first, tau, ids[np.searchsorted(t, end, side="left"):], bits))
+                later = int(np.searchsorted(t, end, side="left"))
+                self._epochs.append((first, tau, ids[later:].copy() if later else ids, bits))
 
     @property
     def _found(self):

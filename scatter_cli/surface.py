@@ -83,18 +83,21 @@ class Surface:
         return v @ m[:3, :3].T + m[:3, 3]
 
 
-def load_surface(source, *, input_format: str | None = None, objects=None, plain=False) -> Surface:
+def load_surface(source, *, input_format: str | None = None, objects=None, plain=False, smooth=False) -> Surface:
     """Load ``source`` (path, ``'-'`` for standard input, trimesh.Trimesh or trimesh.Scene).
 
     ``plain``: only vertices and faces are wanted (no colours, UVs or normals from the
     file), so the fast readers (readers.py) may read it without importing trimesh.
+    ``smooth``: smooth vertex normals are wanted too; the fast readers then read only
+    files without normals or UVs of their own (the normals are computed from the faces,
+    as for trimesh's mesh of such a file).
     """
     if isinstance(source, (str, os.PathLike)) and _suffix(source, input_format) in USD_FORMATS:
         from .usdread import load_usd
 
         return load_usd(os.fspath(source), input_format, objects=objects, plain=plain)
     if plain and not objects and isinstance(source, (str, os.PathLike)) and not _is_stream(os.fspath(source)):
-        fast = _read_plain(os.fspath(source), input_format)
+        fast = _read_plain(os.fspath(source), input_format, smooth)
         if fast is not None:
             return _with_units(fast, source, input_format)
     if import_trimesh is not None and "trimesh" not in sys.modules:
@@ -133,7 +136,7 @@ def _suffix(source, input_format):
     return (input_format or os.path.splitext(os.fspath(source))[1].lstrip(".")).lower()
 
 
-def _read_plain(path, input_format):
+def _read_plain(path, input_format, smooth=False):
     """The Surface of a mesh file read by the fast readers, or None (use trimesh).
 
     One geometry makes a mesh, several a scene, as trimesh.load makes them; the names
@@ -142,9 +145,19 @@ def _read_plain(path, input_format):
     from .readers import read_mesh
 
     _check_readable(path)
-    parts = read_mesh(path, (input_format or os.path.splitext(path)[1].lstrip(".")).lower())
+    parts = read_mesh(path, (input_format or os.path.splitext(path)[1].lstrip(".")).lower(), smooth)
     if parts is None:
         return None
+    surface = _plain_surface(path, parts)
+    if smooth:
+        from .visuals import VertexTables
+
+        for g in surface.geometries:
+            g.mesh = VertexTables(g.vertices, g.faces)  # normals computed from the faces when asked
+    return surface
+
+
+def _plain_surface(path, parts):
     if isinstance(parts, tuple):  # a GLB scene
         geometries = [_checked_geometry(n, v, f, path) for n, v, f in parts[0]]
         surface = Surface(geometries, [Instance(*i) for i in parts[1]], path, is_scene=True)

@@ -244,13 +244,6 @@ def test_poisson_thins_exterior_candidates():
     assert d[np.triu_indices(len(d), 1)].min() >= 0.4 * (1 - 1e-6)
 
 
-def test_stratified_is_a_usage_error():
-    from scatter_cli.errors import ScatterUsageError
-
-    with pytest.raises(ScatterUsageError, match="stratified"):
-        scatter_cli.sample(es.box_in_box()[0], 10, exterior=True, method="stratified")
-
-
 def test_sobol_keeps_no_hidden_point():
     scene, _ = es.box_in_box()
     s = scatter_cli.sample(scene, 2000, exterior=True, method="sobol", attributes=["object"])

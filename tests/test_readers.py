@@ -205,12 +205,13 @@ def test_the_command_writes_the_same_bytes_either_way(tmp_path):
     assert outs[0] == outs[1]
 
 
+@pytest.mark.parametrize("attributes", ["face", "face,smooth-normal"])
 @pytest.mark.parametrize("suffix", ["obj", "off", "stl"])
-def test_a_plain_text_job_never_imports_trimesh(suffix, tmp_path):
+def test_a_plain_text_job_never_imports_trimesh(suffix, attributes, tmp_path):
     path = tmp_path / f"m.{suffix}"
     path.write_bytes((OBJ_CASES["materials"] if suffix == "obj" else OFF_CASES["triangles and quads"] if suffix == "off"
                       else STL_CASES["named"]).encode())
-    args = ["sample", str(path), "-n", "100", "-a", "face", "-o", str(tmp_path / "o.ply")]
+    args = ["sample", str(path), "-n", "100", "-a", attributes, "-o", str(tmp_path / "o.ply")]
     code = f"import sys\nfrom scatter_cli import cli\nassert cli.main({args!r}) == 0\nprint('trimesh' in sys.modules)"
     proc = run_user([sys.executable, "-c", code], text=True)
     assert proc.stdout.strip() == "False", proc.stderr
@@ -302,3 +303,39 @@ def test_the_memory_check_fails_a_loader_that_makes_objects_per_face(tmp_path_fa
 
 def run_user_text(cmd, env=None):
     return run_user(cmd, env=env, text=True, timeout=600)
+
+
+def assert_same_smooth_normals(path):
+    fast = scatter_cli.sample(path, count=2000, seed=4, attributes="face,smooth-normal")
+    slow = scatter_cli.sample(load_surface(path), count=2000, seed=4, attributes="face,smooth-normal")
+    assert fast.points.tobytes() == slow.points.tobytes()
+    assert fast.attributes["normal"].tobytes() == slow.attributes["normal"].tobytes()
+
+
+def carries_normals_or_uv(path):
+    data = path.read_bytes()
+    if path.suffix == ".obj":
+        return b"vt" in data or b"vn" in data
+    if path.suffix == ".ply":
+        head = data[: data.find(b"end_header")]
+        return any(w in head.split() for w in (b"nx", b"u", b"s", b"texture_u"))
+    return path.suffix == ".glb" and b'"NORMAL"' in data
+
+
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+@pytest.mark.parametrize("mesh", MESHES, ids=[m.name for m in MESHES])
+def test_smooth_normals_from_the_fast_path_are_trimesh_s(mesh, fmt, tmp_path):
+    """A job asking for smooth normals reads a file without normals or UVs of its own with
+    the fast readers (the normals are computed from the faces, as for trimesh's mesh), and
+    hands the others to trimesh."""
+    path = resave(mesh, fmt, tmp_path)
+    assert (read_mesh(path, path.suffix[1:], smooth=True) is None) == carries_normals_or_uv(path)
+    assert_same_smooth_normals(path)
+
+
+@pytest.mark.parametrize("suffix,case,text", CASES, ids=[f"{s}-{c}" for s, c, _ in CASES])
+def test_format_rules_hold_for_smooth_normals(suffix, case, text, tmp_path):
+    path = tmp_path / f"m.{suffix}"
+    path.write_bytes(text.encode())
+    assert (read_mesh(path, suffix, smooth=True) is None) == carries_normals_or_uv(path)
+    assert_same_smooth_normals(path)
