@@ -190,8 +190,14 @@ def shell_cover(grid, vertex_cells, faces, lo, hi, box_lo, box_hi, grow):
 
 def bounds(vertices, faces):
     """(F, 3) lower and (F, 3) upper corners of the boxes of faces (F, 3) of ``vertices`` (V, 3)."""
-    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
-    return np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    lo = np.take(vertices, faces[:, 0], axis=0)
+    hi = lo.copy()
+    corner = np.empty_like(lo)
+    for k in (1, 2):
+        np.take(vertices, faces[:, k], axis=0, out=corner)
+        np.minimum(lo, corner, out=lo)
+        np.maximum(hi, corner, out=hi)
+    return lo, hi
 
 
 def crossings(grid, vertices, faces, lo, hi):
@@ -250,10 +256,15 @@ def enclosed_faces(vertices, faces, part, closed, offset):
     vertices (V, 3) float64 in world space, faces (F, 3) int64; part (F,) int64 their
     part (a shell when ``closed[part]``); offset: how far off its face a ray starts."""
     out = np.zeros(len(faces), bool)
-    order = np.argsort(part, kind="stable")  # each part's faces in one run
-    faces, part = faces[order], part[order]
+    order = None
+    if np.any(part[1:] < part[:-1]):  # each part's faces in one run
+        order = np.argsort(part, kind="stable")
+        faces, part = faces[order], part[order]
     lo, hi = bounds(vertices, faces)
-    finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
+    if np.isfinite(vertices).all():
+        finite = np.ones(len(faces), bool)
+    else:
+        finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
     starts = np.flatnonzero(np.r_[True, part[1:] != part[:-1]])
     ends = np.r_[starts[1:], len(part)]
     shell = closed[part[starts]] & np.logical_and.reduceat(finite, starts)
@@ -297,5 +308,5 @@ def enclosed_faces(vertices, faces, part, closed, offset):
     a, b = grid.ranges(lo[idx], hi[idx], grow)
     at, sign = corner_sum(a, b)
     total = sum(table[tuple(c)] * sg for c, sg in zip(at, sign))
-    out[order[idx]] = total == np.prod(b - a + 1, axis=1)
+    out[idx if order is None else order[idx]] = total == np.prod(b - a + 1, axis=1)
     return out

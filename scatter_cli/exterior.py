@@ -73,6 +73,8 @@ class ExteriorSource:
         faces_total = len(occluder.normals)
         hit_faces = np.zeros(faces_total, dtype=bool)
         tried_faces = np.zeros(faces_total, dtype=bool)
+        if occluder.enclosed is None:
+            rays += self._enclose_if_worth_it(count, limit)
         with ThreadPoolExecutor(max_workers=threads) as pool:
             block = 0
             while (count is None or kept[-1] < count) and block * BLOCK < limit:
@@ -88,8 +90,6 @@ class ExteriorSource:
                     tried_faces[faces] = True
                     hit_faces[faces[mask]] = True
                 block += len(group)
-                if block == 1 and self._worth_enclosing(count, limit, kept[1]):
-                    self._enclose()
                 if kept[-1] == 0 and block * BLOCK >= GIVE_UP:
                     raise ScatterError(f"no exterior surface found: the first {block * BLOCK:,} candidates are all hidden")
         self._kept = np.asarray(kept, dtype=np.int64)
@@ -113,30 +113,29 @@ class ExteriorSource:
             "seconds": time.perf_counter() - t,
         }
 
-    def _worth_enclosing(self, count, limit, kept):
-        """Whether the hidden candidates the first block predicts for the rest of the run
-        justify finding the enclosed faces."""
-        hidden = self._sizes[0] - kept
-        if not hidden or (count is not None and kept >= count) or BLOCK >= limit:
-            return False
-        total = limit if count is None else min(limit, count * self._sizes[0] / max(kept, 1))
-        expected = hidden / self._sizes[0] * (total - self._sizes[0])
-        return expected * ENCLOSE_FACES_PER_HIDDEN >= len(self.occluder.normals)
-
-    def _enclose(self):
-        """Find the enclosed faces, once the first block (alone: the same for any thread
-        count) says enough of the surface is hidden."""
-        t = time.perf_counter()
-        self.occluder.enclose()
-        self.enclosure_seconds = time.perf_counter() - t
+    def _enclose_if_worth_it(self, count, limit):
+        """Find the enclosed faces when the hidden candidates that the first block
+        predicts for the run justify it; the prediction counts the block's candidates
+        whose two normal rays are both blocked (a few of those may yet get out). Returns
+        the rays cast."""
+        stop = int(min(BLOCK, limit))
+        if stop <= 0:
+            return 0
+        chunk = self.base.draw(0, stop)
+        normals = self.occluder.face_normals(chunk.face, chunk.instance)
+        blocked, rays = self.occluder.normals_blocked(chunk.points, normals)
+        hidden = int(np.count_nonzero(blocked))
+        total = limit if count is None else min(limit, count * stop / max(stop - hidden, 1))
+        if hidden and hidden / stop * total * ENCLOSE_FACES_PER_HIDDEN >= len(self.occluder.normals):
+            t = time.perf_counter()
+            self.occluder.enclose()
+            self.enclosure_seconds = time.perf_counter() - t
+        return rays
 
     @staticmethod
     def _blocks_to_go(count, kept, done, threads):
-        """Blocks for the next round of the pass: the first block alone, then about what
-        the rate so far says is left (a few more), in multiples of the thread count, at
-        most 16 rounds' worth a time."""
-        if not done:
-            return 1
+        """Blocks for the next round of the pass: about what the rate so far says is left
+        (a few more), in multiples of the thread count, at most 16 rounds' worth a time."""
         if count is None or not kept:
             return threads
         need = (count - kept) * done / kept * 1.05 + 1

@@ -140,9 +140,7 @@ class Occluder:
         todo = np.arange(len(points)) if enclosed is None else np.flatnonzero(~enclosed)
         rays = 0
         if self.normal_rays:
-            for sign in (1.0, -1.0):
-                rays += len(todo)
-                todo = self._cast(origin, normals, sign * normals[todo], todo, out)
+            todo, rays = self._normal_rays(origin, normals, todo, out)
         spin = random_rotations(u)
         for d in self.design:
             if not len(todo):
@@ -150,6 +148,22 @@ class Occluder:
             rays += len(todo)
             todo = self._cast(origin, normals, rotate(spin[todo], d), todo, out)
         return out, rays
+
+    def normals_blocked(self, points, normals):
+        """((n,) bool: both normal rays of each point (n, 3) on a face of unit normal
+        ``normals`` (n, 3) are blocked, rays cast)."""
+        out = np.zeros(len(points), dtype=bool)
+        _, rays = self._normal_rays(points - self.center, normals, np.arange(len(points)), out)
+        return ~out, rays
+
+    def _normal_rays(self, origin, normals, todo, out):
+        """Cast the normal, then the opposite direction, from points ``todo``; mark those
+        that get out in ``out``: (the others, rays cast)."""
+        rays = 0
+        for sign in (1.0, -1.0):
+            rays += len(todo)
+            todo = self._cast(origin, normals, sign * normals[todo], todo, out)
+        return todo, rays
 
     def _cast(self, origin, normals, d, todo, out):
         """Cast rays ``d`` (m, 3) from points ``todo`` (m,); mark those that get out in
