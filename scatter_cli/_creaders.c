@@ -1031,9 +1031,11 @@ static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
         }
         for (int64_t i = 0; i < nf && !status; i++)
             status = face_record(&c, &q, nv, 1, 4);
-        while (!status && c.p < c.end) /* trimesh reads every line left as numbers */
-            if (!is_space(*c.p) && !is_break(*c.p++))
+        while (!status && c.p < c.end) { /* trimesh reads every line left as numbers */
+            char ch = *c.p++;
+            if (!is_space(ch) && !is_break(ch))
                 status = 1;
+        }
     }
     Py_END_ALLOW_THREADS
     PyBuffer_Release(&buf);

@@ -398,10 +398,12 @@ static PyObject *order_sort(PyObject *self, PyObject *args)
     double *tb = malloc((most ? most : 1) * sizeof(double));
     uint64_t *ib = malloc((most ? most : 1) * sizeof(uint64_t));
     int64_t *next = malloc((fine + 1) * sizeof(int64_t));
-    if (!tb || !ib || !next) {
+    uint32_t *fk = malloc((most ? most : 1) * sizeof(uint32_t)); /* each arrival's fine key */
+    if (!tb || !ib || !next || !fk) {
         free(tb);
         free(ib);
         free(next);
+        free(fk);
         return PyErr_NoMemory();
     }
     uint64_t mask = ((uint64_t)1 << cb) - 1;
@@ -409,19 +411,22 @@ static PyObject *order_sort(PyObject *self, PyObject *args)
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp q = q0; q < q1 && ok; q++) {
         npy_intp lo = bounds[q], n = bounds[q + 1] - lo;
-        for (npy_intp i = lo; i < lo + n; i++)
-            ok &= (id[i] >> cb) < (uint64_t)nu && t[i] >= 0.0 && (time_key(t[i], scale, total) >> shift) == q;
+        memset(next, 0, (fine + 1) * sizeof(int64_t));
+        for (npy_intp i = 0; i < n; i++) {
+            double x = t[lo + i];
+            int64_t k = x >= 0.0 ? time_key(x, scale, total) : -1;
+            ok &= (id[lo + i] >> cb) < (uint64_t)nu && (k >> shift) == q;
+            tb[i] = x;
+            ib[i] = id[lo + i];
+            fk[i] = (uint32_t)(k & (fine - 1));
+            next[fk[i] + 1]++;
+        }
         if (n < 2 || !ok)
             continue;
-        memcpy(tb, t + lo, n * sizeof(double));
-        memcpy(ib, id + lo, n * sizeof(uint64_t));
-        memset(next, 0, (fine + 1) * sizeof(int64_t));
-        for (npy_intp i = 0; i < n; i++)
-            next[(time_key(tb[i], scale, total) & (fine - 1)) + 1]++;
         for (int64_t f = 0; f < fine; f++)
             next[f + 1] += next[f];
         for (npy_intp i = 0; i < n; i++) {
-            int64_t at = lo + next[time_key(tb[i], scale, total) & (fine - 1)]++;
+            int64_t at = lo + next[fk[i]]++;
             t[at] = tb[i];
             id[at] = ib[i];
         }
@@ -451,6 +456,7 @@ static PyObject *order_sort(PyObject *self, PyObject *args)
     free(tb);
     free(ib);
     free(next);
+    free(fk);
     if (!ok) {
         PyErr_SetString(PyExc_ValueError, "order_sort: an arrival is not in its bucket");
         return NULL;

@@ -47,6 +47,7 @@ LANES = 4  # per arrival: time, then up to three warp inputs
 FACE_BLOCK = 1 << 16  # faces keyed at a time
 _kernel = native.kernel("_cstable")
 ARRIVAL_BLOCK = 1 << 20  # time blocks expanded at a time
+ROOM_SDS = 8.0  # a face range's arrival arrays hold its mean count plus this many standard deviations
 RAY_LANE = 1 << 32  # lanes RAY_LANE + 4 j + k of a block: arrival j's ray rotation (--exterior)
 
 
@@ -271,6 +272,9 @@ class FaceTable:
         api.sampled_bounds reads (so a stable run builds no SamplePlan)."""
         from .sampling import Part
 
+        if self.identity:  # one instance, every face
+            inst = self.surface.instances[0]
+            return [Part(0, None, None, inst.matrix, self.surface.geometries[inst.geometry])]
         out = []
         bounds = np.searchsorted(self.part, np.arange(len(self.surface.instances) + 1))
         for k, inst in enumerate(self.surface.instances):
@@ -451,8 +455,8 @@ def kernel_arrivals(table, tau, bits):
     worker threads, in one pass: (t (M,) float64, id (M,) uint64, starts (S,), counts (S,)):
     range s wrote its arrivals to ``[starts[s], starts[s] + counts[s])``.
 
-    Each range gets room for its mean count plus 8 standard deviations; in the rare case
-    that one holds more, the pass runs again with room for the counts it returned.
+    Each range gets room for its mean count plus ROOM_SDS standard deviations; in the rare
+    case that one holds more, the pass runs again with room for the counts it returned.
     """
     n = len(table)
     threads = native.worker_count()
@@ -460,7 +464,7 @@ def kernel_arrivals(table, tau, bits):
     pieces = 1 if threads == 1 or work < 1 << 16 or n < 4 * threads else 4 * threads
     cuts = np.linspace(0, n, pieces + 1).astype(np.int64).tolist()
     mean = [tau * float(np.sum(table.rate[a:b])) for a, b in zip(cuts[:-1], cuts[1:])]
-    room = [int(m + 8 * math.sqrt(m) + 64) for m in mean]
+    room = [max(0, int(m + ROOM_SDS * math.sqrt(m) + 64)) for m in mean]
     args = (table.key, table.rate, float(tau), BLOCK_MEAN, POISSON_CDF)
     with ThreadPoolExecutor(max_workers=threads) as pool:
         for _ in range(2):

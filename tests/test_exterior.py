@@ -55,12 +55,13 @@ def scene_cells(name):
     return scene, {k: (np.arange(2 * len(v)) // 2, np.array([e for _, e in v])) for k, v in cells.items()}
 
 
-def cell_test(name, n=6000, seed=1, occluder=None, monkeypatch=None):
-    """(p-value of the per-cell counts on exterior cells against their areas, points on hidden cells)."""
+def cell_test(name, n=6000, seed=1, occluder=None, monkeypatch=None, **options):
+    """(p-value of the per-cell counts on exterior cells against their areas, points on hidden
+    cells); ``options``: more sample options (``stable=True``)."""
     scene, cells = scene_cells(name)
     if occluder is not None:
         monkeypatch.setattr(visibility, "Occluder", occluder)
-    s = scatter_cli.sample(scene, n, seed=seed, exterior=True, attributes=["face", "object"])
+    s = scatter_cli.sample(scene, n, seed=seed, exterior=True, attributes=["face", "object"], **options)
     surface = load_surface(scene)
     counts, areas, exterior = [], [], []
     for k, inst in enumerate(surface.instances):

@@ -15,50 +15,27 @@ from . import exterior_scenes as es
 from .conftest import run_scatter, triangles_mesh
 
 pytest.importorskip("embreex")
-from scipy import stats  # noqa: E402
-
 import scatter_cli  # noqa: E402
 from scatter_cli import visibility  # noqa: E402
 from scatter_cli.exterior import classify  # noqa: E402
 from scatter_cli.stable import StableSource  # noqa: E402
 from scatter_cli.surface import load_surface  # noqa: E402
 
-from .test_exterior import BROKEN, scene_cells  # noqa: E402
+from .test_exterior import BROKEN, cell_test  # noqa: E402
 
 LEVEL = 1e-3
 
 
-def stable_cell_test(name, n=6000, seed=1, **kw):
-    """(p-value of the --stable --exterior counts on exterior cells against their areas,
-    points on hidden cells)."""
-    scene, cells = scene_cells(name)
-    s = scatter_cli.sample(scene, n, seed=seed, stable=True, exterior=True, attributes=["face", "object"], **kw)
-    surface = load_surface(scene)
-    counts, areas, exterior = [], [], []
-    for k, inst in enumerate(surface.instances):
-        face_cell, ext = cells[inst.name]
-        g = surface.geometries[inst.geometry]
-        tri = g.vertices[g.faces]
-        a = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-        mine = s.attributes["object"] == k
-        counts.append(np.bincount(face_cell[s.attributes["face"][mine]], minlength=len(ext)))
-        areas.append(np.bincount(face_cell, weights=a, minlength=len(ext)))
-        exterior.append(ext)
-    counts, areas, exterior = map(np.concatenate, (counts, areas, exterior))
-    expected = counts[exterior].sum() * areas[exterior] / areas[exterior].sum()
-    return stats.chisquare(counts[exterior], expected).pvalue, int(counts[~exterior].sum()), len(s.points)
-
-
 @pytest.mark.parametrize("name", ["box_in_box", "double_shell", "car"])
 def test_uniform_over_the_exterior_part(name):
-    p, hidden, n = stable_cell_test(name)
-    assert n == 6000 and hidden == 0 and p > LEVEL, (p, hidden)
+    """Per-cell counts on exterior cells against their exact areas (test_exterior's test)."""
+    p, hidden = cell_test(name, stable=True)
+    assert hidden == 0 and p > LEVEL, (p, hidden)
 
 
 @pytest.mark.parametrize("name", ["box_in_box", "car"])
 def test_uniform_test_catches_a_classifier_that_sees_through_walls(name, monkeypatch):
-    monkeypatch.setattr(visibility, "Occluder", BROKEN["too_far"])
-    p, hidden, _ = stable_cell_test(name)
+    p, hidden = cell_test(name, occluder=BROKEN["too_far"], monkeypatch=monkeypatch, stable=True)
     assert hidden > 0 or p < LEVEL
 
 
