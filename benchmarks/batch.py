@@ -1,20 +1,31 @@
 """Collections: `scatter batch` against its peers on 300+ small real meshes.
 
-    PYTHONPATH=$PWD python benchmarks/batch.py [--copies 30] [--repeats 3] [--out benchmarks/batch-results.md]
+    NUMPY_MADVISE_HUGEPAGE=0 PYTHONPATH=$PWD python benchmarks/batch.py [--copies 28] [--repeats 3] [--out FILE]
 
 The collection: copies of the small meshes of samples/ in OBJ, OFF, PLY, STL and GLB,
-each copy scaled and moved so that no two files are alike, in a temporary folder. Each
-mesh: 2,048 points with normals, written as binary PLY. Timed as whole commands,
-start-up included, medians of back-to-back runs:
+each copy scaled and moved so that no two files are alike, in a temporary folder, listed
+in an interleaved order (copy 0 of every mesh, then copy 1, ...) so that every fifth of
+the run holds the same mix of meshes. Each mesh: 2,048 points with normals, written as
+binary PLY. Timed as whole commands, start-up included, medians of back-to-back runs:
 
-- `scatter batch DIR -o OUT/{rel}.ply -n 2048 -a normal -j 2`;
+- `scatter batch --from-list LIST -o OUT/{stem}.ply -n 2048 -a normal -j 2`: the time
+  includes Python's start-up, the imports, starting the two worker processes (each
+  imports NumPy and trimesh) and stopping them;
 - a trimesh script: multiprocessing.Pool(2) mapping load, sample_surface, write PLY;
 - a shell loop of `scatter sample` (over the first --loop meshes, scaled to the whole);
-- `scatter batch --engine dask` on a local cluster of two one-thread workers (the cluster
-  started once, before the runs, as a user's cluster would be).
+- `scatter batch --engine dask` on a local cluster of two one-thread workers started
+  before the timing (`dask scheduler`, `dask worker --nthreads 1`): the time includes the
+  command's start-up, importing dask.distributed, connecting, the tasks and closing the
+  client. Twice per fresh cluster: the first batch also starts each Dask worker's sampling
+  process (as -j 2 starts its workers); a later batch finds them running (a long-lived
+  cluster's usual case). Starting the cluster itself is timed on its own.
 
-Also: the resident memory of each batch worker against the meshes done (flat: no growth
-with the collection) and, in one process, where a mesh's time goes (load, sample, write).
+Also: the fixed cost of a run (a batch of one mesh, each engine), the CPU seconds each
+run costs by process (the command with the workers it waits for; the Dask scheduler,
+workers and their sampling processes), the peak resident memory of each batch worker
+over each fifth of the collection (VmHWM, reset at each fifth through
+/proc/PID/clear_refs: exact, no polling gaps) and, in one process, where a mesh's time
+goes (load, sample, write).
 """
 
 from __future__ import annotations
@@ -27,7 +38,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -81,7 +91,7 @@ def make_collection(folder, copies):
             path = folder / f"{Path(name).stem}-{c:03d}.{suffix}"
             m.export(path)
             paths.append(path)
-    return paths
+    return [paths[i * copies + c] for c in range(copies) for i in range(len(SMALL))]  # interleaved
 
 
 def run(cmd, **kw):
@@ -92,17 +102,6 @@ def run(cmd, **kw):
 
 def scatter(*args):
     return [sys.executable, "-m", "scatter_cli", *map(str, args)]
-
-
-def watch_workers(parent_pid, out_dir, samples):
-    """Sample (meshes written, RSS MB of each worker process) until the parent exits."""
-    from scatter_cli.worker import resident_bytes
-
-    while os.path.exists(f"/proc/{parent_pid}"):
-        kids = children(parent_pid)
-        done = sum(1 for _ in os.scandir(out_dir)) if out_dir.exists() else 0
-        samples.append((done, [resident_bytes(k) / 2**20 for k in kids]))
-        time.sleep(0.05)
 
 
 def children(pid):
@@ -120,31 +119,91 @@ def children(pid):
     return found
 
 
-def batch_with_memory(src, out):
+def peak_mb(pid, reset=False):
+    """The process's peak resident memory (VmHWM) in MB, then (``reset``) start it again."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            hwm = next(int(line.split()[1]) / 1024 for line in f if line.startswith("VmHWM:"))
+        if reset:
+            with open(f"/proc/{pid}/clear_refs", "w") as f:
+                f.write("5")
+        return hwm
+    except (OSError, StopIteration):
+        return None
+
+
+def outputs_done(folder):
+    try:
+        return sum(1 for e in os.scandir(folder) if not e.name.startswith("."))
+    except OSError:
+        return 0
+
+
+def batch_memory(listing, out, total):
+    """Peak resident MB of each batch worker over each fifth of the collection:
+    {pid: [MB per fifth]} (a worker's peak is read every 10 ms and reset at each fifth)."""
     shutil.rmtree(out, ignore_errors=True)
-    samples = []
-    t = time.perf_counter()
-    proc = subprocess.Popen(scatter("batch", src, "-o", f"{out}/{{rel}}.ply", "-n", COUNT, "-a", "normal", "-j", 2, "-q"),
-                            stdin=subprocess.DEVNULL)
-    watcher = threading.Thread(target=watch_workers, args=(proc.pid, out, samples))
-    watcher.start()
-    assert proc.wait() == 0
-    elapsed = time.perf_counter() - t
-    watcher.join()
-    return elapsed, samples
+    proc = subprocess.Popen(scatter("batch", "--from-list", listing, "-o", f"{out}/{{stem}}.ply", "-n", COUNT, "-a",
+                                    "normal", "-j", 2, "-q"), stdin=subprocess.DEVNULL)
+    peaks, workers, fifth, scanned = {}, [], 0, 0.0
+    while proc.poll() is None:
+        if time.monotonic() - scanned > 0.2:
+            workers, scanned = children(proc.pid), time.monotonic()
+        done = outputs_done(out)
+        boundary = done >= (fifth + 1) * total / 5 and fifth < 4
+        for pid in workers:
+            mb = peak_mb(pid, reset=boundary)
+            if mb is not None:
+                peaks.setdefault(pid, [float("nan")] * 5)[fifth] = mb
+        fifth += boundary
+        time.sleep(0.01)
+    assert proc.returncode == 0
+    return peaks
 
 
-def memory_profile(samples, total):
-    """Peak worker RSS over each fifth of the collection."""
-    fifths = []
-    for q in range(5):
-        lo, hi = q * total / 5, (q + 1) * total / 5
-        rss = [max(r) for done, r in samples if lo <= done < hi and r]
-        fifths.append(max(rss) if rss else float("nan"))
-    return fifths
+def cpu_seconds(pids):
+    """CPU seconds used so far by each of ``pids`` and by their children, by role:
+    {"scheduler", "workers", "sampling"} (the first pid is the scheduler)."""
+    used = {"scheduler": 0.0, "workers": 0.0, "sampling": 0.0}
+    tick = os.sysconf("SC_CLK_TCK")
+    for name in os.listdir("/proc"):
+        if not name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{name}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        seconds = (int(fields[11]) + int(fields[12])) / tick
+        if int(name) == pids[0]:
+            used["scheduler"] += seconds
+        elif int(name) in pids:
+            used["workers"] += seconds
+        elif int(fields[1]) in pids[1:]:
+            used["sampling"] += seconds
+    return used
+
+
+def timed(cmd, cluster=None):
+    """(seconds, CPU seconds by role) of one whole command."""
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    pids = [p.pid for p in cluster or ()]
+    c0 = cpu_seconds(pids) if cluster else {}
+    seconds = run(cmd)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = {"command": after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime}
+    if cluster:
+        cpu.update({k: v - c0[k] for k, v in cpu_seconds(pids).items()})
+    return seconds, cpu
 
 
 def start_cluster():
+    """A scheduler and two one-thread workers on 127.0.0.1: (address, processes, seconds to start)."""
+    import distributed
+
+    t = time.perf_counter()
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -154,11 +213,15 @@ def start_cluster():
                                "--port", str(port), "--no-dashboard"], **quiet)]
     procs += [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
                                 "--no-nanny", "--no-dashboard", "--host", "127.0.0.1"], **quiet) for _ in range(2)]
-    import distributed
-
     with distributed.Client(address, timeout=60) as c:
         c.wait_for_workers(2, timeout=120)
-    return address, procs
+    return address, procs, time.perf_counter() - t
+
+
+def stop_cluster(procs):
+    for p in reversed(procs):
+        p.kill()
+        p.wait()
 
 
 def stage_times(paths):
@@ -198,27 +261,40 @@ def main():
         src.mkdir()
         paths = make_collection(src, args.copies)
         n = len(paths)
+        listing = work / "meshes.txt"
+        listing.write_text("".join(f"{p}\n" for p in paths))
+        one = work / "one.txt"
+        one.write_text(f"{paths[0]}\n")
         jobs_file = work / "jobs.tsv"
         jobs_file.write_text("".join(f"{p}\t{work / 'tm' / (p.stem + '.ply')}\n" for p in paths))
         (work / "tm").mkdir()
         script = work / "tm_pool.py"
         script.write_text(TRIMESH_SCRIPT)
-        address, cluster = start_cluster()
-        times = {"batch": [], "trimesh": [], "dask": []}
-        memory = None
-        try:
-            for r in range(args.repeats):
-                t, samples = batch_with_memory(src, work / "out")
-                times["batch"].append(t)
-                memory = memory or memory_profile(samples, n)
-                times["trimesh"].append(run([sys.executable, str(script), str(jobs_file)]))
-                shutil.rmtree(work / "dask", ignore_errors=True)
-                times["dask"].append(run(scatter("batch", src, "-o", f"{work}/dask/{{rel}}.ply", "-n", COUNT, "-a",
-                                                 "normal", "--engine", "dask", "--scheduler", address, "-q")))
-        finally:
-            for p in reversed(cluster):
-                p.kill()
-                p.wait()
+        common = ["-n", COUNT, "-a", "normal", "-q"]
+        times = {k: [] for k in ("batch", "trimesh", "dask_first", "dask", "cluster", "batch_one", "dask_one")}
+        cpu = {}
+
+        def batch_cmd(lst, out, *engine):
+            shutil.rmtree(out, ignore_errors=True)
+            return scatter("batch", "--from-list", lst, "-o", f"{out}/{{stem}}.ply", *common, *engine)
+
+        for r in range(args.repeats):
+            t, cpu["batch"] = timed(batch_cmd(listing, work / "out", "-j", 2))
+            times["batch"].append(t)
+            times["batch_one"].append(timed(batch_cmd(one, work / "out", "-j", 2))[0])
+            times["trimesh"].append(run([sys.executable, str(script), str(jobs_file)]))
+            address, cluster, started = start_cluster()
+            times["cluster"].append(started)
+            try:
+                dask = ("--engine", "dask", "--scheduler", address)
+                t, cpu["dask_first"] = timed(batch_cmd(listing, work / "dask", *dask), cluster)
+                times["dask_first"].append(t)
+                t, cpu["dask"] = timed(batch_cmd(listing, work / "dask", *dask), cluster)
+                times["dask"].append(t)
+                times["dask_one"].append(timed(batch_cmd(one, work / "dask", *dask), cluster)[0])
+            finally:
+                stop_cluster(cluster)
+        memory = batch_memory(listing, work / "mem", n)
         subset = paths[:: max(1, n // args.loop)][: args.loop]
         loop = " ; ".join(f"{sys.executable} -m scatter_cli sample {p} -n {COUNT} -a normal -o {work}/loop.ply"
                           for p in subset)
@@ -226,38 +302,56 @@ def main():
         stages = stage_times(paths)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+    print(report(args, n, times, cpu, memory, t_loop, len(subset), stages))
+    if args.out:
+        Path(args.out).write_text(report(args, n, times, cpu, memory, t_loop, len(subset), stages))
+
+
+def report(args, n, times, cpu, memory, t_loop, looped, stages):
     med = {k: statistics.median(v) for k, v in times.items()}
-    rate = {k: n / v for k, v in med.items()}
+    rate = {k: n / med[k] for k in ("batch", "trimesh", "dask_first", "dask")}
     rate["loop"] = n / t_loop
+    per_mesh = {k: (med[k] - med[k + "_one"]) / (n - 1) for k in ("batch", "dask")}
     lines = [
         f"# scatter batch: {n} meshes, {COUNT} points with normals each (binary PLY)",
         "",
-        f"Command: `PYTHONPATH=$PWD python benchmarks/batch.py --copies {args.copies} --repeats {args.repeats}`"
-        f" ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; load average {os.getloadavg()[0]:.1f} on "
-        f"{os.cpu_count()} CPUs)",
+        f"Command: `NUMPY_MADVISE_HUGEPAGE=0 PYTHONPATH=$PWD python benchmarks/batch.py --copies {args.copies} "
+        f"--repeats {args.repeats} --loop {args.loop}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
+        f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs)",
         "",
-        "| run | seconds (median) | meshes/s | scatter batch -j 2 is |",
+        "| run (whole command) | seconds (median) | meshes/s | scatter batch -j 2 is |",
         "|---|---|---|---|",
-        f"| scatter batch -j 2 | {med['batch']:.2f} | {rate['batch']:.1f} | 1 |",
+        f"| scatter batch -j 2 (starting its 2 workers included) | {med['batch']:.2f} | {rate['batch']:.1f} | 1 |",
         f"| trimesh + multiprocessing.Pool(2) | {med['trimesh']:.2f} | {rate['trimesh']:.1f} | "
         f"{rate['batch'] / rate['trimesh']:.2f}x faster |",
-        f"| shell loop of scatter sample ({len(subset)} timed, scaled) | {t_loop:.1f} | {rate['loop']:.2f} | "
+        f"| shell loop of scatter sample ({looped} timed, scaled) | {t_loop:.1f} | {rate['loop']:.2f} | "
         f"{rate['batch'] / rate['loop']:.1f}x faster |",
-        f"| scatter batch --engine dask (2 workers, 1 thread each) | {med['dask']:.2f} | {rate['dask']:.1f} | "
-        f"{med['dask'] / med['batch']:.2f}x the time |",
+        f"| Dask, 2 workers x 1 thread: first batch on the cluster (starting its sampling processes included) | "
+        f"{med['dask_first']:.2f} | {rate['dask_first']:.1f} | {med['dask_first'] / med['batch']:.2f}x the time |",
+        f"| Dask, 2 workers x 1 thread: a later batch (sampling processes running) | {med['dask']:.2f} | "
+        f"{rate['dask']:.1f} | {med['dask'] / med['batch']:.2f}x the time |",
         "",
-        "All runs: " + "; ".join(f"{k} " + ", ".join(f"{t:.2f}" for t in v) for k, v in times.items()),
+        "All runs (s): " + "; ".join(f"{k} " + ", ".join(f"{t:.2f}" for t in v) for k, v in times.items()),
         "",
-        "Peak resident memory of a batch worker (MB) over each fifth of the collection: "
-        + ", ".join(f"{m:.0f}" for m in memory),
+        f"Starting the Dask cluster (scheduler and 2 workers, until connected; not in any time above): "
+        f"{med['cluster']:.2f} s.",
+        "",
+        f"Fixed cost of a run (a batch of one mesh): -j 2 {med['batch_one']:.2f} s, Dask {med['dask_one']:.2f} s "
+        f"(later batch). Cost per further mesh ((all - one) / {n - 1}): -j 2 {per_mesh['batch'] * 1e3:.1f} ms, "
+        f"Dask {per_mesh['dask'] * 1e3:.1f} ms.",
+        "",
+        "CPU seconds of one run (last repeat), by process: "
+        + "; ".join(f"{k}: " + ", ".join(f"{role} {v:.2f}" for role, v in c.items()) + f" (total {sum(c.values()):.2f})"
+                    for k, c in cpu.items()),
+        "",
+        "Peak resident memory of each batch worker (MB) over each fifth of the collection: "
+        + "; ".join(f"worker {i + 1}: " + ", ".join(f"{m:.0f}" for m in fifths)
+                    for i, fifths in enumerate(memory.values())),
         "",
         "Time per mesh in one process (median / mean, ms): "
         + ", ".join(f"{k} {a * 1e3:.1f} / {b * 1e3:.1f}" for k, (a, b) in stages.items()),
     ]
-    text = "\n".join(lines) + "\n"
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text)
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

@@ -6,7 +6,8 @@ Scenes (written once to a temporary directory as binary PLY):
   1,638,400 faces, 20 % of the area hidden.
 
 For each scene and count, ``scatter sample MESH -n N -o out.ply`` with and without
-``--exterior`` (``--stats`` gives the ray-scene build, the exterior pass and the rays),
+``--exterior`` (``--stats`` gives the ray-scene build, the exterior pass, the part of it
+spent finding enclosed faces, and the rays),
 ``--repeats`` back-to-back warm runs each, medians. Prints a Markdown table.
 
     PYTHONPATH=. python benchmarks/exterior.py [--repeats 3] [--counts 100000,1000000] \
@@ -101,7 +102,7 @@ def main():
                 m2s.append((name, mesh_to_sdf(opts.mesh_to_sdf, mesh), wall))
         for name, mesh in scenes(tmp).items():
             for n in counts:
-                plain, ext, build, passes, rays, frac = [], [], [], [], [], []
+                plain, ext, build, passes, encl, rays, frac = [], [], [], [], [], [], []
                 for _ in range(opts.repeats):  # alternate, so that load drifts hit both alike
                     wall, _ = run(mesh, n, tmp / "o.ply", False, tmp / "s.json")
                     plain.append(wall)
@@ -109,18 +110,20 @@ def main():
                     ext.append(wall)
                     build.append(st["timings"]["ray_scene"])
                     passes.append(st["timings"]["exterior"])
+                    encl.append(st["timings"].get("enclosure", 0.0))
                     rays.append(st["exterior"]["rays"])
                     frac.append(st["exterior"]["exterior_fraction"])
-                p, e, b, x = (statistics.median(v) for v in (plain, ext, build, passes))
-                rows.append((name, n, p, e, b, x, (e - b) / p, rays[0], rays[0] / x, statistics.median(frac)))
+                p, e, b, x, c = (statistics.median(v) for v in (plain, ext, build, passes, encl))
+                rows.append((name, n, p, e, b, x, c, (e - b) / p, rays[0], rays[0] / max(x - c, 1e-9),
+                             statistics.median(frac), st["exterior"].get("faces_enclosed", 0)))
     print(f"CPUs: {os.cpu_count()}, threads: {os.environ.get('SCATTER_THREADS', 'default')}, "
           f"repeats: {opts.repeats} (medians)\n")
-    print("| mesh | N | plain s | --exterior s | BVH build s | exterior pass s | (ext - build) / plain "
-          "| rays | rays/s | exterior fraction |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for name, n, p, e, b, x, ratio, r, rate, f in rows:
-        print(f"| {name} | {n:,} | {p:.2f} | {e:.2f} | {b:.2f} | {x:.2f} | {ratio:.2f} | {r:,} | "
-              f"{rate / 1e6:.2f} M | {f:.4f} |")
+    print("| mesh | N | plain s | --exterior s | BVH build s | exterior pass s | of which enclosure s "
+          "| (ext - build) / plain | rays | rays/s (pass less enclosure) | exterior fraction | faces enclosed |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for name, n, p, e, b, x, c, ratio, r, rate, f, enclosed in rows:
+        print(f"| {name} | {n:,} | {p:.2f} | {e:.2f} | {b:.2f} | {x:.2f} | {c:.2f} | {ratio:.2f} | {r:,} | "
+              f"{rate / 1e6:.2f} M | {f:.4f} | {enclosed:,} |")
     if m2s:
         print("\nmesh_to_sdf scan (100 renders of 400 x 400):\n")
         print("| mesh | mesh_to_sdf s | points | points on the hidden sphere | CV of outer cell counts "

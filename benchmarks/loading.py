@@ -1,14 +1,17 @@
-"""Loading benchmark: whole commands on the 1.31M-face icosphere in every format, and
-load time per mesh on a collection of small files, fast readers against trimesh.
+"""Loading benchmark: whole commands on the 1.31M-face icosphere in every format, the
+memory a load takes, and load time per mesh on a collection of small files, fast readers
+against trimesh.
 
     PYTHONPATH=. python benchmarks/loading.py [--runs 5] [--small 300] [--dir DIR] [--no-cloudcompare]
 
 Part 1 runs `scatter sample FILE -n 1000000 -o out.ply -q` for each format, the formats
 taken in turn round after round (so a change in the machine's load hits them alike), and
 CloudCompare on the OBJ; it prints medians of wall time and peak memory, and each
-format's ratio to binary PLY from the same rounds. Part 2 loads small meshes in one
-process, each with the fast readers (load_surface(plain=True)) and with trimesh.load
-(process=False), and prints the median time per mesh of each.
+format's ratio to binary PLY from the same rounds. Part 2 loads each icosphere file in a
+fresh process and prints its peak memory beyond the arrays it returns (tests/loadmemory.py).
+Part 3 loads small meshes in one process, each with the fast readers
+(load_surface(plain=True)) and with trimesh.load (process=False), and prints the median
+time per mesh of each.
 """
 
 from __future__ import annotations
@@ -107,6 +110,23 @@ def part_whole_commands(paths, runs, cloudcompare, work):
         print(f"OBJ: CloudCompare / scatter = {ratio:.2f} (target >= 4: {'met' if ratio >= 4 else 'NOT met'})")
 
 
+def part_memory(paths):
+    from tests.loadmemory import load_memory
+
+    def run(cmd, env=None):
+        return subprocess.run(cmd, env=child_env(), capture_output=True, text=True)
+
+    print("\nMemory of a load (load_surface(plain=True) in a fresh process): peak resident size beyond the")
+    print("size before and the returned arrays; the readers map the file and touch all of it")
+    print("| input | file MB | arrays MB | beyond arrays MB | less the file MB | / file size |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for label, path in paths.items():
+        m = load_memory(path, run)
+        beyond = m["peak"] - m["before"] - m["arrays"]
+        print(f"| {label} | {m['file'] / 1e6:.0f} | {m['arrays'] / 1e6:.0f} | {beyond / 1e6:.0f} | "
+              f"{m['extra'] / 1e6:.0f} | {m['extra'] / m['file']:.2f} |")
+
+
 def small_files(folder, count):
     """``count`` small meshes (40 to 1,280 faces), formats in turn, some with quads."""
     import numpy as np
@@ -115,7 +135,7 @@ def small_files(folder, count):
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(0)
     kinds = [("obj", {}), ("off", {}), ("ply", {"encoding": "ascii"}), ("ply", {}), ("stl", {}),
-             ("stl", {"file_type": "stl_ascii"})]
+             ("stl", {"file_type": "stl_ascii"}), ("glb", {})]
     paths = []
     for k in range(count):
         suffix, options = kinds[k % len(kinds)]
@@ -146,7 +166,7 @@ def part_small_files(paths, runs):
             trimesh.load(p, process=False)
             slow.append(time.perf_counter() - t)
     f, s = statistics.median(fast), statistics.median(slow)
-    print(f"\nSmall files: {len(paths)} meshes (OBJ, OFF, ASCII/binary PLY, ASCII/binary STL in turn), "
+    print(f"\nSmall files: {len(paths)} meshes (OBJ, OFF, ASCII/binary PLY, ASCII/binary STL, GLB in turn), "
           f"{runs} passes, median load time per mesh")
     print(f"| reader | ms per mesh |\n|---|---:|\n| fast readers | {f * 1e3:.3f} |\n| trimesh.load | {s * 1e3:.3f} |")
     print(f"trimesh / fast = {s / f:.1f}")
@@ -162,7 +182,9 @@ def main():
     with tempfile.TemporaryDirectory() as work:
         folder = Path(args.dir or work)
         cc = not args.no_cloudcompare and shutil.which("CloudCompare") is not None
-        part_whole_commands(big_files(folder / "big"), args.runs, cc, work)
+        paths = big_files(folder / "big")
+        part_whole_commands(paths, args.runs, cc, work)
+        part_memory(paths)
         part_small_files(small_files(folder / "small", args.small), max(1, args.runs // 2))
 
 

@@ -5,8 +5,9 @@ the fraction of points an edit moves against its expectation from the areas.
 
 Meshes: the 1.31M-face icosphere (trimesh.creation.icosphere(subdivisions=8), written
 to a binary PLY for the end-to-end runs) and samples/skull.ply. Times are medians of
-back-to-back warm runs, default and --stable alternating, so their ratio is measured
-under the same load. End to end: ``python -m scatter_cli sample MESH -n N -o out.npy``;
+back-to-back runs, default and --stable alternating after a warm run of each at the same
+N, so their ratio is measured under the same load; both write xyz only, in the precision
+--precision auto picks (the same for both: checked). End to end: ``python -m scatter_cli sample MESH -n N -o out.npy``;
 peak memory is the child's maximum resident set (wait4), and "beyond the mesh" is that
 minus the peak of the same command with ``-n 1``.
 """
@@ -41,13 +42,20 @@ def icosphere_ply(directory):
     return path
 
 
-def in_process(surface, n, stable, repeats):
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        api.prepare(surface, n, stable=stable).collect()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
+def in_process(surface, n, repeats):
+    """(default s, stable s): medians of runs of ``api.prepare(surface, n).collect()`` with
+    and without --stable, alternating, after one warm run of each at the same N. Like with
+    like: no attributes, the same precision (checked), the surface loaded once for both."""
+    dtypes = {s: api.prepare(surface, n, stable=s).dtype for s in (False, True)}
+    assert dtypes[False] == dtypes[True], dtypes
+    times = {False: [], True: []}
+    for k in range(repeats + 1):
+        for s in (False, True):
+            t = time.perf_counter()
+            api.prepare(surface, n, stable=s).collect()
+            if k:  # the first round warms both
+                times[s].append(time.perf_counter() - t)
+    return statistics.median(times[False]), statistics.median(times[True])
 
 
 # Runs the command and prints its peak RSS: a small parent, so that the fork's copy of
@@ -114,18 +122,18 @@ def main():
         meshes = {"icosphere-8": icosphere_ply(tmp), "skull": ROOT / "samples" / "skull.ply"}
         for name, path in meshes.items():
             surface = load_surface(str(path))
-            api.prepare(surface, 1000, stable=True).collect()  # warm
             base = {s: end_to_end(path, 1, s, Path(tmp) / "o.npy")[1] for s in (False, True)}
             for n in counts:
-                t_default = in_process(surface, n, False, args.repeats)
-                t_stable = in_process(surface, n, True, args.repeats)
+                t_default, t_stable = in_process(surface, n, args.repeats)
                 e2e = {False: [], True: []}
+                for s in (False, True):  # warm the file cache and the interpreter's
+                    end_to_end(path, n, s, Path(tmp) / "o.npy")
                 for _ in range(args.repeats):
                     for s in (False, True):
                         e2e[s].append(end_to_end(path, n, s, Path(tmp) / "o.npy"))
                 out_mb = os.path.getsize(Path(tmp) / "o.npy") / 2**20
                 row = {
-                    "mesh": name, "faces": surface.face_count, "count": n,
+                    "mesh": name, "faces": surface.face_count, "count": n, "load_average": os.getloadavg()[0],
                     "in_process_default_s": t_default, "in_process_stable_s": t_stable,
                     "in_process_ratio": t_stable / t_default,
                     "end_to_end_default_s": statistics.median(x[0] for x in e2e[False]),
@@ -150,13 +158,13 @@ def main():
 
 def print_table(rows, edits):
     print("\n| mesh | N | in-process default / stable (ratio) | end to end default / stable (ratio) | "
-          "peak MB default / stable | stable beyond mesh MB (budget) |")
-    print("|---|---|---|---|---|---|")
+          "peak MB default / stable | stable beyond mesh MB (budget 3 x output + 200) | load |")
+    print("|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['mesh']} | {r['count']:.0e} | {r['in_process_default_s']:.2f} / {r['in_process_stable_s']:.2f} s "
               f"({r['in_process_ratio']:.2f}x) | {r['end_to_end_default_s']:.2f} / {r['end_to_end_stable_s']:.2f} s "
               f"({r['end_to_end_ratio']:.2f}x) | {r['peak_default_mb']:.0f} / {r['peak_stable_mb']:.0f} | "
-              f"{r['stable_beyond_mesh_mb']:.0f} ({r['memory_budget_mb']:.0f}) |")
+              f"{r['stable_beyond_mesh_mb']:.0f} ({r['memory_budget_mb']:.0f}) | {r['load_average']:.1f} |")
     print("\n| mesh | edited area | points moved | expected |")
     print("|---|---|---|---|")
     for e in edits:

@@ -7,7 +7,8 @@ and calls the kernel with out-of-range indices (it must refuse them). Any report
 
     python benchmarks/stable_sanitizers.py      (gcc with libasan/libubsan; Linux)
 
-Run once at c71580a: no report; the three bad calls refused.
+Run at c71580a, and again with the arrival sort and id placement of 2026-12-02: no
+report; the bad calls refused.
 """
 
 import glob
@@ -30,7 +31,7 @@ from scatter_cli import stable
 assert stable._kernel is not None and sys.argv[1] in stable._kernel.__file__
 rng = np.random.default_rng(0)
 for name in ("skull.ply", "cesiummilktruck.glb", "narrow_triangles.obj", "moebius-160-10.ply"):
-    for kw in (dict(count=20000), dict(count=None, density=5.0), dict(count=0)):
+    for kw in (dict(count=20000), dict(count=None, density=5.0), dict(count=0), dict(count=None, radius=2.0)):
         scatter_cli.sample(sys.argv[2] + "/" + name, stable=True, attributes=("face", "bary"), **kw)
 for k in range(30):
     v = rng.normal(size=(50, 3))
@@ -42,12 +43,16 @@ for k in range(30):
     except scatter_cli.ScatterError:
         pass
 key, rate = np.zeros(3, np.uint64), np.ones(3)
-bad = [lambda: stable._kernel.arrivals(key, rate, 1.0, 2.0, stable.POISSON_CDF, 0, 5, None, None, None),
+t, ids, one = np.zeros(4), np.zeros(4, np.uint64), np.ones(1, np.int64)
+bad = [lambda: stable._kernel.arrivals(key, rate, 1.0, 2.0, stable.POISSON_CDF, 0, 5, 8, None, None),
        lambda: stable._kernel.faces(np.zeros((3, 3)), np.array([[0, 1, 7]]), 0, 1, 0, np.empty(1, np.uint8),
                                     np.empty(1, np.uint64), np.empty(1)),
-       lambda: stable._kernel.place(np.array([9]), np.zeros(1, np.uint64), key, np.zeros(3, np.uint8), np.arange(3),
-                                    np.zeros((3, 3), np.int64), np.zeros((3, 3)), np.empty((1, 3)), np.empty((1, 2)),
-                                    np.zeros(1, np.int64))]
+       lambda: stable._kernel.place(np.array([9 << 8], np.uint64), 8, key, None, np.zeros((3, 3), np.int64),
+                                    np.zeros((3, 3)), np.empty((1, 3)), None, None, False),
+       lambda: stable._kernel.order_count(t, ids, np.array([2]), np.array([3]), 1.0, 2, 8, np.zeros(2, np.int64)),
+       lambda: stable._kernel.order_scatter(t, ids, np.zeros(1, np.int64), one, 1.0, 2, 8, np.array([5, 0]),
+                                            np.empty(1), np.empty(1, np.uint64)),
+       lambda: stable._kernel.order_sort(t, ids, np.array([0, 1, 9]), 0, 2, 1.0, 2, 8, key, 8)]
 for call in bad:
     try:
         call()
@@ -71,7 +76,8 @@ def main():
                         "-I" + numpy.get_include(), str(ROOT / "scatter_cli" / "_cstable.c"), "-o", str(out)], check=True)
         env = dict(os.environ, PYTHONPATH=tmp, LD_PRELOAD=":".join(r[0] for r in runtimes), ASAN_OPTIONS="detect_leaks=0")
         env.pop("SCATTER_NUMPY", None)
-        subprocess.run([sys.executable, "-c", CHECK, tmp, str(ROOT / "samples")], env=env, check=True)
+        # run from tmp: python -c puts the working directory first on the path
+        subprocess.run([sys.executable, "-c", CHECK, tmp, str(ROOT / "samples")], env=env, check=True, cwd=tmp)
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
+#include <pthread.h>
 
 #define MAX_INDEX 2147483647LL
 #define MAX_CORNERS 255
@@ -152,6 +153,22 @@ static double exact_decimal(uint64_t m, int e10)
     return ldexp((double)(uint64_t)q, drop - shift);
 }
 
+/* Eight ASCII digits at p (p + 8 within the buffer): 1 and their value in *out, else 0.
+ * Bit tricks on one little-endian 64-bit load (as fast_float does). */
+static inline int eight_digits(const char *p, uint64_t *out)
+{
+    uint64_t x;
+    memcpy(&x, p, 8);
+    if (((x + 0x4646464646464646ULL) | (x - 0x3030303030303030ULL)) & 0x8080808080808080ULL)
+        return 0;
+    x -= 0x3030303030303030ULL;
+    x = (x * 10) + (x >> 8);
+    x = (((x & 0x000000FF000000FFULL) * 0x000F424000000064ULL) +
+         (((x >> 16) & 0x000000FF000000FFULL) * 0x0000271000000001ULL)) >> 32;
+    *out = (uint32_t)x;
+    return 1;
+}
+
 /* A decimal number at c->p ([+-]? digits [. digits] [e [+-] digits], a digit somewhere
  * before the exponent), ending at whitespace, a line break or the end. 0 and the value
  * in *out, or -1 (not such a number; c->p then undefined). */
@@ -163,7 +180,15 @@ static int parse_double(cursor *c, double *out)
         negative = *p++ == '-';
     uint64_t mantissa = 0;
     int significant = 0, digits = 0, scale = 0;
+    uint64_t eight;
     while (p < end && is_digit(*p)) {
+        if ((mantissa || *p != '0') && significant <= 11 && end - p >= 8 && eight_digits(p, &eight)) {
+            mantissa = mantissa * 100000000ULL + eight;
+            significant += 8;
+            digits += 8;
+            p += 8;
+            continue;
+        }
         if (mantissa || *p != '0') {
             if (significant < 19)
                 mantissa = mantissa * 10 + (uint64_t)(*p - '0');
@@ -177,6 +202,14 @@ static int parse_double(cursor *c, double *out)
     if (p < end && *p == '.') {
         p++;
         while (p < end && is_digit(*p)) {
+            if ((mantissa || *p != '0') && significant <= 11 && end - p >= 8 && eight_digits(p, &eight)) {
+                mantissa = mantissa * 100000000ULL + eight;
+                significant += 8;
+                scale -= 8;
+                digits += 8;
+                p += 8;
+                continue;
+            }
             if (mantissa || *p != '0') {
                 if (significant < 19) {
                     mantissa = mantissa * 10 + (uint64_t)(*p - '0');
@@ -292,9 +325,16 @@ static int end_line(cursor *c)
  * whitespace that only trimesh's own handling decides. */
 static int plain_text(const char *s, Py_ssize_t n)
 {
-    for (Py_ssize_t i = 0; i < n; i++) {
-        unsigned char b = (unsigned char)s[i];
-        if (b >= 0x7f || (b < 0x20 && b != '\t' && b != '\n' && b != '\r'))
+    const unsigned char *u = (const unsigned char *)s;
+    for (Py_ssize_t i = 0; i < n;) {
+        Py_ssize_t stop = n - i > 4096 ? i + 4096 : n;
+        unsigned char bad = 0;
+        for (; i < stop; i++) { /* no early exit inside a block: the compiler vectorises it */
+            unsigned char b = u[i];
+            unsigned char control = (unsigned char)(b - 0x20) >= 0x5f; /* below 0x20 or 0x7f and up */
+            bad |= control & (b != '\t') & (b != '\n') & (b != '\r');
+        }
+        if (bad)
             return 0;
     }
     return 1;
@@ -804,11 +844,12 @@ static int64_t *triangulate(polys *q, int64_t *nf)
         np_ = (int64_t)(q->poly.len / (8 * (size_t)k));
     }
     *nf = nt + 2 * nq + np_ * (k - 2);
-    int64_t *out = malloc((size_t)*nf * 24 + 1), *o = out;
+    /* the triangles' list grows into the result (a large realloc moves pages, not bytes) */
+    int64_t *out = realloc(q->tri.data, (size_t)*nf * 24 + 1), *o = out;
     if (!out)
         return NULL;
-    if (q->tri.len) /* no memcpy from NULL, even of 0 bytes (UBSan finding) */
-        memcpy(o, q->tri.data, q->tri.len);
+    q->tri.data = NULL;
+    q->tri.len = q->tri.cap = 0;
     o += 3 * nt;
     const int64_t *qd = (const int64_t *)q->quad.data;
     for (int64_t i = 0; i < nq; i++, o += 3)
@@ -990,9 +1031,11 @@ static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
         }
         for (int64_t i = 0; i < nf && !status; i++)
             status = face_record(&c, &q, nv, 1, 4);
-        while (!status && c.p < c.end) /* trimesh reads every line left as numbers */
-            if (!is_space(*c.p) && !is_break(*c.p++))
+        while (!status && c.p < c.end) { /* trimesh reads every line left as numbers */
+            char ch = *c.p++;
+            if (!is_space(ch) && !is_break(ch))
                 status = 1;
+        }
     }
     Py_END_ALLOW_THREADS
     PyBuffer_Release(&buf);
@@ -1030,58 +1073,141 @@ static int plain_line_rest(cursor *c)
 {
     const char *e = memchr(c->p, '\n', (size_t)(c->end - c->p));
     e = e ? e : c->end;
-    if (contains_nocase(c->p, e, "vertex") || contains_nocase(c->p, e, "solid"))
+    int maybe = 0; /* a 'v' or 's' at all: the search is needed only then */
+    for (const char *q = c->p; q < e; q++)
+        maybe |= (*q | 0x20) == 'v' || (*q | 0x20) == 's';
+    if (maybe && (contains_nocase(c->p, e, "vertex") || contains_nocase(c->p, e, "solid")))
         return -1;
     c->p = e < c->end ? e + 1 : e;
     return 0;
 }
 
+/* One stretch of an ASCII STL body, from a line start to `stop` (just after a line break,
+ * or the end): its vertices, and 0 (endsolid, with no other solid after it in the file),
+ * 1 (hand the file to trimesh), 2 (reached `stop` first) or -1 (no memory). */
+typedef struct {
+    const char *p, *stop, *file_end, *check_from;
+    grow v;
+    int status, plain; /* plain: the stretch from check_from holds only plain text */
+} stl_part;
+
+static int stl_body(stl_part *s)
+{
+    s->plain = plain_text(s->check_from, s->stop - s->check_from);
+    if (!s->plain)
+        return 1;
+    cursor c = {s->p, s->stop};
+    for (;;) {
+        skip_blank_lines(&c);
+        if (c.p >= c.end)
+            return 2;
+        if (starts_nocase(&c, "vertex")) {
+            c.p += 6;
+            double xyz[3];
+            if (grow_room(&s->v, sizeof xyz) < 0)
+                return -1;
+            if (!at_token_end(&c) || numbers(&c, xyz) != 3 || end_line(&c) < 0)
+                return 1;
+            memcpy(s->v.data + s->v.len, xyz, sizeof xyz);
+            s->v.len += sizeof xyz;
+        } else if (starts_nocase(&c, "endsolid")) {
+            c.p += 8; /* another solid after it: another geometry */
+            return contains_nocase(c.p, s->file_end, "solid") ? 1 : 0;
+        } else if (starts_nocase(&c, "facet") || starts_nocase(&c, "outer") || starts_nocase(&c, "endloop") ||
+                   starts_nocase(&c, "endfacet")) {
+            if (plain_line_rest(&c) < 0)
+                return 1;
+        } else {
+            return 1;
+        }
+    }
+}
+
+static void *stl_part_run(void *arg)
+{
+    stl_part *s = arg;
+    s->status = stl_body(s);
+    return NULL;
+}
+
+#define MAX_PARTS 8
+#define MIN_PART (4 << 20)
+
+/* The parts in file order decide: the first to end at endsolid ends the file, a part
+ * that reached its stop hands on to the next; the vertices of the parts read are joined
+ * into parts[0]. Returns the file's status as stl_body words it. */
+static int stl_join(stl_part *parts, int n)
+{
+    for (int k = 0; k < n; k++) {
+        if (parts[k].status == 1 || parts[k].status == -1)
+            return parts[k].status;
+        if (k > 0) {
+            if (grow_room(&parts[0].v, parts[k].v.len) < 0)
+                return -1;
+            memcpy(parts[0].v.data + parts[0].v.len, parts[k].v.data, parts[k].v.len);
+            parts[0].v.len += parts[k].v.len;
+        }
+        if (parts[k].status == 0) {
+            for (int j = k + 1; j < n; j++)
+                if (!parts[j].plain)
+                    return 1; /* as when the whole file is checked first */
+            return 0;
+        }
+    }
+    return 1; /* no endsolid */
+}
+
 static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
 {
     Py_buffer buf;
-    if (!PyArg_ParseTuple(args, "y*", &buf))
+    int threads = 1;
+    if (!PyArg_ParseTuple(args, "y*|i", &buf, &threads))
         return NULL;
-    const char *text = buf.buf;
-    cursor c = {text, text + buf.len};
-    grow v = {0};
-    int status = 1;
+    const char *text = buf.buf, *end = text + buf.len;
+    cursor c = {text, end};
+    stl_part parts[MAX_PARTS];
+    memset(parts, 0, sizeof parts);
+    int n = 0, status = 1;
     Py_BEGIN_ALLOW_THREADS
     skip_blank_lines(&c);
-    if (plain_text(text, buf.len) && starts_nocase(&c, "solid")) {
+    if (starts_nocase(&c, "solid")) {
         c.p += 5;
-        status = plain_line_rest(&c) < 0 ? 1 : 2;
-        while (status == 2) {
-            skip_blank_lines(&c);
-            if (c.p >= c.end) {
-                status = 1; /* no endsolid */
-            } else if (starts_nocase(&c, "vertex")) {
-                c.p += 6;
-                double xyz[3];
-                if (grow_room(&v, sizeof xyz) < 0)
-                    status = -1;
-                else if (!at_token_end(&c) || numbers(&c, xyz) != 3 || end_line(&c) < 0)
-                    status = 1;
-                else {
-                    memcpy(v.data + v.len, xyz, sizeof xyz);
-                    v.len += sizeof xyz;
+        if (plain_line_rest(&c) == 0) {
+            /* parts split at line breaks: every break ends a line, so each part starts at one */
+            int want = threads < 1 ? 1 : threads > MAX_PARTS ? MAX_PARTS : threads;
+            const char *from = c.p;
+            while (n < want) {
+                const char *stop = end;
+                if (n < want - 1 && (end - from) / (want - n) >= MIN_PART) {
+                    const char *mid = from + (end - from) / (want - n);
+                    const char *nl = memchr(mid, '\n', (size_t)(end - mid));
+                    stop = nl ? nl + 1 : end;
                 }
-            } else if (starts_nocase(&c, "endsolid")) {
-                c.p += 8;
-                if (contains_nocase(c.p, c.end, "solid"))
-                    status = 1; /* another solid: another geometry */
-                else
-                    status = 0;
-            } else if (starts_nocase(&c, "facet") || starts_nocase(&c, "outer") || starts_nocase(&c, "endloop") ||
-                       starts_nocase(&c, "endfacet")) {
-                if (plain_line_rest(&c) < 0)
-                    status = 1;
-            } else {
-                status = 1;
+                parts[n] = (stl_part){from, stop, end, n ? from : text, {0}, 1, 0};
+                n++;
+                from = stop;
+                if (stop == end)
+                    break;
             }
+            pthread_t ids[MAX_PARTS];
+            int started[MAX_PARTS] = {0};
+            for (int k = 1; k < n; k++)
+                started[k] = pthread_create(&ids[k], NULL, stl_part_run, &parts[k]) == 0;
+            stl_part_run(&parts[0]);
+            for (int k = 1; k < n; k++) {
+                if (started[k])
+                    pthread_join(ids[k], NULL);
+                else
+                    stl_part_run(&parts[k]);
+            }
+            status = stl_join(parts, n);
         }
     }
     Py_END_ALLOW_THREADS
     PyBuffer_Release(&buf);
+    for (int k = 1; k < n; k++)
+        grow_free(&parts[k].v);
+    grow v = parts[0].v;
     size_t nv = v.len / 24;
     if (status < 0) {
         grow_free(&v);
@@ -1099,7 +1225,7 @@ static PyMethodDef methods[] = {
     {"read_off", read_off, METH_VARARGS, "read_off(buffer) -> (vertices, faces) or None"},
     {"read_ply_ascii", read_ply_ascii, METH_VARARGS,
      "read_ply_ascii(buffer, offset, nv, nf, props, x, y, z, x32, y32, z32) -> (vertices, faces) or None"},
-    {"read_stl_ascii", read_stl_ascii, METH_VARARGS, "read_stl_ascii(buffer) -> vertices (3F, 3) or None"},
+    {"read_stl_ascii", read_stl_ascii, METH_VARARGS, "read_stl_ascii(buffer, threads=1) -> vertices (3F, 3) or None"},
     {NULL, NULL, 0, NULL},
 };
 

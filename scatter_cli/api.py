@@ -16,9 +16,9 @@ from .attributes import AttributeMaker
 from .errors import ScatterUsageError
 from .methods import SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
-from .sampling import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
-from .sources import Source, ThinnedSource, make_source, thinned
-from .surface import Surface, apply_matrix, load_surface
+from .sampling import SamplePlan, chunk_ranges, run_chunks
+from .sources import Source, StratifiedSource, ThinnedSource, make_source, thinned
+from .surface import Surface, load_surface, transformed_columns
 
 METHODS = ("random", "stratified", "sobol")
 PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object", "orient"}
@@ -136,17 +136,19 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     check_options(count, density, seed, method, precision, chunk_size, radius, poisson, weight, oversampling,
                   exterior, stable)
     shard = check_shard(shard, poisson, radius)
-    plain = not weight and set(names) <= PLAIN_ATTRIBUTES  # no colours, UVs or normals to read
+    # no colours, UVs or normals to read: the fast readers may load it (smooth normals too,
+    # from files whose normals trimesh would compute from the faces)
+    plain = not weight and set(names) <= PLAIN_ATTRIBUTES | {"smooth-normal"}
     surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects,
-                                                                  plain=plain)
+                                                                  plain=plain, smooth="smooth-normal" in names)
     t1 = time.perf_counter()
     for message in surface._cache.pop("warnings", ()) if warn else ():
         warn(message)
     maker = AttributeMaker(surface, names, seed)
     if stable:
         source, plan, dtype, info = _stable_source(surface, count, density, radius, weight, seed, maker, precision,
-                                                   warn, t1 - t0)
-        chunk_size = chunk_size or DEFAULT_CHUNK
+                                                   warn, t1 - t0, exterior)
+        chunk_size = chunk_size or plan.default_chunk
     else:
         plan, weighting, area = plan_surface(surface, weight, warn)
         count = point_count(count, density, area, method)
@@ -178,6 +180,8 @@ def _filtered_source(source_of, surface, area, info, count, density, poisson, ra
         if density is not None:  # the exterior points among the plain run's
             source = _exterior_source(base, occluder, seed, area, info, candidates=count)
             count = source.count
+        elif isinstance(base, StratifiedSource):  # its strata are fixed by the count: no stream to filter
+            return _exterior_source(source_of, occluder, seed, area, info, subset=count)
     n = candidate_count(area, count, radius, surface.source, oversampling) if thin else count
     if not exterior:
         source = source_of(n)
@@ -199,27 +203,34 @@ def _occluder(surface, info):
     return occluder
 
 
-def _exterior_source(base, occluder, seed, area, info, count=None, candidates=None):
+def _exterior_source(base, occluder, seed, area, info, count=None, candidates=None, subset=None):
     """The exterior points of ``base``'s stream: exactly ``count``, or those among its
-    first ``candidates``."""
-    from .exterior import ExteriorSource
+    first ``candidates``; or, ``base`` being ``source_of``, ``subset`` of the exterior
+    points of one of its bounded runs (:class:`~scatter_cli.exterior.ExteriorSubset`)."""
+    from .exterior import ExteriorSource, ExteriorSubset
 
     t = time.perf_counter()
-    source = ExteriorSource(base, occluder, seed, area, count=count, candidates=candidates)
+    if subset is not None:
+        source = ExteriorSubset(base, occluder, seed, area, subset)
+    else:
+        source = ExteriorSource(base, occluder, seed, area, count=count, candidates=candidates)
     info.update(count=source.count, exterior=source.stats)
     info["timings"]["exterior"] = time.perf_counter() - t
+    info["timings"]["enclosure"] = source.enclosure_seconds
     return source
 
 
-def _stable_source(surface, count, density, radius, weight, seed, maker, precision, warn, load_time):
+def _stable_source(surface, count, density, radius, weight, seed, maker, precision, warn, load_time, exterior):
     """(source, used faces, dtype, info) of ``--stable``: the points come from
-    :class:`scatter_cli.stable.StableSource`."""
-    from .stable import StableSource, stable_weight
+    :class:`scatter_cli.stable.StableSource`; with ``--exterior``, its exterior arrivals
+    (the N earliest, those before D, or the candidates of ``--radius``), in arrival order."""
+    from .stable import StableSource, dart_thrown, stable_weight
 
     t = time.perf_counter()
     exact = density is None and radius is None
-    source = StableSource(surface, seed, count=(10000 if count is None else count) if exact else None,
-                          density=density, radius=radius, want_bary=maker.needs_bary,
+    n = 10000 if count is None else count
+    source = StableSource(surface, seed, count=n if exact and not exterior else None, density=density, radius=radius,
+                          stream=exact and exterior, want_bary=maker.needs_bary,
                           weight=stable_weight(surface, weight) if weight else None, max_candidates=MAX_CANDIDATES)
     plan = source.table  # the used faces, for the bounds that choose the precision
     if plan.non_finite and warn:
@@ -230,8 +241,14 @@ def _stable_source(surface, count, density, radius, weight, seed, maker, precisi
             "timings": {"load": load_time, "plan": time.perf_counter() - t}}
     if weight:
         info["weight"] = weight
+    if exterior:
+        occluder = _occluder(surface, info)
+        source = _exterior_source(source, occluder, seed, source.area, info, count=n if exact else None,
+                                  candidates=None if exact else source.count)
     if radius is not None:
         info["radius"] = radius
+        source = dart_thrown(source, radius)
+        info["count"] = source.count
     return source, plan, dtype, info
 
 
@@ -333,11 +350,6 @@ def check_options(count=None, density=None, seed=0, method="random", precision="
     if stable and poisson:
         raise ScatterUsageError("--stable does not combine with --poisson (--radius gives a Poisson-disk set that "
                                 "stays put)")
-    if stable and exterior:
-        raise ScatterUsageError("--stable does not combine with --exterior yet")
-    if exterior and method == "stratified":
-        raise ScatterUsageError("--exterior does not combine with --method stratified (its strata are fixed by N); "
-                                "use random or sobol")
     if count is not None:
         _check_sobol_count(method, count)
         if poisson:
@@ -379,21 +391,49 @@ def check_shard(shard, poisson=False, radius=None):
 
 
 def sampled_bounds(plan: SamplePlan):
-    """(2, 3) float64 min and max over the world-space vertices of the faces that get points."""
+    """(2, 3) float64 min and max over the world-space vertices of the faces that get points.
+
+    The instances of a geometry that use all its faces are bounded together: its
+    referenced vertices under all their matrices at once, (k, V) values at a time."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    whole = {}  # geometry -> matrices of the parts that use every face (None: identity)
     for part in plan.parts:
         if not part.count:  # an instance none of whose faces can get points
             continue
-        g = plan.surface.geometries[plan.surface.instances[part.instance].geometry]
-        faces = g.faces if part.faces is None else g.faces[part.faces]
-        referenced = np.zeros(len(g.vertices), dtype=bool)
-        referenced[faces.ravel()] = True
-        v = g.vertices if referenced.all() else g.vertices[referenced]
-        if part.matrix is not None:
-            v = apply_matrix(part.matrix, v)
-        lo = np.minimum(lo, [v[:, c].min() for c in range(3)])
-        hi = np.maximum(hi, [v[:, c].max() for c in range(3)])
+        gi = plan.surface.instances[part.instance].geometry
+        if part.faces is None:
+            whole.setdefault(gi, []).append(part.matrix)
+            continue
+        g = plan.surface.geometries[gi]
+        box = _box(_referenced(g.vertices, g.faces[part.faces]), [part.matrix])
+        lo, hi = np.minimum(lo, box[0]), np.maximum(hi, box[1])
+    for gi, matrices in whole.items():
+        g = plan.surface.geometries[gi]
+        box = _box(_referenced(g.vertices, g.faces), matrices)
+        lo, hi = np.minimum(lo, box[0]), np.maximum(hi, box[1])
     return np.stack([lo, hi])
+
+
+def _referenced(vertices, faces):
+    """The rows of ``vertices`` (V, 3) that ``faces`` (F, 3) use."""
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    return vertices if used.all() else vertices[used]
+
+
+def _box(v, matrices):
+    """(2, 3) min and max of points ``v`` (n, 3) under each of ``matrices`` ((4, 4) or
+    None for identity), as :func:`surface.apply_matrix` places them, bit for bit."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    if any(m is None for m in matrices):
+        lo, hi = v.min(axis=0), v.max(axis=0)
+    moved = [m[:3] for m in matrices if m is not None]
+    step = max(1, (1 << 20) // max(len(v), 1))
+    for s in range(0, len(moved), step):
+        cols = transformed_columns(np.stack(moved[s : s + step]), v)
+        lo = np.minimum(lo, [c.min() for c in cols])
+        hi = np.maximum(hi, [c.max() for c in cols])
+    return lo, hi
 
 
 def float32_error_bound(bounds) -> float:

@@ -13,7 +13,7 @@ import numpy as np
 
 from .errors import ScatterError
 from .samples import ATTRIBUTES
-from .surface import Surface, apply_matrix, cofactor
+from .surface import Surface, cofactors
 from .visuals import color_source, interpolate, uv_table, vertex_normal_table
 
 
@@ -29,13 +29,10 @@ class AttributeMaker:
         self._tables = {}
         # Geometries that receive points, in first-use order (instances share them).
         self._used = list(dict.fromkeys(i.geometry for i in surface.instances))
-        self._cof = {}
-        for k, inst in enumerate(surface.instances):
-            if inst.matrix is not None:
-                # cof(A) = det(A) inv(A)^T: with sign(det) it is |det| inv(A)^T, the normal
-                # transform that keeps normals outward under mirrors (glTF flips winding then).
-                a = inst.matrix[:3, :3]
-                self._cof[k] = cofactor(a) * (-1.0 if np.linalg.det(a) < 0 else 1.0)
+        # per instance: its geometry, whether it has a matrix, and the normal transform
+        self._geometry = np.array([i.geometry for i in surface.instances], dtype=np.int64)
+        self._moved = np.array([i.matrix is not None for i in surface.instances], dtype=bool)
+        self._cof = _normal_transforms([i.matrix for i in surface.instances])
         for name in self.names:
             getattr(self, "_prepare_" + name.replace("-", "_"), lambda: None)()
 
@@ -57,18 +54,19 @@ class AttributeMaker:
     # -- plumbing ---------------------------------------------------------------------
 
     def _groups(self, raw):
-        """[(instance k, rows (m,) int64)] for the instances present in the chunk."""
-        order = np.argsort(raw.instance, kind="stable")
-        bounds = np.searchsorted(raw.instance[order], np.arange(len(self.surface.instances) + 1))
-        return [(k, order[bounds[k] : bounds[k + 1]]) for k in range(len(bounds) - 1) if bounds[k + 1] > bounds[k]]
+        """[(geometry gi, rows (m,) int64)] for the geometries of the chunk's points."""
+        geometry = self._geometry[raw.instance]
+        order = np.argsort(geometry, kind="stable")
+        bounds = np.searchsorted(geometry[order], np.arange(len(self.surface.geometries) + 1))
+        return [(g, order[bounds[g] : bounds[g + 1]]) for g in range(len(bounds) - 1) if bounds[g + 1] > bounds[g]]
 
-    def _per_group(self, raw, groups, compute, width, dtype=np.float64):
-        """Run ``compute(k, face, bary) -> (m, width)`` per instance and scatter the rows."""
+    def _per_geometry(self, raw, groups, compute, width, dtype=np.float64):
+        """Run ``compute(gi, face, bary) -> (m, width)`` per geometry and scatter the rows."""
         if groups is None:
-            return compute(0, raw.face, raw.bary)
+            return compute(int(self._geometry[0]), raw.face, raw.bary)
         out = np.empty((len(raw.face), width), dtype=dtype)
-        for k, rows in groups:
-            out[rows] = compute(k, raw.face[rows], None if raw.bary is None else raw.bary[rows])
+        for gi, rows in groups:
+            out[rows] = compute(gi, raw.face[rows], None if raw.bary is None else raw.bary[rows])
         return out
 
     def _missing(self, name, what, geometry):
@@ -77,16 +75,21 @@ class AttributeMaker:
         hint = " (choose objects that have them with --object)" if self.surface.is_scene else ""
         raise ScatterError(f"{self.surface.source}: cannot write attribute '{name}': {where} no {what}{hint}")
 
-    def _geometry_of(self, k):
-        return self.surface.instances[k].geometry
-
-    def _to_world(self, k, n):
-        """Directions ``n`` (m, 3) of instance k's frame -> unit world-space normals."""
-        cof = self._cof.get(k)
-        if cof is not None:
-            n = apply_matrix(cof, n)
+    def _to_world(self, instance, n, rows=None):
+        """Directions ``n`` (m, 3) of the points' instances (m,) -> unit world-space normals,
+        in place. ``rows``: only those rows (default: all) are transformed and normalised."""
+        if rows is None:
+            rows = np.arange(len(n))
+        moved = rows[self._moved[instance[rows]]]
+        if len(moved):
+            cof = self._cof[instance[moved]]
+            v = n[moved]
+            for c, col in enumerate(_row_by_row(cof, v)):
+                n[moved, c] = col
+        m = n[rows]
         with np.errstate(invalid="ignore", divide="ignore"):
-            n /= np.sqrt(np.einsum("ij,ij->i", n, n))[:, None]
+            m /= np.sqrt(np.einsum("ij,ij->i", m, m))[:, None]
+        n[rows] = m
         return n
 
     # -- face, object, bary -----------------------------------------------------------
@@ -120,11 +123,8 @@ class AttributeMaker:
         return self._face_normals(raw, groups)
 
     def _face_normals(self, raw, groups):
-        def compute(k, face, bary):
-            n = self._tables["normal", self._geometry_of(k)][face]
-            return self._to_world(k, n) if k in self._cof else n
-
-        return self._per_group(raw, groups, compute, 3)
+        n = self._per_geometry(raw, groups, lambda gi, face, bary: self._tables["normal", gi][face], 3)
+        return self._to_world(raw.instance, n, np.flatnonzero(self._moved[raw.instance]))
 
     # -- orient: +Z onto the normal, then a spin about it from the seed ------------------
 
@@ -145,16 +145,17 @@ class AttributeMaker:
             self._tables["vn", gi] = vertex_normal_table(self.surface.geometries[gi].mesh)
 
     def _smooth_normals(self, raw, groups):
-        def compute(k, face, bary):
-            gi = self._geometry_of(k)
-            n = interpolate(self._tables["vn", gi], self.surface.geometries[gi].faces, face, bary)
-            n = self._to_world(k, n)
-            bad = ~np.isfinite(n[:, 0]) | (np.abs(n).max(axis=1) < 0.5)  # unit vectors have a component >= 1/sqrt(3)
-            if bad.any():
-                n[bad] = self._to_world(k, self._tables["normal", gi][face[bad]].copy())
-            return n
+        def compute(gi, face, bary):
+            return interpolate(self._tables["vn", gi], self.surface.geometries[gi].faces, face, bary)
 
-        return self._per_group(raw, groups, compute, 3)
+        n = self._to_world(raw.instance, self._per_geometry(raw, groups, compute, 3))
+        bad = np.flatnonzero(~np.isfinite(n[:, 0]) | (np.abs(n).max(axis=1) < 0.5))  # unit vectors have a component >= 1/sqrt(3)
+        if len(bad):
+            sub = raw.take(bad)
+            flat = self._per_geometry(sub, None if groups is None else self._groups(sub),
+                                      lambda gi, face, bary: self._tables["normal", gi][face], 3)
+            n[bad] = self._to_world(sub.instance, flat)
+        return n
 
     # -- uv -----------------------------------------------------------------------------
 
@@ -166,11 +167,10 @@ class AttributeMaker:
             self._tables["uv", gi] = uv
 
     def _make_uv(self, raw, real_dtype, groups):
-        def compute(k, face, bary):
-            gi = self._geometry_of(k)
+        def compute(gi, face, bary):
             return interpolate(self._tables["uv", gi], self.surface.geometries[gi].faces, face, bary)
 
-        return self._per_group(raw, groups, compute, 2).astype(real_dtype)
+        return self._per_geometry(raw, groups, compute, 2).astype(real_dtype)
 
     # -- color --------------------------------------------------------------------------
 
@@ -185,8 +185,34 @@ class AttributeMaker:
             self._tables["color", gi] = src
 
     def _make_color(self, raw, real_dtype, groups):
-        def compute(k, face, bary):
-            return self._tables["color", self._geometry_of(k)].colors(face, bary)
+        def compute(gi, face, bary):
+            return self._tables["color", gi].colors(face, bary)
 
-        c = self._per_group(raw, groups, compute, 4)
+        c = self._per_geometry(raw, groups, compute, 4)
         return np.rint(np.clip(c, 0.0, 255.0)).astype(np.uint8)
+
+
+def _normal_transforms(matrices):
+    """(K, 3, 3) float64 normal transform of each instance's (4, 4) matrix (rows of None
+    matrices are left zero): cof(A) = det(A) inv(A)^T, times sign(det A), which is
+    |det| inv(A)^T, the transform that keeps normals outward under mirrors (glTF flips
+    winding then)."""
+    out = np.zeros((len(matrices), 3, 3))
+    moved = [k for k, m in enumerate(matrices) if m is not None]
+    if moved:
+        a = np.stack([matrices[k][:3, :3] for k in moved])
+        out[moved] = cofactors(a) * np.where(np.linalg.det(a) < 0, -1.0, 1.0)[:, None, None]
+    return out
+
+
+def _row_by_row(m, v):
+    """Columns of ``m[i] @ v[i]`` for m (n, 3, 3), v (n, 3): [x, y, z] each (n,), with the
+    element-wise operations of :func:`surface.apply_matrix` in its order (the same bits)."""
+    x, y, z = (v[:, c] for c in range(3))
+    out = []
+    for c in range(3):
+        col = m[:, c, 0] * x
+        col += m[:, c, 1] * y
+        col += m[:, c, 2] * z
+        out.append(col)
+    return out

@@ -14,14 +14,17 @@ Dask is imported here only: the optional extra ``dask``.
 
 from __future__ import annotations
 
+import itertools
 import os
 import threading
+import time
 import uuid
 
 from .errors import ScatterError, ScatterUsageError
 
 _local = threading.local()
-WINDOW_PER_THREAD = 4  # tasks queued per worker thread: enough to keep them busy, not millions
+WINDOW_PER_THREAD = 16  # tasks in flight per worker thread: enough to keep them busy, not millions
+GATHER_EVERY = 0.2  # seconds a finished task's record may wait to be fetched with others
 
 
 def _import_distributed():
@@ -46,8 +49,13 @@ def connect(scheduler=None):
 
 def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None, max_memory=None,
              skip_existing=False, done):
-    """Run the jobs ``(index, input, output)`` as tasks; ``done(index, record)`` as each ends."""
-    from .worker import name_the_file, record
+    """Run the jobs ``(index, input, output)`` as tasks; ``done(index, record)`` as each ends.
+
+    At most ``WINDOW_PER_THREAD`` tasks per worker thread are in flight, submitted in
+    blocks (one message to the scheduler per block, not one per mesh). The records of
+    finished tasks are fetched together (one request for many), at most
+    ``GATHER_EVERY`` seconds late or one completion late, whichever is later.
+    """
     from .writers import infer_format
 
     distributed = _import_distributed()
@@ -55,44 +63,68 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
     if own:
         client = connect(scheduler)
     batch_id = uuid.uuid4().hex[:8]
-    futures = {}
+    jobs = {}  # future -> (index, input, output), until its record is in
     try:
         window = WINDOW_PER_THREAD * max(1, sum(client.nthreads().values()))
         pending = distributed.as_completed(loop=client.loop)
 
-        def submit():
-            job = next(jobs_iter, None)
-            if job is None:
-                return False
-            index, input, output = job
-            future = client.submit(sample_task, input, output, infer_format(output, fmt), setup, timeout,
-                                   max_memory, skip_existing, key=f"scatter-{batch_id}-{index}", pure=False)
-            futures[future] = job
-            pending.add(future)
-            return True
+        def refill():
+            block = list(itertools.islice(jobs_iter, window - pending.count()))
+            if block:
+                futures = client.map(sample_task, [j[1] for j in block], [j[2] for j in block],
+                                     [infer_format(j[2], fmt) for j in block],
+                                     key=[f"scatter-{batch_id}-{j[0]}" for j in block], pure=False, setup=setup,
+                                     timeout=timeout, max_memory=max_memory, skip_existing=skip_existing)
+                jobs.update(zip(futures, block))
+                pending.update(futures)
 
-        for _ in range(window):
-            if not submit():
-                break
-        for future in pending:
-            index, input, output = futures.pop(future)
-            try:
-                rec = future.result()
-            except distributed.KilledWorker:  # the task took down every worker it ran on
-                rec = record(input, output, "failed", name_the_file("every Dask worker that sampled it was lost", input))
-            except Exception as exc:  # the task could not run there (scatter_cli missing on a worker?)
-                rec = record(input, output, "failed", name_the_file(f"the Dask task failed: {type(exc).__name__}: {exc}", input))
-            done(index, rec)
-            submit()
+        refill()
+        ready, since = [], 0.0
+        for finished in pending.batches():
+            if not ready:
+                since = time.monotonic()
+            ready.extend(finished)
+            if pending.count() <= window // 2:
+                refill()
+            if pending.is_empty() or len(ready) >= window // 2 or time.monotonic() - since >= GATHER_EVERY:
+                for future, rec in zip(ready, _records(client, ready, distributed)):
+                    index, input, output = jobs.pop(future)
+                    done(index, rec if isinstance(rec, dict) else _lost(rec, input, output, distributed))
+                ready = []
     except BaseException:
-        client.cancel(list(futures))
+        client.cancel(list(jobs))
         raise
     finally:
         if own:
             client.close()
 
 
-def sample_task(input, output, fmt, setup, timeout, max_memory, skip_existing):
+def _records(client, futures, distributed):
+    """The records of finished tasks, fetched in one request; for a task that gave none,
+    its exception."""
+    got = client.gather({f.key: f for f in futures}, errors="skip")
+    return [got.get(f.key) or _exception(f, distributed) for f in futures]
+
+
+def _exception(future, distributed):
+    if future.status == "error":
+        return future.exception()
+    return distributed.CancelledError(future.key)
+
+
+def _lost(exc, input, output, distributed):
+    """The failure record of a task that gave no record: its workers were lost, or it
+    could not run there."""
+    from .worker import name_the_file, record
+
+    if isinstance(exc, distributed.KilledWorker):
+        why = f"the Dask worker sampling it was lost {exc.allowed_failures + 1} times (Dask's allowed-failures)"
+    else:
+        why = f"the Dask task failed: {type(exc).__name__}: {exc}"
+    return record(input, output, "failed", name_the_file(why, input))
+
+
+def sample_task(input, output, fmt, *, setup, timeout, max_memory, skip_existing):
     """The report record of one mesh, sampled on this Dask worker (see :mod:`scatter_cli.worker`)."""
     from .worker import Lane
 

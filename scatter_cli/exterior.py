@@ -26,6 +26,10 @@ _TAG = 0x4558_5452  # key of the rotation stream: independent of the sampling st
 # When this many candidates in a row are all hidden, the surface has no exterior part
 # that sampling can find.
 GIVE_UP = 1 << 20
+# Look for enclosed faces (:mod:`.enclosure`: their candidates then cast no ray) when
+# the hidden candidates the first block predicts for the run number at least the faces
+# over this: finding them costs about as much, a face, as 66 rays over this (measured).
+ENCLOSE_FACES_PER_HIDDEN = 80
 
 
 class ShortStream(ScatterError):
@@ -40,11 +44,13 @@ def rotation_uniforms(seed: int, start: int, stop: int):
     return np.random.Generator(bits).random((stop - start, 3))
 
 
-def classify(occluder, chunk: RawChunk, seed: int):
-    """((n,) bool exterior, rays cast) for the candidates of ``chunk``."""
+def classify(occluder, chunk: RawChunk, seed: int, u=None):
+    """((n,) bool exterior, rays cast) for the candidates of ``chunk``; ``u`` (n, 3): their
+    ray rotations' uniforms, when the source draws them (else from the candidate's index)."""
     normals = occluder.face_normals(chunk.face, chunk.instance)
-    u = rotation_uniforms(seed, chunk.start, chunk.start + len(chunk.points))
-    return occluder.exterior(chunk.points, normals, u)
+    if u is None:
+        u = rotation_uniforms(seed, chunk.start, chunk.start + len(chunk.points))
+    return occluder.exterior(chunk.points, normals, u, occluder.is_enclosed(chunk.face, chunk.instance))
 
 
 class ExteriorSource:
@@ -60,12 +66,15 @@ class ExteriorSource:
     def __init__(self, base, occluder, seed, total_area, count=None, candidates=None, threads=None):
         self.base, self.occluder, self.seed = base, occluder, seed
         t = time.perf_counter()
+        self.enclosure_seconds = 0.0
         self._bits, self._sizes, kept, rays = [], [], [0], 0
         limit = math.inf if candidates is None else candidates
         threads = threads or native.worker_count()
         faces_total = len(occluder.normals)
         hit_faces = np.zeros(faces_total, dtype=bool)
         tried_faces = np.zeros(faces_total, dtype=bool)
+        if occluder.enclosed is None:
+            rays += self._enclose_if_worth_it(count, limit)
         with ThreadPoolExecutor(max_workers=threads) as pool:
             block = 0
             while (count is None or kept[-1] < count) and block * BLOCK < limit:
@@ -100,8 +109,28 @@ class ExteriorSource:
             "rays_per_candidate": rays / tried if tried else 0.0,
             "faces_seen_exterior": int(np.count_nonzero(hit_faces)),
             "faces_seen_hidden_only": int(np.count_nonzero(tried_faces & ~hit_faces)),
+            "faces_enclosed": 0 if occluder.enclosed is None else int(np.count_nonzero(occluder.enclosed)),
             "seconds": time.perf_counter() - t,
         }
+
+    def _enclose_if_worth_it(self, count, limit):
+        """Find the enclosed faces when the hidden candidates that the first block
+        predicts for the run justify it; the prediction counts the block's candidates
+        whose two normal rays are both blocked (a few of those may yet get out). Returns
+        the rays cast."""
+        stop = int(min(BLOCK, limit))
+        if stop <= 0:
+            return 0
+        chunk = self.base.draw(0, stop)
+        normals = self.occluder.face_normals(chunk.face, chunk.instance)
+        blocked, rays = self.occluder.normals_blocked(chunk.points, normals)
+        hidden = int(np.count_nonzero(blocked))
+        total = limit if count is None else min(limit, count * stop / max(stop - hidden, 1))
+        if hidden and hidden / stop * total * ENCLOSE_FACES_PER_HIDDEN >= len(self.occluder.normals):
+            t = time.perf_counter()
+            self.occluder.enclose()
+            self.enclosure_seconds = time.perf_counter() - t
+        return rays
 
     @staticmethod
     def _blocks_to_go(count, kept, done, threads):
@@ -115,7 +144,9 @@ class ExteriorSource:
     def _classify_block(self, b, limit):
         start, stop = b * BLOCK, int(min((b + 1) * BLOCK, limit))
         chunk = self.base.draw(start, stop)
-        mask, rays = classify(self.occluder, chunk, self.seed)
+        # a source whose candidates carry their own streams (--stable) draws their rotations
+        u = self.base.ray_uniforms(start, stop) if hasattr(self.base, "ray_uniforms") else None
+        mask, rays = classify(self.occluder, chunk, self.seed, u)
         return mask, rays, self.occluder.offsets[chunk.instance] + chunk.face
 
     def draw(self, start: int, stop: int) -> RawChunk:
@@ -129,4 +160,42 @@ class ExteriorSource:
             chunk = self.base.draw(b * BLOCK, b * BLOCK + self._sizes[b])
             parts.append(chunk.take(index))
         out = RawChunk.join(parts) if parts else self.base.draw(0, 0)
+        return RawChunk(start, out.points, out.face, out.instance, out.bary)
+
+
+_SUBSET_TAG = 0x4558_5355  # key of the subset choice: independent of the other streams
+
+
+class ExteriorSubset:
+    """Exactly ``count`` exterior points from a source whose points depend on its count
+    (``--method stratified``): the exterior candidates of the run of M that
+    ``source_of(M)`` gives (M = ``count``, then, while they are fewer than ``count``, M
+    grown by the fraction found, plus 2 %), then ``count`` of them chosen uniformly at
+    random without replacement (keyed by the seed), kept in stream order.
+    """
+
+    def __init__(self, source_of, occluder, seed, total_area, count, threads=None):
+        m, passes = max(count, 1), 0
+        while True:
+            self.inner = ExteriorSource(source_of(m), occluder, seed, total_area, candidates=m, threads=threads)
+            passes += 1
+            found = self.inner.count
+            if found >= count:
+                break
+            if found == 0 and m >= GIVE_UP:
+                raise ScatterError(f"no exterior surface found: the {m:,} candidates are all hidden")
+            m = math.ceil(m * count / max(found, 1) * 1.02) + 64
+        bits = np.random.PCG64DXSM(np.random.SeedSequence([_SUBSET_TAG, seed]))
+        self.chosen = np.sort(np.random.Generator(bits).choice(found, count, replace=False))
+        self.count, self.area = count, self.inner.area
+        self.enclosure_seconds = self.inner.enclosure_seconds
+        self.stats = dict(self.inner.stats, candidate_runs=passes)
+
+    def draw(self, start: int, stop: int) -> RawChunk:
+        """Output points ``start .. stop - 1``."""
+        pick = self.chosen[start:stop]
+        if not len(pick):
+            out = self.inner.draw(0, 0)
+        else:
+            out = self.inner.draw(int(pick[0]), int(pick[-1]) + 1).take(pick - pick[0])
         return RawChunk(start, out.points, out.face, out.instance, out.bary)

@@ -31,12 +31,13 @@ class _Unsure(Exception):
     """Something the reader does not handle exactly as trimesh does: hand the file over."""
 
 
-def read_glb(data):
+def read_glb(data, without_normals=False):
     """(geometries [(name, vertices (V, 3) float64, faces (F, 3) int64)], instances
-    [(name, geometry index, (4, 4) float64 world matrix or None)]) of a GLB, or None."""
+    [(name, geometry index, (4, 4) float64 world matrix or None)]) of a GLB, or None.
+    ``without_normals``: also None when a placed primitive has a NORMAL attribute."""
     try:
         doc, buffers = _chunks(data)
-        return _Scene(doc, buffers).read()
+        return _Scene(doc, buffers).read(without_normals)
     except (_Unsure, ValueError, TypeError, KeyError, IndexError, AttributeError, OverflowError, RecursionError):
         return None
 
@@ -99,7 +100,7 @@ class _Scene:
         self.doc, self.buffers = doc, buffers
         self.views = [self._view(v) for v in _list(doc, "bufferViews")]
         self.accessors = [self._accessor(a) for a in _list(doc, "accessors")]
-        self.primitives = []  # per mesh: [(geometry name, POSITION accessor, indices accessor or None)]
+        self.primitives = []  # per mesh: [(geometry name, POSITION, indices or None, has NORMAL)]
         used = {}
         counts = {}
         for mesh in _list(doc, "meshes"):
@@ -162,7 +163,7 @@ class _Scene:
                 raise _Unsure  # trimesh flips the second column
         name = unique_name(_name(mesh.get("name", "GLTF")), used, counts)
         used[name] = True
-        return name, position, indices
+        return name, position, indices, "NORMAL" in attributes
 
     def _array(self, k):
         """Accessor k as an (count, width) array viewing the file."""
@@ -174,14 +175,16 @@ class _Scene:
         rows = np.lib.stride_tricks.as_strided(raw, (count, width * dtype.itemsize), (stride, 1))
         return np.ascontiguousarray(rows).view(dtype)
 
-    def read(self):
+    def read(self, without_normals=False):
         edges = self._edges()
         geometries, index, instances = [], {}, []
         parent = {to: (frm, m) for frm, to, m, _ in edges}
         for frm, to, m, primitive in edges:
             if primitive is None:
                 continue
-            name, position, indices = primitive
+            name, position, indices, normals = primitive
+            if normals and without_normals:
+                raise _Unsure  # trimesh keeps the file's normals
             if name not in index:
                 index[name] = len(geometries)
                 vertices = self._array(position).astype(np.float64)

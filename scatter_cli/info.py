@@ -86,6 +86,7 @@ def exterior_report(surface, seed=0) -> dict:
         "faces_exterior": int(np.sum(seen == len(FACE_PROBES))),
         "faces_mixed": int(np.sum((seen > 0) & (seen < len(FACE_PROBES)))),
         "faces_hidden": int(np.sum(seen == 0)),
+        "faces_enclosed": occluder.enclose() if st["exterior_candidates"] < st["candidates"] else 0,
     }
 
 
@@ -151,7 +152,7 @@ def format_text(report) -> str:
             f"exterior area  {ext['area']:.6g} ± {ext['area_se']:.2g} ({100 * ext['fraction']:.2f} %, "
             f"from {ext['candidates']:,} uniform points)",
             f"exterior faces {ext['faces_exterior']:,} all probes out, {ext['faces_mixed']:,} some, "
-            f"{ext['faces_hidden']:,} none (4 probes a face)",
+            f"{ext['faces_hidden']:,} none (4 probes a face); {ext['faces_enclosed']:,} enclosed in a closed shell",
         ]
     if report["instances"] > 1 or report["geometries"] > 1:
         lines += [f"  [{o['index']}] {o['name']} ({o['geometry']}, {o['faces']:,} faces)" for o in report["objects"]]

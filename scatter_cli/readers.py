@@ -14,18 +14,20 @@ import os
 
 import numpy as np
 
-from .native import kernel
+from .native import kernel, worker_count
 from .plyread import _TYPES, _contents
 
 _STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
 _MAX_HEADER = 1 << 16
 
 
-def read_mesh(path, file_type):
+def read_mesh(path, file_type, smooth=False):
     """A list of (vertices (V, 3) float64, faces (F, 3) int64), one per geometry in
     trimesh's order; for a GLB, a scene: (geometries [(name, vertices, faces)], instances
     [(name, geometry index, (4, 4) matrix or None)]) (gltfread.py); or None (hand the
-    file to trimesh)."""
+    file to trimesh). ``smooth``: hand over files with normals or UVs of their own (the
+    caller computes smooth normals from the faces, as trimesh does for the others).
+    """
     reader = _READERS.get(file_type)
     if reader is None:
         return None
@@ -35,13 +37,41 @@ def read_mesh(path, file_type):
     except OSError:
         return None
     try:
-        return reader(data)
+        if smooth and not _normals_from_faces(data, file_type):
+            return None
+        return reader(data, smooth) if file_type == "glb" else reader(data)
     finally:
         if hasattr(data, "close"):
             try:
                 data.close()
             except BufferError:  # an array still views the mapping: it closes with it
                 pass
+
+
+def _normals_from_faces(data, file_type):
+    """Whether trimesh's mesh of this file has its vertex normals computed from the faces:
+    no normals of the file's own, and no UVs that split the vertices (OBJ ``vt``)."""
+    if file_type == "obj":  # any vt or vn, even in a name or comment: trimesh decides
+        return data.find(b"vt") < 0 and data.find(b"vn") < 0
+    if file_type == "ply":
+        names = _vertex_properties(bytes(data[:_MAX_HEADER]))
+        return names is not None and set(names) <= {"x", "y", "z", "red", "green", "blue", "alpha"}
+    return file_type in ("stl", "off", "glb")  # GLB: the reader looks for NORMAL attributes
+
+
+def _vertex_properties(head):
+    """The names of a PLY's vertex properties (from its header), or None."""
+    end = head.find(b"end_header")
+    if end < 0:
+        return None
+    names, element = [], None
+    for line in head[:end].split(b"\n"):
+        words = line.split()
+        if words[:1] == [b"element"]:
+            element = words[1:2]
+        elif words[:1] == [b"property"] and element == [b"vertex"]:
+            names.append(words[-1].decode("ascii", "replace"))
+    return names
 
 
 def _obj(data):
@@ -72,7 +102,7 @@ def _stl(data):
             vertices.reshape(count, 3, 3)[...] = corners  # one pass from the strided records
             return [(vertices, np.arange(3 * count, dtype=np.int64).reshape(-1, 3))]
     c = kernel("_creaders")
-    vertices = c and c.read_stl_ascii(data)
+    vertices = c and c.read_stl_ascii(data, worker_count())  # large files: parts on several threads
     if vertices is None or vertices is False:
         return None
     return [(vertices, np.arange(len(vertices), dtype=np.int64).reshape(-1, 3))]
@@ -135,10 +165,10 @@ def _ascii_layout(head):
     return (end + len(b"end_header\n"), n_vertex, n_face, len(vprops), *columns, *(int(t == "f4") for t in kinds))
 
 
-def _glb(data):
+def _glb(data, smooth=False):
     from .gltfread import read_glb
 
-    return read_glb(data)
+    return read_glb(data, without_normals=smooth)
 
 
 _READERS = {"obj": _obj, "off": _off, "stl": _stl, "ply": _ply, "glb": _glb}

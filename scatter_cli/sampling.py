@@ -16,7 +16,7 @@ import numpy as np
 
 from . import native
 from .errors import ScatterError
-from .surface import Surface, apply_matrix, cofactor, corners, doubled_areas
+from .surface import Surface, apply_matrix, cofactor, cofactors, corners, face_cross, transformed_columns
 from .warps import square_to_triangle
 
 DRAWS_PER_POINT = 3
@@ -158,14 +158,18 @@ class SamplePlan:
         instanced geometry are stored once), and the (P, 3, 4) placement of each part."""
         base = self.parts[0].tri.base
         self._corners = base if base is not None else self.parts[0].tri
-        rows, faces = [], []
+        origin = self._corners.__array_interface__["data"][0]
+        first = {}  # a geometry's row in the shared corner array, by its view
         for p in self.parts:
-            first = (p.tri.__array_interface__["data"][0] - self._corners.__array_interface__["data"][0]) // (9 * 8)
-            local = np.arange(len(p.tri)) if p.faces is None else p.faces
-            rows.append(first + local)
-            faces.append(local)
-        self._rows = np.concatenate(rows) if rows else np.empty(0, np.int64)
-        self._faces = np.concatenate(faces) if faces else np.empty(0, np.int64)
+            if id(p.tri) not in first:
+                first[id(p.tri)] = (p.tri.__array_interface__["data"][0] - origin) // (9 * 8)
+        counts = np.diff(self.offsets)
+        local = np.arange(self.offsets[-1], dtype=np.int64) - np.repeat(self.offsets[:-1], counts)
+        for k, p in enumerate(self.parts):
+            if p.faces is not None:
+                local[self.offsets[k] : self.offsets[k + 1]] = p.faces
+        self._rows = local + np.repeat(np.array([first[id(p.tri)] for p in self.parts], dtype=np.int64), counts)
+        self._faces = local
         self._instance = np.asarray([p.instance for p in self.parts], dtype=np.int64)
         eye = np.eye(4)
         self._matrix = np.stack([(eye if p.matrix is None else p.matrix)[:3] for p in self.parts])
@@ -265,18 +269,23 @@ def _stream(seed, start):
 
 def _parts(surface: Surface, weights):
     """Per-instance usable faces and twice their (world-space, weighted) areas."""
+    if _kernel is not None and len(surface.instances) == 1:
+        # One mesh and the kernel: areas and points straight from vertices and faces, with
+        # no (F, 9) corner table (72 bytes a face to build and to keep).
+        inst = surface.instances[0]
+        tris, doubled, clean = None, [_doubled_areas(surface.geometries[inst.geometry], inst.matrix)], [False]
+    else:
+        tris = _geometry_corners(surface)
+        doubled, clean = _instance_areas(surface, tris)
     parts, areas = [], []
-    # One mesh and the kernel: areas and points straight from vertices and faces, with no
-    # (F, 9) corner table (72 bytes a face to build and to keep).
-    tris = None if _kernel is not None and len(surface.instances) == 1 else _geometry_corners(surface)
     skipped = 0
     for k, inst in enumerate(surface.instances):
         g = surface.geometries[inst.geometry]
-        a = _doubled_areas(g, None if tris is None else tris[inst.geometry], inst.matrix)
+        a, ok_all = doubled[k], clean[k]
         if weights is not None:
-            a = a * weights(k, inst)
+            a, ok_all = a * weights(k, inst), False
         faces = None
-        if not (len(a) and a.min() > 0 and a.max() < np.inf):  # two reductions check most meshes
+        if not ok_all and not (len(a) and a.min() > 0 and a.max() < np.inf):  # two reductions check most meshes
             finite = np.isfinite(a)
             skipped += int(len(a) - np.count_nonzero(finite))
             ok = finite & (a > 0)
@@ -286,16 +295,65 @@ def _parts(surface: Surface, weights):
     return parts, (areas[0] if len(areas) == 1 else np.concatenate(areas) if areas else np.empty(0)), skipped
 
 
-def _doubled_areas(g, tri, matrix):
-    """(F,) float64 twice the world-space face areas of geometry ``g``, from its corner
-    table ``tri`` (F, 9), or by the kernel from its vertices and faces when tri is None."""
-    if tri is None:
-        out = np.empty(len(g.faces))
-        cof = None if matrix is None else np.ascontiguousarray(cofactor(matrix[:3, :3]))
-        in_blocks(lambda i, j: _kernel.areas(g.vertices, g.faces[i:j], cof, out[i:j]), len(out))
-        return out
+def _doubled_areas(g, matrix):
+    """(F,) float64 twice the world-space face areas of geometry ``g``, by the kernel from
+    its vertices and faces (as :func:`surface.doubled_areas` gives them, bit for bit)."""
+    out = np.empty(len(g.faces))
+    cof = None if matrix is None else np.ascontiguousarray(cofactor(matrix[:3, :3]))
+    in_blocks(lambda i, j: _kernel.areas(g.vertices, g.faces[i:j], cof, out[i:j]), len(out))
+    return out
+
+
+def _instance_areas(surface, tris):
+    """([(F,) float64], [bool]): per instance, twice its world-space face areas (as
+    :func:`surface.doubled_areas` gives them, bit for bit) and whether all are positive
+    and finite. The instances of one geometry are computed together, (k, F) at a time:
+    one face-cross table per geometry, the instance cofactors applied in one go."""
+    by_geometry = {}
+    for k, inst in enumerate(surface.instances):
+        by_geometry.setdefault(inst.geometry, []).append(k)
+    n = len(surface.instances)
+    areas, clean = [None] * n, [False] * n
     with np.errstate(invalid="ignore", over="ignore"):
-        return np.concatenate(in_blocks(lambda i, j: doubled_areas(tri[i:j], matrix), len(tri)))
+        for gi, ks in by_geometry.items():
+            tri = tris[gi]
+            cross = np.concatenate(in_blocks(lambda i, j: face_cross(tri[i:j]), len(tri)))
+            still = [k for k in ks if surface.instances[k].matrix is None]
+            moved = [k for k in ks if surface.instances[k].matrix is not None]
+            if still:
+                a = _norms(list(cross.T))
+                good = bool(len(a) and a.min() > 0 and a.max() < np.inf)
+                for k in still:
+                    areas[k], clean[k] = a, good
+            if moved:
+                table = _moved_norms(cofactors(np.stack([surface.instances[k].matrix for k in moved])), cross)
+                good = ((table.min(axis=1) > 0) & (table.max(axis=1) < np.inf)).tolist() if len(tri) else [False] * len(moved)
+                for r, k in enumerate(moved):
+                    areas[k], clean[k] = table[r], good[r]
+    return areas, clean
+
+
+def _moved_norms(cof, cross):
+    """(k, F) float64 lengths of ``cross`` (F, 3) under each cofactor matrix of ``cof``
+    (k, 3, 3), in blocks of instances of about 2^20 values."""
+    out = np.empty((len(cof), len(cross)))
+    step = max(1, (1 << 20) // max(len(cross), 1))
+
+    def fill(i, j):
+        for s in range(i, j, step):
+            e = min(s + step, j)
+            out[s:e] = _norms(transformed_columns(cof[s:e], cross))
+
+    in_blocks(fill, len(cof), min_block=step)
+    return out
+
+
+def _norms(cols):
+    """sqrt(x^2 + y^2 + z^2) of three columns, summed in this order as the kernel sums it."""
+    s = cols[0] * cols[0]
+    s += cols[1] * cols[1]
+    s += cols[2] * cols[2]
+    return np.sqrt(s, out=s)
 
 
 def _geometry_corners(surface):

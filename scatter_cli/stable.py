@@ -23,13 +23,14 @@ work is O(N + F): per face a key and the blocks up to the threshold, per arrival
 from __future__ import annotations
 
 import math
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from . import native
 from .errors import ScatterError, ScatterUsageError
-from .sampling import RawChunk, in_blocks, interpolate_corners
+from .sampling import DEFAULT_CHUNK, LARGE_MESH_CHUNK, SORT_FACES, RawChunk, in_blocks, interpolate_corners
 from .surface import apply_matrix
 from .warps import square_to_triangle
 
@@ -46,6 +47,8 @@ LANES = 4  # per arrival: time, then up to three warp inputs
 FACE_BLOCK = 1 << 16  # faces keyed at a time
 _kernel = native.kernel("_cstable")
 ARRIVAL_BLOCK = 1 << 20  # time blocks expanded at a time
+ROOM_SDS = 8.0  # a face range's arrival arrays hold its mean count plus this many standard deviations
+RAY_LANE = 1 << 32  # lanes RAY_LANE + 4 j + k of a block: arrival j's ray rotation (--exterior)
 
 
 def _poisson_cdf():
@@ -167,43 +170,28 @@ class FaceTable:
     def __init__(self, surface, seed, weight=None):
         self.surface = surface
         self._columns = {}
-        parts, faces, rots, keys, rates, areas = [], [], [], [], [], []
         self.non_finite = 0
+        got = []  # per instance: (used faces (None: all), rot, key, rate, area of its usable faces)
         for k, inst in enumerate(surface.instances):
-            g = surface.geometries[inst.geometry]
-            w_faces = None if weight is None else weight.face_weights_of(k, inst)
-            world = self.world_columns(k) if _kernel is None or weight is not None else None
-            if world is None:
-                for got in self._kernel_faces(k, seed):
-                    self._keep(k, *got, parts, faces, rots, keys, rates, areas)
-            for i in range(0, len(g.faces) if world is not None else 0, FACE_BLOCK):
-                j = min(i + FACE_BLOCK, len(g.faces))
-                rot, cols = canonical([np.take(world[a], g.faces[i:j, c]) for c in range(3) for a in range(3)])
-                w = None
-                if w_faces is not None:
-                    w = _rotated_mean(w_faces[i:j], rot) if w_faces.ndim == 2 else w_faces[i:j]
-                with np.errstate(invalid="ignore", over="ignore"):
-                    area = 0.5 * doubled_areas(cols)
-                    rate = area if w is None else area * w
-                good = area[np.isfinite(area) & (area > 0)]
-                areas.append(float(np.sum(good)))
-                finite = np.isfinite(rate)
-                self.non_finite += int(len(rate) - np.count_nonzero(finite))
-                ok = np.flatnonzero(finite & (rate > 0))
-                if not len(ok):
-                    continue
-                parts.append(np.full(len(ok), k, dtype=np.int32))
-                faces.append(ok + i)
-                rots.append(rot[ok].astype(np.uint8))
-                keys.append(face_keys([x[ok] for x in cols], seed, None if w is None else w[ok]))
-                rates.append(rate[ok])
+            if _kernel is not None and weight is None:
+                got.append(self._kernel_faces(k, seed))
+            else:
+                got.append(self._numpy_faces(k, seed, weight))
             if inst.matrix is not None and len(surface.instances) > 1:
                 self._columns.pop(k, None)  # moved vertices are made again for the few faces drawn
                 self._columns.pop(("v", k), None)
-        cat = lambda xs, dt: np.concatenate(xs) if xs else np.empty(0, dtype=dt)  # noqa: E731
-        self.part, self.face, self.rot = cat(parts, np.int32), cat(faces, np.int64), cat(rots, np.uint8)
-        self.key, self.rate = cat(keys, np.uint64), cat(rates, np.float64)
-        self.area = float(np.sum(areas))
+        # one instance with every face used: used face k is face k (no part or face table)
+        self.identity = len(got) == 1 and got[0][0] is None
+        if len(got) == 1:
+            self._face, self.rot, self.key, self.rate = got[0][:4]
+            self._part = None
+        else:
+            cat = lambda xs, dt: np.concatenate(xs) if xs else np.empty(0, dtype=dt)  # noqa: E731
+            self._face = cat([np.arange(len(g[2])) if g[0] is None else g[0] for g in got], np.int64)
+            self._part = cat([np.full(len(g[2]), k, dtype=np.int32) for k, g in enumerate(got)], np.int32)
+            self.rot, self.key = cat([g[1] for g in got], np.uint8), cat([g[2] for g in got], np.uint64)
+            self.rate = cat([g[3] for g in got], np.float64)
+        self.area = float(sum(g[4] for g in got))
         self.total = float(np.sum(self.rate)) if len(self.rate) else 0.0
         if weight is not None and self.area > 0 and self.total == 0:
             raise ScatterError(f"{surface.source}: --weight: the weight is zero over the whole surface")
@@ -213,36 +201,70 @@ class FaceTable:
     def __len__(self):
         return len(self.key)
 
+    @property
+    def default_chunk(self):
+        """Points a chunk when the caller does not say: as for the random method's plan
+        (larger chunks on a large mesh, whose points the kernel places in face order)."""
+        return LARGE_MESH_CHUNK if _kernel is not None and len(self) >= SORT_FACES else DEFAULT_CHUNK
+
+    @property
+    def face(self):
+        """(U,) int64: used face k is face ``face[k]`` of its geometry."""
+        if self._face is None:
+            self._face = np.arange(len(self.key))
+        return self._face
+
+    @property
+    def part(self):
+        """(U,) int32: the instance of used face k."""
+        if self._part is None:
+            self._part = np.zeros(len(self.key), dtype=np.int32)
+        return self._part
+
     def _kernel_faces(self, k, seed):
-        """[(first face, rot, key, area)] of instance ``k`` by the kernel, in blocks on
-        the worker threads."""
+        """(used faces or None, rot, key, area, usable area) of instance ``k`` by the
+        kernel, in blocks on the worker threads, unweighted (rate = area)."""
         vertices = self.world_vertices(k)
-        g = self.surface.geometries[self.surface.instances[k].geometry]
+        faces = self.surface.geometries[self.surface.instances[k].geometry].faces
+        n = len(faces)
+        rot, key, area = np.empty(n, np.uint8), np.empty(n, np.uint64), np.empty(n)
         word = seed_word(seed)
+        in_blocks(lambda i, j: _kernel.faces(vertices, faces, i, j, word, rot, key, area), n, 1 << 15)
+        if n and area.min() > 0 and area.max() < np.inf:  # two reductions check most meshes
+            return None, rot, key, area, float(np.sum(area))
+        finite = np.isfinite(area)
+        self.non_finite += int(n - np.count_nonzero(finite))
+        ok = np.flatnonzero(finite & (area > 0))
+        return ok, rot[ok], key[ok], area[ok], float(np.sum(area[ok]))
 
-        def block(i, j):
-            rot, key, area = np.empty(j - i, np.uint8), np.empty(j - i, np.uint64), np.empty(j - i)
-            _kernel.faces(vertices, g.faces[i:j], 0, j - i, word, rot, key, area)
-            return i, rot, key, area
-
-        return in_blocks(block, len(g.faces))
-
-    def _keep(self, k, i, rot, key, area, parts, faces, rots, keys, rates, areas):
-        """Append the usable faces of a kernel block (unweighted: rate = area)."""
-        ok = np.isfinite(area) & (area > 0)
-        self.non_finite += int(len(area) - np.count_nonzero(np.isfinite(area)))
-        if ok.all():
-            good = slice(None)
-        else:
-            good = np.flatnonzero(ok)
-        areas.append(float(np.sum(area[good])))
-        if not ok.any():
-            return
-        parts.append(np.full(len(area[good]), k, dtype=np.int32))
-        faces.append(np.arange(i, i + len(area)) if ok.all() else good + i)
-        rots.append(rot[good])
-        keys.append(key[good])
-        rates.append(area[good])
+    def _numpy_faces(self, k, seed, weight):
+        """(used faces, rot, key, rate, usable area) of instance ``k`` (rate: area times
+        the face's weight), FACE_BLOCK faces at a time."""
+        inst = self.surface.instances[k]
+        g = self.surface.geometries[inst.geometry]
+        w_faces = None if weight is None else weight.face_weights_of(k, inst)
+        world = self.world_columns(k)
+        faces, rots, keys, rates, areas = [], [], [], [], []
+        for i in range(0, len(g.faces), FACE_BLOCK):
+            j = min(i + FACE_BLOCK, len(g.faces))
+            rot, cols = canonical([np.take(world[a], g.faces[i:j, c]) for c in range(3) for a in range(3)])
+            w = None
+            if w_faces is not None:
+                w = _rotated_mean(w_faces[i:j], rot) if w_faces.ndim == 2 else w_faces[i:j]
+            with np.errstate(invalid="ignore", over="ignore"):
+                area = 0.5 * doubled_areas(cols)
+                rate = area if w is None else area * w
+            areas.append(area[np.isfinite(area) & (area > 0)])
+            finite = np.isfinite(rate)
+            self.non_finite += int(len(rate) - np.count_nonzero(finite))
+            ok = np.flatnonzero(finite & (rate > 0))
+            faces.append(ok + i)
+            rots.append(rot[ok].astype(np.uint8))
+            keys.append(face_keys([x[ok] for x in cols], seed, None if w is None else w[ok]))
+            rates.append(rate[ok])
+        cat = lambda xs, dt: np.concatenate(xs) if xs else np.empty(0, dtype=dt)  # noqa: E731
+        return (cat(faces, np.int64), cat(rots, np.uint8), cat(keys, np.uint64), cat(rates, np.float64),
+                float(np.sum(cat(areas, np.float64))))
 
     @property
     def parts(self):
@@ -250,6 +272,9 @@ class FaceTable:
         api.sampled_bounds reads (so a stable run builds no SamplePlan)."""
         from .sampling import Part
 
+        if self.identity:  # one instance, every face
+            inst = self.surface.instances[0]
+            return [Part(0, None, None, inst.matrix, self.surface.geometries[inst.geometry])]
         out = []
         bounds = np.searchsorted(self.part, np.arange(len(self.surface.instances) + 1))
         for k, inst in enumerate(self.surface.instances):
@@ -401,31 +426,99 @@ def arrivals(table, tau, first=0, last=None):
 
 
 def all_arrivals(table, tau):
-    """:func:`arrivals` of every used face, in face ranges on the worker threads.
-
-    The kernel counts each range's arrivals, then writes them into arrays of exactly
-    that size: no concatenated copy.
-    """
+    """:func:`arrivals` of every used face, in face ranges on the worker threads (the
+    NumPy path)."""
     n = len(table)
     threads = native.worker_count()
     pieces = 1 if threads == 1 or n < 2 * FACE_BLOCK else 4 * threads
     cuts = np.linspace(0, n, pieces + 1).astype(np.int64).tolist()
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        if _kernel is None:
-            parts = list(pool.map(lambda a, b: arrivals(table, tau, a, b), cuts[:-1], cuts[1:]))
-            return tuple(np.concatenate(x) for x in zip(*parts)) if len(parts) > 1 else parts[0]
-        tau = float(tau)
-        args = (table.key, table.rate, tau, BLOCK_MEAN, POISSON_CDF)
-        sizes = list(pool.map(lambda a, b: _kernel.arrivals(*args, a, b, None, None, None), cuts[:-1], cuts[1:]))
-        ends = np.cumsum(sizes).tolist()
-        t, face, ctr = np.empty(ends[-1]), np.empty(ends[-1], np.int64), np.empty(ends[-1], np.uint64)
+        parts = list(pool.map(lambda a, b: arrivals(table, tau, a, b), cuts[:-1], cuts[1:]))
+    return tuple(np.concatenate(x) for x in zip(*parts)) if len(parts) > 1 else parts[0]
 
-        def fill(k):
-            s = slice(ends[k] - sizes[k], ends[k])
-            _kernel.arrivals(*args, cuts[k], cuts[k + 1], t[s], face[s], ctr[s])
 
-        list(pool.map(fill, range(pieces)))
-    return t, face, ctr
+def counter_bits(table, tau):
+    """Bits of the counter (block << COUNT_BITS | j) in an arrival id ``used face << bits |
+    counter``, for the arrivals before ``tau``: room for the most blocks any face has."""
+    expected = tau * table.total
+    if not expected < 2.0**40:  # about 2^40 arrivals: past any memory
+        raise ScatterError(f"{table.surface.source}: --stable would keep {expected:.3g} arrivals: too many")
+    most = int(_blocks_before(tau, BLOCK_MEAN / np.max(table.rate)))
+    bits = COUNT_BITS + (2 * most + 1).bit_length()
+    if bits + max(1, (len(table) - 1).bit_length()) > 63:
+        raise ScatterError(f"{table.surface.source}: too many points for --stable on {len(table):,} faces")
+    return bits
+
+
+def kernel_arrivals(table, tau, bits):
+    """The kernel's arrivals before ``tau`` of every used face, in face ranges on the
+    worker threads, in one pass: (t (M,) float64, id (M,) uint64, starts (S,), counts (S,)):
+    range s wrote its arrivals to ``[starts[s], starts[s] + counts[s])``.
+
+    Each range gets room for its mean count plus ROOM_SDS standard deviations; in the rare
+    case that one holds more, the pass runs again with room for the counts it returned.
+    """
+    n = len(table)
+    threads = native.worker_count()
+    work = n + tau * table.total  # faces and arrivals
+    pieces = 1 if threads == 1 or work < 1 << 16 or n < 4 * threads else 4 * threads
+    cuts = np.linspace(0, n, pieces + 1).astype(np.int64).tolist()
+    mean = [tau * float(np.sum(table.rate[a:b])) for a, b in zip(cuts[:-1], cuts[1:])]
+    room = [max(0, int(m + ROOM_SDS * math.sqrt(m) + 64)) for m in mean]
+    args = (table.key, table.rate, float(tau), BLOCK_MEAN, POISSON_CDF)
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for _ in range(2):
+            starts = np.concatenate([[0], np.cumsum(room)[:-1]]).astype(np.int64)
+            t, ids = np.empty(sum(room)), np.empty(sum(room), np.uint64)
+
+            def fill(k):
+                s = slice(starts[k], starts[k] + room[k])
+                return _kernel.arrivals(*args, cuts[k], cuts[k + 1], bits, t[s], ids[s])
+
+            counts = list(pool.map(fill, range(pieces)))
+            if all(c <= r for c, r in zip(counts, room)):
+                return t, ids, starts, np.asarray(counts, dtype=np.int64)
+            room = counts
+    raise AssertionError("arrivals: the counts changed between two passes")
+
+
+FINE_BITS = 12  # a coarse bucket of the kernel's arrival sort holds 2^12 to 2^15 time keys
+
+
+def kernel_order(t, ids, starts, counts, key, bits, tau):
+    """The kernel's arrival order of the runs ``t[starts[s]:starts[s] + counts[s]]`` (and
+    ``ids`` likewise), all before ``tau``: (time (m,), id (m,), duplicates), sorted by (time,
+    face key, counter) as :func:`arrival_order` sorts them.
+
+    A counting sort on the time key ``floor(t * K / tau)`` (K about m), in two levels on the
+    worker threads: each thread scatters its runs into a few hundred coarse buckets (at its
+    own positions within each), then each coarse bucket, small enough for the
+    cache, is sorted on the rest of its key and exactly within equal keys.
+    """
+    m = int(counts.sum())
+    key_bits = max(1, m.bit_length())  # about 1 to 2 arrivals a key
+    fine_bits = min(key_bits, max(FINE_BITS, key_bits - 8), FINE_BITS + 3)
+    coarse = 1 << (key_bits - fine_bits)
+    total = coarse << fine_bits
+    scale = total / float(tau)
+    threads = native.worker_count() if m >= 1 << 16 else 1
+    groups = [np.arange(k, len(starts), threads) for k in range(threads)]
+    runs = [(t, ids, starts[g], counts[g], scale, fine_bits, total) for g in groups]
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        hist = np.zeros((threads, coarse), np.int64)
+        list(pool.map(lambda k: _kernel.order_count(*runs[k], hist[k]), range(threads)))
+        bounds = np.zeros(coarse + 1, np.int64)
+        np.cumsum(hist.sum(axis=0), out=bounds[1:])
+        t_out, id_out = np.empty(m), np.empty(m, np.uint64)
+        nexts = bounds[:-1] + np.cumsum(hist, axis=0) - hist  # thread k writes after threads 0..k-1
+        list(pool.map(lambda k: _kernel.order_scatter(*runs[k], np.ascontiguousarray(nexts[k]), t_out, id_out),
+                      range(threads)))
+        del t, ids
+        cuts = np.searchsorted(bounds, np.linspace(0, m, threads + 1)).tolist()
+        cuts[0], cuts[-1] = 0, coarse
+        dups = pool.map(lambda k: _kernel.order_sort(t_out, id_out, bounds, cuts[k], cuts[k + 1], scale, fine_bits,
+                                                     total, key, bits), range(threads))
+        return t_out, id_out, any(list(dups))
 
 
 def arrival_order(t, face, ctr, key):
@@ -460,19 +553,6 @@ def arrival_order(t, face, ctr, key):
     return order
 
 
-def _face_order(face):
-    """(n,) int64 permutation sorting ``face`` (n,) int64 >= 0: one value sort of packed
-    (face, position) words, several times faster than argsort."""
-    n = len(face)
-    bits = max(1, (n - 1).bit_length())
-    if n < 2 or int(face.max()) >= 1 << (64 - bits):
-        return np.argsort(face, kind="stable")
-    packed = face.astype(np.uint64) << np.uint64(bits)
-    packed |= np.arange(n, dtype=np.uint64)
-    packed.sort()
-    return (packed & np.uint64((1 << bits) - 1)).astype(np.int64)
-
-
 def _duplicates(t, face, ctr, key):
     """Whether two consecutive arrivals (sorted arrays) are the same arrival of two faces
     with one key."""
@@ -483,73 +563,98 @@ def _duplicates(t, face, ctr, key):
 
 
 class StableSource:
-    """The ``--stable`` point source: ``draw(start, stop)`` gives points start..stop-1 in
+    """The ``--stable`` point source: ``draw(start, stop)`` gives arrivals start..stop-1 in
     arrival order (a pure function of the range).
 
-    Exactly one of ``count`` (the N earliest arrivals), ``density`` (every arrival before
-    time D) and ``radius`` (arrival-order dart throwing) is given. ``weight``: an object
-    with ``face_weights_of(k, inst)`` and ``barycentric(w, u)`` (vertex colours) or with
-    ``accept(raw, u)`` (textures: arrivals at rate area times bound, kept with
-    probability weight over bound).
+    At most one of ``count`` (the N earliest arrivals), ``density`` (every arrival before
+    time D), ``radius`` (every arrival before the candidate horizon of ``--radius R``:
+    :func:`dart_thrown` keeps the set) and ``stream=True`` (every arrival, without end:
+    ``count`` is None and the arrivals are found as far as ``draw`` asks; what the
+    exterior filter reads). ``weight``: an object with ``face_weights_of(k, inst)`` and
+    ``barycentric(w, u)`` (vertex colours) or with ``accept(raw, u)`` (textures: arrivals
+    at rate area times bound, kept with probability weight over bound).
+
+    An arrival is held as one word, ``id = used face << bits | counter`` (``bits`` from
+    :func:`counter_bits`): 8 bytes a point.
     """
 
-    def __init__(self, surface, seed, *, count=None, density=None, radius=None, want_bary=False, weight=None,
-                 max_candidates=None):
+    def __init__(self, surface, seed, *, count=None, density=None, radius=None, stream=False, want_bary=False,
+                 weight=None, max_candidates=None):
         self.surface, self.seed, self.want_bary, self.weight = surface, seed, want_bary, weight
         self.table = FaceTable(surface, seed, weight)
         self.area = self.table.area
         self.rate = self.table.total
+        self._epochs = []  # [(first arrival, end time, ids (k,) uint64, bits)]: arrivals in time order
+        if stream:
+            # every later stretch of the stream must read the keys the first one read
+            self.table.rekey_duplicates(seed)
+            self._lock = threading.Lock()
+            self.count = None
+            return
         if radius is not None:
             self._select_radius(radius, max_candidates)
         elif density is not None:
             self._select_before(float(density))
         else:
             self._select_count(int(count))
-        self.count = len(self.used)
+        self.count = len(self._epochs[0][2])
 
     # -- selection ---------------------------------------------------------------------
 
     def _candidates(self, tau):
-        """Arrivals before ``tau``, in arrival order, as (time, used face, counter);
-        faces with one key get distinct keys first."""
+        """Arrivals before ``tau`` in arrival order: (time (m,) float64, id (m,) uint64,
+        bits); faces with one key get distinct keys first."""
         for _ in range(4):
-            t, face, ctr = all_arrivals(self.table, tau)
-            if self._accepts:
-                keep = self._accept(face, ctr)
-                t, face, ctr = t[keep], face[keep], ctr[keep]
-            order = arrival_order(t, face, ctr, self.table.key)
-            t = t[order]  # one array at a time: peak memory 40 bytes an arrival
-            face = face[order]
-            ctr = ctr[order]
-            del order
-            if not (_duplicates(t, face, ctr, self.table.key) and self.table.rekey_duplicates(self.seed)):
-                return t, face, ctr
+            t, ids, bits, dup = self._sorted_arrivals(tau)
+            if not (dup and self.table.rekey_duplicates(self.seed)):
+                return t, ids, bits
         raise ScatterError(f"{self.surface.source}: --stable could not tell duplicate faces apart")
+
+    def _sorted_arrivals(self, tau):
+        """(time, id, bits, whether two faces with one key gave the same arrival) of the
+        arrivals before ``tau``, in arrival order."""
+        bits = counter_bits(self.table, tau)
+        key = self.table.key
+        if _kernel is not None:
+            t, ids, starts, counts = kernel_arrivals(self.table, tau, bits)
+            if self._accepts:
+                t, ids = (np.concatenate([x[s : s + c] for s, c in zip(starts, counts)]) for x in (t, ids))
+                keep = np.flatnonzero(self._accept(ids, bits))
+                t, ids, starts, counts = t[keep], ids[keep], np.zeros(1, np.int64), np.array([len(keep)], np.int64)
+            t, ids, dup = kernel_order(t, ids, starts, counts, key, bits, tau)
+            return t, ids, bits, dup
+        t, face, ctr = all_arrivals(self.table, tau)
+        if self._accepts:
+            keep = self._accept(pack(face, ctr, bits), bits)
+            t, face, ctr = t[keep], face[keep], ctr[keep]
+        order = arrival_order(t, face, ctr, key)
+        t, face, ctr = t[order], face[order], ctr[order]
+        return t, pack(face, ctr, bits), bits, _duplicates(t, face, ctr, key)
 
     @property
     def _accepts(self):
         return self.weight is not None and hasattr(self.weight, "accept")
 
     def _select_before(self, tau):
-        _, self.used, self.ctr = self._candidates(tau)
+        t, ids, bits = self._candidates(tau)
+        self._epochs = [(0, tau, ids, bits)]
 
     def _select_count(self, n):
         if n == 0:
-            self.used, self.ctr = np.empty(0, np.int64), np.empty(0, np.uint64)
+            self._epochs = [(0, 0.0, np.empty(0, np.uint64), COUNT_BITS + 1)]
             return
         # a time that n arrivals beat with overwhelming odds: mean count n + 6 sd + 16
         tau = (n + 6.0 * math.sqrt(n) + 16.0) / self.rate
         for _ in range(64):
-            t, face, ctr = self._candidates(tau)
+            t, ids, bits = self._candidates(tau)
             if len(t) >= n:
-                self.used, self.ctr = face[:n], ctr[:n]  # views: the few past n stay
+                self._epochs = [(0, tau, ids[:n], bits)]  # a view: the few past n stay
                 self.threshold = float(t[n - 1])
                 return
             tau *= max(1.25, 1.1 * n / max(len(t), 1))
         raise ScatterError(f"{self.surface.source}: --stable found fewer than {n:,} arrivals")
 
     def _select_radius(self, radius, max_candidates):
-        from . import greedy, pairs
         from .api import RADIUS_OVERSAMPLING
 
         # candidates at RADIUS_OVERSAMPLING times the hexagonal density of spacing R: a
@@ -561,67 +666,111 @@ class StableSource:
                                     f"{self.area:.6g}): thinning would need {expected:,.0f} candidates, more than "
                                     f"{max_candidates:,}")
         self.horizon = tau
-        _, face, ctr = self._candidates(tau)
-        points = self._place(face, ctr).points
-        i, j, _ = pairs.all_pairs(points, radius)
-        kept = np.flatnonzero(greedy.in_priority_order(len(face), i, j, np.arange(len(face))))
-        self.used, self.ctr = face[kept], ctr[kept]
+        self._select_before(tau)
 
-    def _accept(self, face, ctr):
+    def _extend(self, stop):
+        """Stream mode: find arrivals until there are at least ``stop``. Each stretch holds
+        the arrivals between the last one's end time and a later time (all arrivals before
+        that time, in order, less those before the end), so stretches only append."""
+        with self._lock:
+            while self._found < stop:
+                first, end = (self._found, self._epochs[-1][1]) if self._epochs else (0, 0.0)
+                want = max(2 * stop, 1 << 14)
+                tau = max((want + 6.0 * math.sqrt(want) + 16.0) / self.rate, 2 * end)
+                t, ids, bits, dup = self._sorted_arrivals(tau)
+                if dup:
+                    raise ScatterError(f"{self.surface.source}: --stable could not tell duplicate faces apart")
+                later = int(np.searchsorted(t, end, side="left"))
+                self._epochs.append((first, tau, ids[later:].copy() if later else ids, bits))
+
+    @property
+    def _found(self):
+        return self._epochs[-1][0] + len(self._epochs[-1][2]) if self._epochs else 0
+
+    def _stretches(self, start, stop):
+        """[(ids, bits)] of arrivals ``start .. stop - 1``, stretch by stretch."""
+        if self.count is None and self._found < stop:
+            self._extend(stop)
+        out = []
+        for first, _, ids, bits in self._epochs:
+            lo, hi = max(start, first), min(stop, first + len(ids))
+            if lo < hi:
+                out.append((ids[lo - first : hi - first], bits))
+        return out or [(np.empty(0, np.uint64), COUNT_BITS + 1)]
+
+    def _accept(self, ids, bits):
         """(m,) bool: texture-weighted arrivals that pass their rejection test."""
-        raw = self._place(face, ctr, bary=True)
-        u = to_unit(lane(self._state(face, ctr), (LANES * (ctr & np.uint64(31)) + np.uint64(4)).astype(np.uint64)))
+        raw = self._place(ids, bits, bary=True)
+        used, ctr = unpack(ids, bits)
+        u = to_unit(lane(self._state(used, ctr), (LANES * (ctr & np.uint64(31)) + np.uint64(4)).astype(np.uint64)))
         return self.weight.accept(raw, u)
 
     # -- points ------------------------------------------------------------------------
 
-    def _state(self, face, ctr):
-        return lane(self.table.key[face], (ctr >> np.uint64(COUNT_BITS)) + np.uint64(1))
+    def _state(self, used, ctr):
+        return lane(self.table.key[used], (ctr >> np.uint64(COUNT_BITS)) + np.uint64(1))
 
-    def _place(self, face, ctr, start=0, bary=None):
-        """The RawChunk of arrivals (used face (n,), counter (n,))."""
+    def ray_uniforms(self, start, stop):
+        """(n, 3) uniforms in [0, 1) for arrivals ``start .. stop - 1`` from their own
+        streams (lanes RAY_LANE + 4 j + k): the exterior filter's ray rotations, so an
+        arrival's verdict does not depend on its place in the stream."""
+        parts = []
+        for ids, bits in self._stretches(start, stop):
+            used, ctr = unpack(ids, bits)
+            state = self._state(used, ctr)
+            j = (ctr & np.uint64((1 << COUNT_BITS) - 1)) * np.uint64(LANES) + np.uint64(RAY_LANE)
+            parts.append(np.stack([to_unit(lane(state, j + np.uint64(k))) for k in range(3)], axis=1))
+        return np.concatenate(parts) if len(parts) > 1 else parts[0]
+
+    def _place(self, ids, bits, start=0, bary=None):
+        """The RawChunk of arrivals ``ids`` (n,) uint64."""
         want_bary = self.want_bary if bary is None else bary
         t = self.table
         if _kernel is not None and not self._barycentric and len(self.surface.instances) == 1:
-            points, b = np.empty((len(face), 3)), np.empty((len(face), 2))
-            inst = self.surface.instances[0]
-            # in face order: arrival order reads the face and vertex tables at random
-            # (docs/stable.md has the figures)
-            face, ctr = np.ascontiguousarray(face, dtype=np.int64), np.ascontiguousarray(ctr)
-            _kernel.place(face, ctr, t.key, t.rot, t.face, self.surface.geometries[inst.geometry].faces,
-                          t.world_vertices(0), points, b, _face_order(face))
-            return self._finish(start, face, b, points, want_bary)
-        state = self._state(face, ctr)
+            n = len(ids)
+            points = np.empty((n, 3))
+            b = np.empty((n, 2)) if want_bary else None
+            face = None if t.identity else np.empty(n, np.int64)
+            g = self.surface.geometries[self.surface.instances[0].geometry]
+            # in face order on a large mesh: arrival order reads the tables at random
+            _kernel.place(np.ascontiguousarray(ids), bits, t.key, None if t.identity else t.face, g.faces,
+                          t.world_vertices(0), points, b, face, len(t) >= SORT_FACES)
+            if face is None:  # used face k is face k
+                face = (ids >> np.uint64(bits)).astype(np.int64)
+            return self._finish(start, ids, bits, face, b, points, want_bary)
+        used, ctr = unpack(ids, bits)
+        state = self._state(used, ctr)
         j = (ctr & np.uint64((1 << COUNT_BITS) - 1)) * np.uint64(LANES)
-        u = np.empty((len(face), 3 if self._barycentric else 2))
+        u = np.empty((len(used), 3 if self._barycentric else 2))
         for k in range(u.shape[1]):
             u[:, k] = to_unit(lane(state, j + np.uint64(2 + k)))
         if self._barycentric:
-            w = _rotated_rows(self.weight.corner_weights(self.table.part[face], self.table.face[face]),
-                              self.table.rot[face], width=1)
+            w = _rotated_rows(self.weight.corner_weights(t.part[used], t.face[used]), t.rot[used], width=1)
             b = self.weight.barycentric(w, u)
         else:
             b = square_to_triangle(u)
-        points = _interpolate(t.corner_columns(face), b)
-        return self._finish(start, face, b, points, want_bary)
+        points = _interpolate(t.corner_columns(used), b)
+        return self._finish(start, ids, bits, t.face[used], b, points, want_bary)
 
-    def _finish(self, start, face, b, points, want_bary):
+    def _finish(self, start, ids, bits, face, b, points, want_bary):
         t = self.table
+        one = len(self.surface.instances) == 1
+        used = None if one and not want_bary else (ids >> np.uint64(bits)).astype(np.int64)
         out_bary = None
         if want_bary:
             canon = np.empty((len(face), 3))
             canon[:, 1:] = b
             canon[:, 0] = 1.0 - b[:, 0] - b[:, 1]
-            rot = t.rot[face].astype(np.int64)
+            rot = t.rot[used].astype(np.int64)
             out_bary = np.empty_like(canon)
             rows = np.arange(len(face))
             for k in range(3):  # canonical corner k is the face's corner (k + rot) % 3
                 out_bary[rows, (k + rot) % 3] = canon[:, k]
-        if len(self.surface.instances) == 1:
+        if one:
             instance = np.broadcast_to(np.int64(0), (len(face),))  # one value, no memory
         else:
-            instance = t.part[face].astype(np.int64)
-        return RawChunk(start, points, t.face[face], instance, out_bary)
+            instance = t.part[used].astype(np.int64)
+        return RawChunk(start, points, face, instance, out_bary)
 
     @property
     def _barycentric(self):
@@ -629,7 +778,32 @@ class StableSource:
 
     def draw(self, start: int, stop: int) -> RawChunk:
         """Points ``start .. stop - 1`` in arrival order."""
-        return self._place(self.used[start:stop], self.ctr[start:stop], start)
+        parts = [self._place(ids, bits) for ids, bits in self._stretches(start, stop)]
+        out = RawChunk.join(parts)
+        return RawChunk(start, out.points, out.face, out.instance, out.bary)
+
+
+def pack(used, ctr, bits):
+    """(n,) uint64 arrival ids ``used << bits | ctr``."""
+    return (used.astype(np.uint64) << np.uint64(bits)) | ctr
+
+
+def unpack(ids, bits):
+    """(used face (n,) int64, counter (n,) uint64) of arrival ids."""
+    return (ids >> np.uint64(bits)).astype(np.int64), ids & np.uint64((1 << bits) - 1)
+
+
+def dart_thrown(source, radius):
+    """A :class:`~scatter_cli.sources.ThinnedSource` of ``source``'s points, each kept in
+    order when no point kept before it lies within ``radius``: every kept pair at least R
+    apart, every point within R of a kept one, and the kept set is as local as the order."""
+    from . import greedy, pairs
+    from .sources import ThinnedSource
+
+    raw = source.draw(0, source.count)
+    i, j, _ = pairs.all_pairs(raw.points, radius)
+    kept = np.flatnonzero(greedy.in_priority_order(len(raw.points), i, j, np.arange(len(raw.points))))
+    return ThinnedSource(raw.take(kept), source)
 
 
 class VertexColorRates:

@@ -59,6 +59,15 @@ class Surface:
     source: str = "<mesh>"
     is_scene: bool = False
     _cache: dict = field(default_factory=dict, repr=False)
+    # The scene's up axis ("Y" or "Z") and metres per unit, where the format says them
+    # (USD stages; glTF by its specification); None where it does not.
+    up_axis: str | None = None
+    meters_per_unit: float | None = None
+
+    def keeping(self, instances) -> "Surface":
+        """The same scene with only ``instances`` (a list of this surface's instances)."""
+        return Surface(self.geometries, instances, self.source, self.is_scene, up_axis=self.up_axis,
+                       meters_per_unit=self.meters_per_unit)
 
     @property
     def face_count(self) -> int:
@@ -74,20 +83,23 @@ class Surface:
         return v @ m[:3, :3].T + m[:3, 3]
 
 
-def load_surface(source, *, input_format: str | None = None, objects=None, plain=False) -> Surface:
+def load_surface(source, *, input_format: str | None = None, objects=None, plain=False, smooth=False) -> Surface:
     """Load ``source`` (path, ``'-'`` for standard input, trimesh.Trimesh or trimesh.Scene).
 
     ``plain``: only vertices and faces are wanted (no colours, UVs or normals from the
     file), so the fast readers (readers.py) may read it without importing trimesh.
+    ``smooth``: smooth vertex normals are wanted too; the fast readers then read only
+    files without normals or UVs of their own (the normals are computed from the faces,
+    as for trimesh's mesh of such a file).
     """
     if isinstance(source, (str, os.PathLike)) and _suffix(source, input_format) in USD_FORMATS:
         from .usdread import load_usd
 
         return load_usd(os.fspath(source), input_format, objects=objects, plain=plain)
     if plain and not objects and isinstance(source, (str, os.PathLike)) and not _is_stream(os.fspath(source)):
-        fast = _read_plain(os.fspath(source), input_format)
+        fast = _read_plain(os.fspath(source), input_format, smooth)
         if fast is not None:
-            return fast
+            return _with_units(fast, source, input_format)
     if import_trimesh is not None and "trimesh" not in sys.modules:
         import_trimesh()
     import trimesh
@@ -109,6 +121,14 @@ def load_surface(source, *, input_format: str | None = None, objects=None, plain
         surface = select_objects(surface, objects)
     if surface.face_count == 0:
         raise ScatterError(f"{name}: the mesh has no faces")
+    return _with_units(surface, source, input_format)
+
+
+def _with_units(surface, source, input_format):
+    """glTF is Y up in metres by its specification: the surface says so (other formats
+    this module reads carry no such metadata)."""
+    if isinstance(source, (str, os.PathLike)) and _suffix(source, input_format) in ("glb", "gltf"):
+        surface.up_axis, surface.meters_per_unit = "Y", 1.0
     return surface
 
 
@@ -116,7 +136,7 @@ def _suffix(source, input_format):
     return (input_format or os.path.splitext(os.fspath(source))[1].lstrip(".")).lower()
 
 
-def _read_plain(path, input_format):
+def _read_plain(path, input_format, smooth=False):
     """The Surface of a mesh file read by the fast readers, or None (use trimesh).
 
     One geometry makes a mesh, several a scene, as trimesh.load makes them; the names
@@ -125,9 +145,19 @@ def _read_plain(path, input_format):
     from .readers import read_mesh
 
     _check_readable(path)
-    parts = read_mesh(path, (input_format or os.path.splitext(path)[1].lstrip(".")).lower())
+    parts = read_mesh(path, (input_format or os.path.splitext(path)[1].lstrip(".")).lower(), smooth)
     if parts is None:
         return None
+    surface = _plain_surface(path, parts)
+    if smooth:
+        from .visuals import VertexTables
+
+        for g in surface.geometries:
+            g.mesh = VertexTables(g.vertices, g.faces)  # normals computed from the faces when asked
+    return surface
+
+
+def _plain_surface(path, parts):
     if isinstance(parts, tuple):  # a GLB scene
         geometries = [_checked_geometry(n, v, f, path) for n, v, f in parts[0]]
         surface = Surface(geometries, [Instance(*i) for i in parts[1]], path, is_scene=True)
@@ -260,7 +290,7 @@ def select_objects(surface: Surface, names) -> Surface:
             f"(objects: {', '.join(sorted(known)) or 'none'})"
         )
     kept = [i for i in surface.instances if i.name in wanted or surface.geometries[i.geometry].name in wanted]
-    return Surface(surface.geometries, kept, surface.source, surface.is_scene)
+    return surface.keeping(kept)
 
 
 def corners(vertices, faces):
@@ -323,6 +353,37 @@ def cofactor(a):
     """
     r0, r1, r2 = np.asarray(a, dtype=np.float64)[:3, :3].tolist()
     return np.array([_cross(r1, r2), _cross(r2, r0), _cross(r0, r1)])
+
+
+def cofactors(a):
+    """Cofactor matrices of a stack (k, 3, 3) (or (k, 4, 4), its upper-left blocks) ->
+    (k, 3, 3) float64: :func:`cofactor` of each, the same products in the same order,
+    so the same bits."""
+    a = np.asarray(a, dtype=np.float64)
+    r = [[a[:, i, j] for j in range(3)] for i in range(3)]
+    out = np.empty((len(a), 3, 3))
+    for i in range(3):
+        x, y = r[(i + 1) % 3], r[(i + 2) % 3]
+        out[:, i, 0] = x[1] * y[2] - x[2] * y[1]
+        out[:, i, 1] = x[2] * y[0] - x[0] * y[2]
+        out[:, i, 2] = x[0] * y[1] - x[1] * y[0]
+    return out
+
+
+def transformed_columns(m, v):
+    """The columns of ``v @ m[k, :3, :3].T (+ m[k, :3, 3])`` for every matrix of a stack:
+    m (k, 3, 3) or (k, 3|4, 4), v (n, 3) -> [x, y, z], each (k, n) float64, with the
+    element-wise operations of :func:`apply_matrix` in its order (the same bits)."""
+    cols = [np.ascontiguousarray(v[:, c]) for c in range(3)]
+    out = []
+    for c in range(3):
+        col = m[:, c, 0, None] * cols[0]
+        col += m[:, c, 1, None] * cols[1]
+        col += m[:, c, 2, None] * cols[2]
+        if m.shape[2] > 3:
+            col += m[:, c, 3, None]
+        out.append(col)
+    return out
 
 
 def _cross(x, y):

@@ -26,6 +26,7 @@ below the prototype's parent (``/World/trees[17]/oak/trunk``).
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import sys
 import tempfile
@@ -128,6 +129,33 @@ def _reason(exc):
     return text[:200] or type(exc).__name__
 
 
+class _Placed:
+    """Meshes placed in a frame: ``geometry`` (r,) int64, ``matrix`` (r, 4, 4) float64
+    row-vector matrices into the frame, ``names`` and ``aliases`` (r strings each)."""
+
+    def __init__(self, geometry, matrix, names, aliases):
+        self.geometry = np.asarray(geometry, dtype=np.int64).reshape(-1)
+        self.matrix = np.asarray(matrix, dtype=np.float64).reshape(-1, 4, 4)
+        self.names, self.aliases = list(names), list(aliases)
+
+    @staticmethod
+    def join(parts):
+        if len(parts) == 1:
+            return parts[0]
+        return _Placed(np.concatenate([p.geometry for p in parts] + [np.empty(0, np.int64)]),
+                       np.concatenate([p.matrix for p in parts] + [np.empty((0, 4, 4))]),
+                       [n for p in parts for n in p.names], [a for p in parts for a in p.aliases])
+
+
+def compose(a, b):
+    """``a @ b`` for stacks of 4x4 matrices (broadcast), as a fixed sequence of element-wise
+    products and sums: the same bits whatever the stack's size or the BLAS installed."""
+    out = a[..., :, 0, None] * b[..., None, 0, :]
+    for k in range(1, 4):
+        out += a[..., :, k, None] * b[..., None, k, :]
+    return out
+
+
 class _StageReader:
     def __init__(self, stage, source, plain):
         from pxr import Usd, UsdGeom
@@ -139,24 +167,27 @@ class _StageReader:
         self.geometries: list[Geometry] = []
         self.index: dict[str, int] = {}
         self.in_prototype: set[int] = set()
-        self.subtrees: dict[tuple, list] = {}
+        self.subtrees: dict[tuple, _Placed] = {}
         self.skip_purposes = {UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy}
 
     def surface(self):
         """(Surface, aliases): aliases[k] is the prim path of instance k's mesh as authored."""
         placed = self._walk(self.stage.GetPseudoRoot(), None)
-        instances, aliases = [], []
-        for g, m, name, alias in placed:
+        for g, name in zip(placed.geometry.tolist(), placed.names):
             if g in self.in_prototype:  # /__Prototype_1/... is no name a user knows
                 self.geometries[g].name = name
                 self.in_prototype.discard(g)
-            instances.append(Instance(name, g, None if np.array_equal(m, np.eye(4)) else np.ascontiguousarray(m.T)))
-            aliases.append(alias)
-        return Surface(self.geometries, instances, self.source, is_scene=True), aliases
+        identity = (placed.matrix == np.eye(4)).all(axis=(1, 2)).tolist()
+        columns = np.ascontiguousarray(placed.matrix.transpose(0, 2, 1))  # column-vector matrices
+        instances = [Instance(name, g, None if same else columns[k])
+                     for k, (name, g, same) in enumerate(zip(placed.names, placed.geometry.tolist(), identity))]
+        surface = Surface(self.geometries, instances, self.source, is_scene=True)
+        surface.up_axis, surface.meters_per_unit = stage_units(self.stage)
+        return surface, placed.aliases
 
-    # -- placements: [(geometry, (4, 4) row-vector matrix, name, alias)] ------------------
+    # -- placements -----------------------------------------------------------------------
 
-    def _walk(self, root, base):
+    def _walk(self, root, base) -> _Placed:
         """Meshes under ``root`` (itself included), each with the matrix that maps its points
         into the frame of ``base`` (an ancestor prim; None: world space)."""
         out = []
@@ -166,14 +197,14 @@ class _StageReader:
                 it.PruneChildren()
             elif prim.IsInstance():
                 it.PruneChildren()
-                out += self._instance(prim, base)
+                out.append(self._instance(prim, base))
             elif prim.IsA(self.UsdGeom.PointInstancer):
                 it.PruneChildren()
-                out += self._point_instances(prim, base)
+                out.append(self._point_instances(prim, base))
             elif prim.IsA(self.UsdGeom.Mesh):
                 path = str(prim.GetPath())
-                out.append((self._geometry(prim), self._matrix(prim, base), path, path))
-        return out
+                out.append(_Placed([self._geometry(prim)], self._matrix(prim, base), [path], [path]))
+        return _Placed.join(out) if out else _Placed([], [], [], [])
 
     def _matrix(self, prim, base):
         if base is None:
@@ -201,20 +232,50 @@ class _StageReader:
         """An instanceable prim: its prototype's meshes under the prim's matrix."""
         proto = prim.GetPrototype()
         if not proto:
-            return []
+            return _Placed([], [], [], [])
         at = self._matrix(prim, base)
         old, new = str(proto.GetPath()), str(prim.GetPath())
         inner = self._subtree(proto, None)  # a prototype is a root prim: its own frame
-        for g, *_ in inner:
-            self.in_prototype.add(g)
-        return [(g, m @ at, new + name[len(old):], alias) for g, m, name, alias in inner]
+        self.in_prototype.update(inner.geometry.tolist())
+        return _Placed(inner.geometry, compose(inner.matrix, at), [new + n[len(old):] for n in inner.names],
+                       inner.aliases)
 
     def _point_instances(self, prim, base):
-        """A point instancer: each instance's prototype meshes under the instance matrix."""
+        """A point instancer: in instance order, each instance's prototype meshes under the
+        instance matrix (arrays over all instances at once)."""
+        where = str(prim.GetPath())
+        xf, index, shown, targets = self._instancer_arrays(prim, where)
+        protos = [self._prototype(self.stage.GetPrimAtPath(t)) for t in targets]
+        sizes = np.array([len(p.geometry) for p in protos] + [0], dtype=np.int64)
+        table = _Placed.join(protos + [_Placed([], [], [], [])])  # every prototype's meshes, end to end
+        suffixes = [s for p in protos for s in p.names]
+        first = np.cumsum(sizes) - sizes
+        rows = np.flatnonzero(shown & (sizes[index] > 0))
+        counts = sizes[index[rows]]
+        instance = np.repeat(rows, counts)  # (r,) the instance of each placement
+        start = np.cumsum(counts) - counts
+        entry = first[index[instance]] + np.arange(len(instance)) - np.repeat(start, counts)
+        # the prototype's own transform is in its entries' matrices (ExcludeProtoXform)
+        matrix = compose(compose(table.matrix[entry], xf[instance]), self._matrix(prim, base))
+        entries = entry.tolist()
+        names = [f"{where}[{i}]{suffixes[e]}" for i, e in zip(instance.tolist(), entries)]
+        return _Placed(table.geometry[entry], matrix, names, [table.aliases[e] for e in entries])
+
+    def _prototype(self, proto):
+        """A point instancer's prototype: its meshes in the frame of its parent, named by
+        their path below that parent."""
+        if not proto:
+            return _Placed([], [], [], [])
+        parent = proto.GetParent()
+        cut = 0 if parent.IsPseudoRoot() else len(str(parent.GetPath()))
+        inner = self._subtree(proto, parent)
+        return _Placed(inner.geometry, inner.matrix, [n[cut:] for n in inner.names], inner.aliases)
+
+    def _instancer_arrays(self, prim, where):
+        """(transforms (n, 4, 4), prototype index (n,), shown (n,) bool, prototype paths)."""
         UsdGeom = self.UsdGeom
         pi = UsdGeom.PointInstancer(prim)
         targets = pi.GetPrototypesRel().GetTargets()
-        where = str(prim.GetPath())
         try:
             xf = pi.ComputeInstanceTransformsAtTime(
                 self.time, self.time, UsdGeom.PointInstancer.ExcludeProtoXform, UsdGeom.PointInstancer.IgnoreMask
@@ -230,20 +291,7 @@ class _StageReader:
             raise ScatterError(f"{self.source}: point instancer {where}: prototype index out of range")
         mask = pi.ComputeMaskAtTime(self.time)
         shown = np.asarray(mask, dtype=bool) if len(mask) == len(index) else np.ones(len(index), dtype=bool)
-        world = self._matrix(prim, base)
-        out = []
-        for k, target in enumerate(targets):
-            proto = self.stage.GetPrimAtPath(target)
-            rows = np.flatnonzero(shown & (index == k))
-            if not proto or not len(rows):
-                continue
-            parent = proto.GetParent()
-            cut = 0 if parent.IsPseudoRoot() else len(str(parent.GetPath()))
-            # the prototype's own transform is in its subtree's matrices (ExcludeProtoXform)
-            for g, m, name, alias in self._subtree(proto, parent):
-                placed = m @ xf[rows] @ world  # (r, 4, 4): instance matrices in one product
-                out += [(g, placed[j], f"{where}[{i}]{name[cut:]}", alias) for j, i in enumerate(rows.tolist())]
-        return out
+        return xf, index, shown, targets
 
     # -- geometry -------------------------------------------------------------------------
 
@@ -257,30 +305,62 @@ class _StageReader:
     def _read_mesh(self, prim, path):
         mesh = self.UsdGeom.Mesh(prim)
         t = self.time
-        # unauthored arrays are empty (a mesh without faces), arrays of the wrong shape an error
-        points = _array(mesh.GetPointsAttr().Get(t) or [], np.float64, 3)
-        counts = _array(mesh.GetFaceVertexCountsAttr().Get(t) or [], np.int64)
-        corners = _array(mesh.GetFaceVertexIndicesAttr().Get(t) or [], np.int64)
-        holes = _array(mesh.GetHoleIndicesAttr().Get(t), np.int64)
-        if points is None or counts is None or corners is None:
+        left = mesh.GetOrientationAttr().Get(t) == self.UsdGeom.Tokens.leftHanded
+        counts, corners, holes = self._polygons(mesh, path)
+        if self.plain:  # the faces, then the polygon arrays let go before the points come
+            faces, top = fan_faces(counts, corners, holes, left), _top(corners)
+            del counts, corners, holes
+            return Geometry(path, self._points(mesh, path, top), faces)
+        points = self._points(mesh, path, _top(corners))
+        topo = _Topology(counts, corners, holes, left, len(points))
+        return _with_primvars(path, mesh, points, topo, self.time)
+
+    def _polygons(self, mesh, path):
+        """(faceVertexCounts, faceVertexIndices, holeIndices or None) as integer arrays,
+        checked to add up; unauthored: empty (a mesh without faces)."""
+        t = self.time
+        # The largest array first, while nothing else is held: usd-core decodes it with a
+        # transient buffer of its own. They stay the Vt arrays' int32 (no copy).
+        corners = _array(mesh.GetFaceVertexIndicesAttr().Get(t) or [], np.int32)
+        counts = _array(mesh.GetFaceVertexCountsAttr().Get(t) or [], np.int32)
+        if counts is None or corners is None:
             raise ScatterError(f"{self.source}: mesh {path}: malformed points or faces")
         if (len(counts) and counts.min() < 0) or counts.sum() != len(corners):
             raise ScatterError(f"{self.source}: mesh {path}: faceVertexCounts do not add up to faceVertexIndices")
-        if len(corners) and (corners.min() < 0 or corners.max() >= len(points)):
+        if len(corners) and corners.min() < 0:
             raise ScatterError(f"{self.source}: mesh {path}: face vertex index out of range")
-        left = mesh.GetOrientationAttr().Get(t) == self.UsdGeom.Tokens.leftHanded
-        tri, polygon = triangulate(counts, holes, left)
-        if self.plain:
-            return Geometry(path, points, corners[tri])
-        topo = _Topology(counts, corners, tri, polygon, len(points))
-        return _with_primvars(path, mesh, points, topo, self.time)
+        return counts, corners, _array(mesh.GetHoleIndicesAttr().Get(t), np.int32)
+
+    def _points(self, mesh, path, top):
+        """(V, 3) float64 points; ``top``: the largest vertex index the faces use (-1: none)."""
+        points = _array(mesh.GetPointsAttr().Get(self.time) or [], np.float64, 3)
+        if points is None:
+            raise ScatterError(f"{self.source}: mesh {path}: malformed points or faces")
+        if top >= len(points):
+            raise ScatterError(f"{self.source}: mesh {path}: face vertex index out of range")
+        return points
+
+
+def _top(corners):
+    return int(corners.max()) if len(corners) else -1
+
+
+def stage_units(stage):
+    """(up axis "Y" or "Z", metres per unit) of a stage: as authored, else USD's fallbacks
+    (Y up, 0.01: centimetres), which is what the stage's coordinates mean."""
+    from pxr import UsdGeom
+
+    return str(UsdGeom.GetStageUpAxis(stage)), float(UsdGeom.GetStageMetersPerUnit(stage))
 
 
 def _array(value, dtype, width=None):
-    """A Vt array -> numpy (n,) or (n, width); None when unset or of the wrong shape."""
+    """A Vt array -> numpy (n,) or (n, width) of ``dtype`` (integers: any integer type, as
+    stored, no copy); None when unset or of the wrong shape."""
     if value is None:
         return None
-    a = np.asarray(value, dtype=dtype)
+    a = np.asarray(value)
+    if not (np.issubdtype(dtype, np.integer) and np.issubdtype(a.dtype, np.integer)):
+        a = a.astype(dtype, copy=False)
     if width is None:
         return a.reshape(-1) if a.ndim <= 1 else None
     if a.size == 0:
@@ -288,42 +368,96 @@ def _array(value, dtype, width=None):
     return a if a.ndim == 2 and a.shape[1] == width else None
 
 
-def triangulate(counts, holes=None, left_handed=False):
-    """Fan triangles of polygons, in polygon order.
+def fan_faces(counts, corners, holes=None, left_handed=False, block=1 << 16):
+    """(F, 3) int64 vertex indices of the fan triangles of polygons, in polygon order:
+    polygon k, at positions s .. s+c-1 of ``corners``, gives (s, s+j+1, s+j+2) for j = 0
+    .. c-3 (none for fewer than 3 corners, nor for a hole); ``left_handed`` swaps the last
+    two corners of each.
 
-    counts (P,) int64 corners per polygon; holes (H,) int64 polygons to drop or None.
-    Returns (tri (F, 3) int64 positions in faceVertexIndices, polygon (F,) int64).
+    counts (P,), corners (C,) and holes (H,) integer arrays (faceVertexCounts,
+    faceVertexIndices, holeIndices). Polygons of one size are a reshape; mixed sizes go
+    ``block`` polygons at a time, so no (F,) table is built beside the result.
     """
-    counts = np.asarray(counts, dtype=np.int64)
-    start = np.cumsum(counts) - counts
-    made = np.maximum(counts - 2, 0)
-    if holes is not None and len(holes):
-        holes = holes[(holes >= 0) & (holes < len(counts))]
-        made[holes] = 0
-    polygon = np.repeat(np.arange(len(counts)), made)
-    first = np.cumsum(made) - made
-    j = np.arange(len(polygon)) - first[polygon]
-    s = start[polygon]
-    tri = np.stack([s, s + j + 1, s + j + 2], axis=1)
+    hole = _hole_mask(counts, holes)
+    if len(counts) and counts.min() == counts.max() >= 3 and not hole.any():
+        c = int(counts[0])
+        grid = corners.reshape(len(counts), c)
+        faces = np.empty((len(counts), c - 2, 3), dtype=np.int64)
+        faces[:, :, 0] = grid[:, :1]
+        faces[:, :, 1] = grid[:, 1:-1]
+        faces[:, :, 2] = grid[:, 2:]
+        faces = faces.reshape(-1, 3)
+    else:
+        faces = np.empty((int(_made(counts, hole).sum()), 3), dtype=np.int64)
+        at = row = 0
+        for p in range(0, len(counts), block):
+            n = np.asarray(counts[p : p + block], dtype=np.int64)
+            made = _made(n, hole[p : p + block])
+            polygon = np.repeat(np.arange(len(n)), made)
+            s = (at + np.cumsum(n) - n)[polygon]
+            rows = faces[row : row + len(polygon)]
+            rows[:, 0] = corners[s]
+            s += np.arange(len(polygon)) - (np.cumsum(made) - made)[polygon]  # s + j
+            rows[:, 1] = corners[s + 1]
+            rows[:, 2] = corners[s + 2]
+            at += int(n.sum())
+            row += len(polygon)
     if left_handed:
-        tri[:, [1, 2]] = tri[:, [2, 1]]
-    return tri, polygon
+        second = faces[:, 1].copy()
+        faces[:, 1] = faces[:, 2]
+        faces[:, 2] = second
+    return faces
+
+
+def _hole_mask(counts, holes):
+    """(P,) bool: the polygons ``holes`` names (indices out of range ignored)."""
+    hole = np.zeros(len(counts), dtype=bool)
+    if holes is not None and len(holes):
+        hole[holes[(holes >= 0) & (holes < len(counts))]] = True
+    return hole
+
+
+def _made(counts, hole):
+    """(P,) int64 triangles each polygon's fan makes: corners - 2, none for a hole."""
+    made = np.maximum(np.asarray(counts, dtype=np.int64) - 2, 0)
+    made[hole] = 0
+    return made
 
 
 class _Topology:
-    """A mesh's polygons and triangles, for expanding primvars to the rows a table needs."""
+    """A mesh's polygons and triangles, for expanding primvars to the rows a table needs;
+    the per-triangle tables are made only when a primvar needs them."""
 
-    def __init__(self, counts, corners, tri, polygon, n_points):
-        self.counts, self.corners, self.tri, self.polygon, self.n_points = counts, corners, tri, polygon, n_points
-        self.polygon_of_corner = np.repeat(np.arange(len(counts)), counts)
+    def __init__(self, counts, corners, holes, left_handed, n_points):
+        self.counts, self.corners, self.n_points = counts, corners, n_points
+        self.hole, self.left_handed = _hole_mask(counts, holes), left_handed
+        self.triangles = int(_made(counts, self.hole).sum())
         self.sizes = {"constant": 1, "uniform": len(counts), "vertex": n_points, "varying": n_points,
                       "faceVarying": len(corners)}
+
+    def faces(self):
+        """(F, 3) int64 vertex indices of the triangles."""
+        return fan_faces(self.counts, self.corners, np.flatnonzero(self.hole), self.left_handed)
+
+    @functools.cached_property
+    def tri(self):
+        """(F, 3) int64 positions in faceVertexIndices of the triangles' corners."""
+        return fan_faces(self.counts, np.arange(len(self.corners)), np.flatnonzero(self.hole), self.left_handed)
+
+    @functools.cached_property
+    def polygon(self):
+        """(F,) int64 the polygon of each triangle."""
+        return np.repeat(np.arange(len(self.counts)), _made(self.counts, self.hole))
+
+    @functools.cached_property
+    def polygon_of_corner(self):
+        return np.repeat(np.arange(len(self.counts)), self.counts)
 
     def expand(self, values, interpolation, rows):
         """Primvar values (n, C) -> one row per ``rows`` ("point", "corner" or "triangle"),
         or None when that interpolation cannot give such rows."""
         if interpolation == "constant":
-            n = {"point": self.n_points, "corner": len(self.corners), "triangle": len(self.tri)}[rows]
+            n = {"point": self.n_points, "corner": len(self.corners), "triangle": self.triangles}[rows]
             return np.broadcast_to(values[:1], (n, values.shape[1]))
         if interpolation == "uniform":
             return {"corner": lambda: values[self.polygon_of_corner], "triangle": lambda: values[self.polygon]}.get(
@@ -383,12 +517,12 @@ def _with_primvars(path, mesh, points, topo, time):
     if rows == "corner":
         vertices, faces, point_of = points[topo.corners], topo.tri, topo.corners
     else:
-        vertices, faces, point_of = points, topo.corners[topo.tri], None
+        vertices, faces, point_of = points, topo.faces(), None
     tables = VertexTables(vertices, faces, uv=table(uv, 2), normals=table(normals, 3), point_of=point_of)
     if color:
         kind = {0: "constant_color", 1: "face_colors"}.get(color_rank, "vertex_colors")
         at = {0: "triangle", 1: "triangle"}.get(color_rank, rows)
-        rgba = np.empty((len(topo.tri) if at == "triangle" else len(vertices), 4))
+        rgba = np.empty((topo.triangles if at == "triangle" else len(vertices), 4))
         rgba[:, :3] = topo.expand(rgb[0], rgb[1], at)[:, :3] * 255.0
         rgba[:, 3] = 255.0 if alpha is None else topo.expand(alpha[0], alpha[1], at)[:, 0] * 255.0
         setattr(tables, kind, rgba[0] if kind == "constant_color" else rgba)
@@ -412,5 +546,5 @@ def select_paths(surface: Surface, paths, aliases) -> Surface:
         raise ScatterUsageError(f"{surface.source}: no mesh at or under {', '.join(map(repr, missing))} "
                                 f"(meshes: {shown or 'none'})")
     kept = sorted(set().union(*hits.values()))
-    return Surface(surface.geometries, [surface.instances[k] for k in kept], surface.source, surface.is_scene)
+    return surface.keeping([surface.instances[k] for k in kept])
 

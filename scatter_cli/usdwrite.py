@@ -26,9 +26,10 @@ import numpy as np
 from .errors import ScatterError
 from .writers import _Writer
 
-# Bytes held per point per value while the stage is built and saved: the gathered
-# NumPy array, the Vt array, and the serialised copy.
-COPIES = 3
+# Bytes per point of each value as the stage holds it (float32 values, colour as rgb and
+# opacity, orient as quatf, quath and a protoIndices int), once as a Vt array and once
+# serialised; the gathered NumPy arrays come on top (see check_fits).
+USD_BYTES = {"points": 12, "normal": 12, "color": 16, "uv": 8, "face": 4, "bary": 12, "object": 4, "orient": 28}
 DEFAULT_UP_AXIS, DEFAULT_METERS_PER_UNIT = "Y", 1.0
 PRIMVARS = {  # key -> (primvar name, Sdf value type name, columns taken)
     "normal": ("normals", "Normal3fArray", slice(0, 3)),
@@ -59,14 +60,23 @@ def available_memory():
     return None
 
 
-def check_fits(count, layout, available=None):
+def bytes_per_point(layout):
+    """Memory the stage needs per point: the gathered arrays (the layout's dtypes, and a
+    centred copy of float64 points), plus each value as a Vt array and serialised."""
+    total = 0
+    for key, cols, dt in layout:
+        gathered = dt.itemsize * len(cols)
+        total += gathered * (2 if key == "points" and dt == np.float64 else 1) + 2 * USD_BYTES.get(key, gathered)
+    return total
+
+
+def check_fits(count, layout, available=None, path=None):
     """Refuse, in one line, a count whose stage would not fit in the memory available."""
-    per_point = sum(dt.itemsize * len(cols) for _, cols, dt in layout) + (16 if any(
-        k == "orient" for k, _, _ in layout) else 0)
-    need = COPIES * per_point * count
+    need = bytes_per_point(layout) * count
     available = available_memory() if available is None else available
     if available is not None and need > available:
-        raise ScatterError(f"USD output is built in memory (it cannot stream): {count:,} points need about "
+        where = f"{path}: " if path else ""
+        raise ScatterError(f"{where}USD output is built in memory (it cannot stream): {count:,} points need about "
                            f"{need / 1e9:.3g} GB, more than the {available / 1e9:.3g} GB available; "
                            "write PLY, PCD or LAS instead, or split the run with --shard")
 
@@ -75,8 +85,8 @@ class UsdWriter(_Writer):
     def __init__(self, stream, layout, count, path=None, up_axis=None, meters_per_unit=None, spacing=None):
         super().__init__(stream, layout, count)
         _pxr()
-        check_fits(count, layout)
         self.path = None if path is None or str(path) == "-" else os.fspath(path)
+        check_fits(count, layout, path=self.path or "<stdout>")
         self.up_axis = up_axis or DEFAULT_UP_AXIS
         self.meters_per_unit = meters_per_unit or DEFAULT_METERS_PER_UNIT
         self.spacing = spacing

@@ -92,28 +92,55 @@ class Occluder:
                 TriangleMesh(self.scene, np.where(finite[:, None], local, 0.0).astype(np.float32),
                              f[good].astype(np.int32))
         self.radius = radius
+        self._world = [(v, f, inst.geometry, surface.geometries[inst.geometry].vertices)
+                       for v, f, inst in zip(world, faces, surface.instances)]
+        self.enclosed = None
         # Embree builds its tree at the first query: build it now (one ray)
         self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED")
         # float32 spacing at the largest coordinate, times the roundings
         roundings = OFFSET_ROUNDINGS if offset_roundings is None else offset_roundings
         self.offset = float(np.spacing(np.float32(radius or 1.0))) * roundings
 
+    def enclose(self):
+        """Find the faces certainly hidden (:mod:`.enclosure`): their candidates then cast
+        no ray (the verdict the rays would give). Returns how many."""
+        from .enclosure import closed_parts, enclosed_faces
+
+        if self.enclosed is None:
+            parts, vertices, faces, part, closed = {}, [], [], [], []
+            for v, f, geometry, own in self._world:
+                if geometry not in parts:  # welded in the geometry's own frame
+                    parts[geometry] = closed_parts(own, f)
+                p, c = parts[geometry]
+                part.append(p + sum(len(x) for x in closed))
+                closed.append(c)
+                faces.append(f + sum(len(x) for x in vertices))
+                vertices.append(v)
+            self.enclosed = enclosed_faces(np.concatenate(vertices), np.concatenate(faces), np.concatenate(part),
+                                           np.concatenate(closed), self.offset)
+        return int(np.count_nonzero(self.enclosed))
+
+    def is_enclosed(self, face, instance):
+        """(n,) bool: faces ``face`` (n,) of instances ``instance`` (n,) are certainly hidden."""
+        if self.enclosed is None:
+            return np.zeros(len(face), bool)
+        return self.enclosed[self.offsets[instance] + face]
+
     def face_normals(self, face, instance):
         """(n, 3) unit normals of faces ``face`` (n,) of instances ``instance`` (n,)."""
         return self.normals[self.offsets[instance] + face]
 
-    def exterior(self, points, normals, u):
+    def exterior(self, points, normals, u, enclosed=None):
         """Whether each point (n, 3) on a face of unit normal ``normals`` (n, 3) sees out:
         ((n,) bool, rays cast). ``u`` (n, 3) uniforms in [0, 1) choose each point's
-        rotation of the design."""
+        rotation of the design; points where ``enclosed`` (n,) bool is set are hidden
+        without a ray."""
         origin = points - self.center
         out = np.zeros(len(points), dtype=bool)
-        todo = np.arange(len(points))
+        todo = np.arange(len(points)) if enclosed is None else np.flatnonzero(~enclosed)
         rays = 0
         if self.normal_rays:
-            for sign in (1.0, -1.0):
-                rays += len(todo)
-                todo = self._cast(origin, normals, sign * normals[todo], todo, out)
+            todo, rays = self._normal_rays(origin, normals, todo, out)
         spin = random_rotations(u)
         for d in self.design:
             if not len(todo):
@@ -121,6 +148,22 @@ class Occluder:
             rays += len(todo)
             todo = self._cast(origin, normals, rotate(spin[todo], d), todo, out)
         return out, rays
+
+    def normals_blocked(self, points, normals):
+        """((n,) bool: both normal rays of each point (n, 3) on a face of unit normal
+        ``normals`` (n, 3) are blocked, rays cast)."""
+        out = np.zeros(len(points), dtype=bool)
+        _, rays = self._normal_rays(points - self.center, normals, np.arange(len(points)), out)
+        return ~out, rays
+
+    def _normal_rays(self, origin, normals, todo, out):
+        """Cast the normal, then the opposite direction, from points ``todo``; mark those
+        that get out in ``out``: (the others, rays cast)."""
+        rays = 0
+        for sign in (1.0, -1.0):
+            rays += len(todo)
+            todo = self._cast(origin, normals, sign * normals[todo], todo, out)
+        return todo, rays
 
     def _cast(self, origin, normals, d, todo, out):
         """Cast rays ``d`` (m, 3) from points ``todo`` (m,); mark those that get out in

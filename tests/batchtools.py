@@ -68,30 +68,64 @@ def no_temporary_files(folder):
 reader_fd = []
 
 
-def wait_for_reader(fifo, timeout=30):
-    """The pid of the process that opened ``fifo`` to read it (we open its writing end)."""
+def wait_for_reader(fifo, timeout=30, over=None):
+    """The pid of the process that opened ``fifo`` to read it (we open its writing end).
+
+    ``over``: a callable, true once the batch has ended: then no reader will come, and
+    the wait fails at once instead of at ``timeout`` (a backstop for a loaded machine).
+    """
     deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+    while True:
         try:
             reader_fd.append(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
             break
         except OSError:
+            if over is not None and over():
+                raise AssertionError(f"the batch ended with nobody reading {fifo}") from None
+            if time.monotonic() > deadline:
+                raise AssertionError(f"nobody opened {fifo} in {timeout} s") from None
             time.sleep(0.02)
-    else:
-        raise AssertionError("nobody opened the FIFO")
     while time.monotonic() < deadline:
-        for pid in filter(str.isdigit, os.listdir("/proc")):
-            if int(pid) == os.getpid():
-                continue
-            try:
-                fds = os.listdir(f"/proc/{pid}/fd")
-            except OSError:
-                continue
-            for fd in fds:
-                try:
-                    if os.readlink(f"/proc/{pid}/fd/{fd}") == str(fifo):
-                        return int(pid)
-                except OSError:
-                    pass
+        pid = fifo_reader(fifo)
+        if pid is not None:
+            return pid
         time.sleep(0.02)
     raise AssertionError("no reader of the FIFO found")
+
+
+def fifo_reader(fifo):
+    """The pid of a process (not this one) that has ``fifo`` open, or None."""
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        if int(pid) == os.getpid():
+            continue
+        try:
+            fds = os.listdir(f"/proc/{pid}/fd")
+        except OSError:
+            continue
+        for fd in fds:
+            try:
+                if os.readlink(f"/proc/{pid}/fd/{fd}") == str(fifo):
+                    return int(pid)
+            except OSError:
+                pass
+    return None
+
+
+def parent_of(pid):
+    with open(f"/proc/{pid}/stat") as f:
+        return int(f.read().rsplit(")", 1)[1].split()[1])
+
+
+def gone(pid, timeout=30):
+    """Wait until process ``pid`` has exited (a zombie counts)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                state = f.read().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            return
+        if state in "ZX":
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"process {pid} still alive")

@@ -2,9 +2,13 @@
 
 import json
 import os
+import pty
+import re
 import shutil
 import signal
 import subprocess
+import threading
+import time
 
 import pytest
 
@@ -88,6 +92,60 @@ def test_exit_codes_and_error_lines(tmp_path):
     no_scheduler = run_scatter("batch", src, "-o", f"{tmp_path}/d/{{stem}}.ply", "--engine", "dask",
                                env={"DASK_SCHEDULER_ADDRESS": ""})
     assert no_scheduler.returncode == 2 and b"--scheduler" in no_scheduler.stderr
+
+
+PROGRESS = re.compile(r"batch: (\d+)/(\d+) done, (\d+) failed, [\d.]+ meshes/s, \d+ s left *$")
+
+
+def test_progress_on_a_terminal_only(tmp_path):
+    """On a terminal (a pseudo-terminal here) standard error shows meshes done, failed,
+    the rate and the time left, erased before error lines and the summary; through a pipe,
+    none of it."""
+    src = folder_with_fifo(tmp_path)
+    (src / "e.obj").write_text("not a mesh\n")  # replaces MESHES[3]: the one failure, last
+    args = [src, "-o", f"{tmp_path}/out/{{stem}}.ply", "-n", "100", "-j", "1"]
+    main, terminal = pty.openpty()
+    proc = popen_user(scatter_command("batch", *args), stdout=subprocess.PIPE, stderr=terminal)
+    os.close(terminal)
+    screen = bytearray()
+    reader = threading.Thread(target=read_all, args=(main, screen))
+    reader.start()
+    wait_for_reader(src / "c.ply", over=lambda: proc.poll() is not None)
+    time.sleep(0.25)  # a lower bound, not a wait: c ends more than 0.2 s after a and b, so it is drawn
+    with os.fdopen(reader_fd.pop(), "wb") as fifo:
+        os.set_blocking(fifo.fileno(), True)
+        fifo.write((SAMPLES / MESHES[1]).read_bytes())
+    proc.communicate(timeout=120)
+    reader.join(60)
+    os.close(main)
+    assert proc.returncode == 1
+    text = screen.decode()
+    pieces = [p.replace("\x1b[K", "") for p in re.split(r"[\r\n]+", text)]
+    drawn = [tuple(map(int, m.groups())) for m in map(PROGRESS.match, pieces) if m]
+    assert (3, 5, 0) in drawn and drawn[-1] == (5, 5, 1)
+    assert drawn == sorted(drawn)
+    assert [p for p in pieces if p.startswith("error:")] == [p for p in pieces if "e.obj" in p]
+    assert len([p for p in pieces if p.startswith("error:")]) == 1
+    assert text.rstrip().splitlines()[-1].startswith("\x1b[Kbatch: 4 written, 0 skipped, 1 failed in ")
+    os.unlink(src / "c.ply")
+    shutil.copy(SAMPLES / MESHES[1], src / "c.ply")
+    piped = run_scatter("batch", *args[:-2], "-o", f"{tmp_path}/piped/{{stem}}.ply", "-j", "1")
+    assert piped.returncode == 1
+    err = piped.stderr.decode()
+    assert "meshes/s" not in err and "\r" not in err and "\x1b" not in err
+    assert err.splitlines()[-1].startswith("batch: 4 written, 0 skipped, 1 failed in ")
+
+
+def read_all(fd, into):
+    """What the terminal ``fd`` shows, until its other end is closed."""
+    while True:
+        try:
+            block = os.read(fd, 4096)
+        except OSError:  # EIO: the command and its workers are gone
+            return
+        if not block:
+            return
+        into += block
 
 
 def test_from_list_on_standard_input(tmp_path):

@@ -55,12 +55,13 @@ def scene_cells(name):
     return scene, {k: (np.arange(2 * len(v)) // 2, np.array([e for _, e in v])) for k, v in cells.items()}
 
 
-def cell_test(name, n=6000, seed=1, occluder=None, monkeypatch=None):
-    """(p-value of the per-cell counts on exterior cells against their areas, points on hidden cells)."""
+def cell_test(name, n=6000, seed=1, occluder=None, monkeypatch=None, **options):
+    """(p-value of the per-cell counts on exterior cells against their areas, points on hidden
+    cells); ``options``: more sample options (``stable=True``)."""
     scene, cells = scene_cells(name)
     if occluder is not None:
         monkeypatch.setattr(visibility, "Occluder", occluder)
-    s = scatter_cli.sample(scene, n, seed=seed, exterior=True, attributes=["face", "object"])
+    s = scatter_cli.sample(scene, n, seed=seed, exterior=True, attributes=["face", "object"], **options)
     surface = load_surface(scene)
     counts, areas, exterior = [], [], []
     for k, inst in enumerate(surface.instances):
@@ -226,6 +227,7 @@ def test_exterior_area_estimate_and_face_counts(box_file):
     report = describe(box_file, exterior=True)["exterior"]
     assert abs(report["area"] - 54.0) < 4 * report["area_se"]
     assert (report["faces_exterior"], report["faces_mixed"], report["faces_hidden"]) == (108, 0, 12)
+    assert report["faces_enclosed"] == 12  # the inner box, whole
     proc = run_scatter("sample", box_file, "--exterior", "-n", "10", "-f", "csv", "-o", "/dev/null", "--stats", "-", check=True)
     stats_ = json.loads(proc.stderr)["exterior"]
     assert abs(stats_["exterior_area"] - 54.0) < 4 * stats_["exterior_area_se"]
@@ -241,13 +243,6 @@ def test_poisson_thins_exterior_candidates():
     assert len(r.points) > 100 and not np.any(r.attributes["object"] == inner)
     d = np.linalg.norm(r.points[:, None] - r.points[None], axis=2)
     assert d[np.triu_indices(len(d), 1)].min() >= 0.4 * (1 - 1e-6)
-
-
-def test_stratified_is_a_usage_error():
-    from scatter_cli.errors import ScatterUsageError
-
-    with pytest.raises(ScatterUsageError, match="stratified"):
-        scatter_cli.sample(es.box_in_box()[0], 10, exterior=True, method="stratified")
 
 
 def test_sobol_keeps_no_hidden_point():

@@ -52,7 +52,16 @@ def test_the_fast_readers_answer_for_every_seed(tmp_path, name):
     ("ply-binary", b"\x00\x01"),  # trailing bytes: trimesh rejects the file, so the fast reader hands it over
     ("ply-ascii", b"3 \n"),  # a stray partial line after the faces: likewise
     ("ply-ascii", b"\n\x8f"),
+    ("ply-ascii-quads", b" 1 3 2\n0"),  # a space after the faces once looped for ever (ASan fuzz run)
 ])
 def test_differential_findings_stay_fixed(tmp_path, name, tail):
     suffix, seed = SEEDS[name]
     assert differential(seed + tail, suffix, tmp_path) == "handed"
+
+
+@pytest.mark.parametrize("tail", [b" ", b"  \n \n", b"\t\r\n"])
+def test_blank_space_after_the_faces_is_read(tmp_path, tail):
+    """The ASCII PLY reader's scan of what follows the faces steps over spaces (it once
+    stood still on one)."""
+    suffix, seed = SEEDS["ply-ascii"]
+    assert differential(seed + tail, suffix, tmp_path) == "same"

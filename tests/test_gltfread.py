@@ -203,3 +203,13 @@ def test_a_node_graph_trimesh_cannot_walk_is_a_one_line_error(tmp_path):
     proc = run_scatter("sample", path, "-n", "100", "-o", tmp_path / "out.ply")
     err = proc.stderr.decode()
     assert proc.returncode == 1 and err.count("\n") == 1 and err.startswith("error: ") and str(path) in err
+
+
+def test_a_primitive_with_normals_goes_to_trimesh_when_smooth_normals_are_wanted():
+    from scatter_cli.gltfread import read_glb
+
+    g = case_instanced()
+    g.doc["meshes"][1]["primitives"][0]["attributes"]["NORMAL"] = g.add(np.ones((6, 3), dtype="<f4"), 5126, "VEC3")
+    data = g.bytes()
+    assert read_glb(data) is not None and read_glb(data, without_normals=True) is None
+    assert read_glb(case_instanced().bytes(), without_normals=True) is not None

@@ -20,6 +20,7 @@ from scatter_cli.surface import load_surface
 
 from .conftest import SAMPLES, run_scatter, run_user
 from .fuzz_inputs import SEEDS
+from .loadmemory import load_memory
 
 SHARED = Path("/work/shared/meshes")
 MESHES = sorted({p.name: p for d in (SHARED, SAMPLES) if d.is_dir() for p in d.iterdir()
@@ -204,12 +205,13 @@ def test_the_command_writes_the_same_bytes_either_way(tmp_path):
     assert outs[0] == outs[1]
 
 
+@pytest.mark.parametrize("attributes", ["face", "face,smooth-normal"])
 @pytest.mark.parametrize("suffix", ["obj", "off", "stl"])
-def test_a_plain_text_job_never_imports_trimesh(suffix, tmp_path):
+def test_a_plain_text_job_never_imports_trimesh(suffix, attributes, tmp_path):
     path = tmp_path / f"m.{suffix}"
     path.write_bytes((OBJ_CASES["materials"] if suffix == "obj" else OFF_CASES["triangles and quads"] if suffix == "off"
                       else STL_CASES["named"]).encode())
-    args = ["sample", str(path), "-n", "100", "-a", "face", "-o", str(tmp_path / "o.ply")]
+    args = ["sample", str(path), "-n", "100", "-a", attributes, "-o", str(tmp_path / "o.ply")]
     code = f"import sys\nfrom scatter_cli import cli\nassert cli.main({args!r}) == 0\nprint('trimesh' in sys.modules)"
     proc = run_user([sys.executable, "-c", code], text=True)
     assert proc.stdout.strip() == "False", proc.stderr
@@ -230,3 +232,110 @@ def test_numbers_convert_as_python_floats_do():
     got = _creaders.read_stl_ascii((text + "endsolid\n").encode()).ravel()
     want = np.array([float(t) for t in toks])
     assert got.view(np.int64).tolist() == want.view(np.int64).tolist()
+
+
+def big_ascii_stl(facets=48000, seed=0):
+    """About 13 MB of ASCII STL: large enough for the reader to split it into parts."""
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal((facets, 3, 3))
+    rows = ["facet normal 0 0 1\n outer loop\n" + "".join("  vertex %r %r %r\n" % tuple(v) for v in f.tolist())
+            + " endloop\nendfacet\n" for f in x]
+    return rows
+
+
+@pytest.mark.parametrize("case", ["plain", "crlf", "endsolid early", "endsolid early, then other bytes",
+                                  "a second solid late", "a bad line late"])
+def test_ascii_stl_read_in_parts_is_read_as_in_one(case):
+    """The reader splits a large file at line breaks and reads the parts on threads; the
+    parts decide in file order, so the result is the one-part result in every case."""
+    from scatter_cli import _creaders
+
+    rows = big_ascii_stl()
+    k = len(rows) // 5
+    if case == "endsolid early":
+        rows[k] = "endsolid\n"
+    elif case == "endsolid early, then other bytes":
+        rows[k] = "endsolid\n"
+        rows[-k] = rows[-k].replace("outer", "\x80uter")
+    elif case == "a second solid late":
+        rows[-k] = "endsolid\nsolid b\n"
+    elif case == "a bad line late":
+        rows[-k] = rows[-k].replace("outer loop", "outer loop 1")
+        rows[-k] = rows[-k].replace("vertex", "vertexx", 1)
+    text = "solid a\n" + "".join(rows) + ("" if "endsolid early" in case else "endsolid a\n")
+    data = (text.replace("\n", "\r\n") if case == "crlf" else text).encode()
+    one = _creaders.read_stl_ascii(data, 1)
+    want = {"endsolid early": 3 * k, "plain": 3 * len(rows), "crlf": 3 * len(rows)}.get(case)
+    assert (one is None) if want is None else len(one) == want
+    for threads in (2, 3):
+        parts = _creaders.read_stl_ascii(data, threads)
+        assert (parts is None) == (one is None)
+        assert one is None or parts.tobytes() == one.tobytes()
+
+
+@functools.lru_cache(maxsize=None)
+def icosphere_files(folder, subdivisions):
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions)
+    paths = {}
+    for fmt, (suffix, options) in FORMATS.items():
+        paths[fmt] = Path(folder) / f"ico{subdivisions}-{fmt}.{suffix}"
+        mesh.export(paths[fmt], **options)
+    return paths
+
+
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+def test_a_load_takes_at_most_the_file_size_beyond_what_it_returns(fmt, tmp_path_factory):
+    """Peak resident memory of a load in a fresh process, less the returned arrays and
+    the (mapped) file itself, is at most the file size; the icosphere(7) (327,680 faces)
+    in each format, 6 to 98 MB."""
+    paths = icosphere_files(str(tmp_path_factory.getbasetemp()), 7)
+    got = load_memory(paths[fmt], run_user_text)
+    assert got["extra"] <= got["file"], got
+
+
+def test_the_memory_check_fails_a_loader_that_makes_objects_per_face(tmp_path_factory):
+    """The broken variant: the OFF through trimesh (compiled readers off), which parses
+    with Python objects per line, exceeds the same bound."""
+    paths = icosphere_files(str(tmp_path_factory.getbasetemp()), 7)
+    got = load_memory(paths["off"], run_user_text, env={"SCATTER_NUMPY": "1"})
+    assert got["extra"] > got["file"], got
+
+
+def run_user_text(cmd, env=None):
+    return run_user(cmd, env=env, text=True, timeout=600)
+
+
+def assert_same_smooth_normals(path):
+    fast = scatter_cli.sample(path, count=2000, seed=4, attributes="face,smooth-normal")
+    slow = scatter_cli.sample(load_surface(path), count=2000, seed=4, attributes="face,smooth-normal")
+    assert fast.points.tobytes() == slow.points.tobytes()
+    assert fast.attributes["normal"].tobytes() == slow.attributes["normal"].tobytes()
+
+
+def carries_normals_or_uv(path):
+    data = path.read_bytes()
+    if path.suffix == ".obj":
+        return b"vt" in data or b"vn" in data
+    if path.suffix == ".ply":
+        head = data[: data.find(b"end_header")]
+        return any(w in head.split() for w in (b"nx", b"u", b"s", b"texture_u"))
+    return path.suffix == ".glb" and b'"NORMAL"' in data
+
+
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+@pytest.mark.parametrize("mesh", MESHES, ids=[m.name for m in MESHES])
+def test_smooth_normals_from_the_fast_path_are_trimesh_s(mesh, fmt, tmp_path):
+    """A job asking for smooth normals reads a file without normals or UVs of its own with
+    the fast readers (the normals are computed from the faces, as for trimesh's mesh), and
+    hands the others to trimesh."""
+    path = resave(mesh, fmt, tmp_path)
+    assert (read_mesh(path, path.suffix[1:], smooth=True) is None) == carries_normals_or_uv(path)
+    assert_same_smooth_normals(path)
+
+
+@pytest.mark.parametrize("suffix,case,text", CASES, ids=[f"{s}-{c}" for s, c, _ in CASES])
+def test_format_rules_hold_for_smooth_normals(suffix, case, text, tmp_path):
+    path = tmp_path / f"m.{suffix}"
+    path.write_bytes(text.encode())
+    assert (read_mesh(path, suffix, smooth=True) is None) == carries_normals_or_uv(path)
+    assert_same_smooth_normals(path)

@@ -35,8 +35,12 @@ def _load(name):
 
 
 def run(mesh, seed=0, **kw):
-    """(source, RawChunk of all its points) for a trimesh mesh or a path."""
+    """(source, RawChunk of all its points) for a trimesh mesh or a path (with ``radius``:
+    the candidates' source and the dart-thrown set)."""
     src = StableSource(load_surface(mesh), seed, want_bary=True, **kw)
+    if "radius" in kw:
+        kept = stable.dart_thrown(src, kw["radius"])
+        return src, kept.draw(0, kept.count)
     return src, src.draw(0, src.count)
 
 
@@ -320,8 +324,7 @@ def test_radius_set_is_spaced_maximal_and_local():
     # maximal: every candidate lies within r of a kept point
     from scipy.spatial import cKDTree
 
-    _, face, ctr = src._candidates(src.horizon)
-    cand = src._place(face, ctr).points
+    cand = src.draw(0, src.count).points
     assert cKDTree(before.points).query(cand)[0].max() < r
 
     v2, f2 = edit_move(v, f)
@@ -348,6 +351,7 @@ def test_any_chunking_and_thread_count_gives_the_same_bytes(threads, monkeypatch
     monkeypatch.setenv("SCATTER_THREADS", threads)
     monkeypatch.setattr(stable, "FACE_BLOCK", 1000)
     monkeypatch.setattr(stable, "ARRIVAL_BLOCK", 777)
+    monkeypatch.setattr(stable, "ROOM_SDS", -50.0)  # the kernel's arrays overflow: the second pass
     src2 = StableSource(load_surface(_mesh(v, f)), 1, want_bary=True, count=7000)
     for size in (1, 999, 7000):
         parts = [src2.draw(s, min(s + size, 7000)) for s in range(0, 7000, size)] if size > 1 else [
@@ -510,3 +514,44 @@ def test_api_output_is_the_same_for_any_chunk_size_and_threads(kw, monkeypatch):
     for size in (97, 1000):
         got = scatter_cli.sample(mesh, stable=True, attributes=("face", "bary"), chunk_size=size, **kw)
         assert _all_bytes(got) == _all_bytes(ref)
+
+
+def _weighted_area(mesh_or_path, spec):
+    """Exact area times weight over the surface: vertex colours by the exact per-face mean
+    weight; the texture-masked quad by the mean of its weight over u (constant in v)."""
+    from scatter_cli.surface import apply_matrix
+    from scatter_cli.weighting import VertexColorWeight
+
+    from .test_attributes import exact_u_bins
+
+    surface = load_surface(mesh_or_path)
+    if spec.startswith("texture"):
+        g = surface.geometries[0]
+        mean = exact_u_bins(mesh_or_path, 0, np.linspace(0, 1, 2))[0] / 200_000 / 255  # texels 0..255 -> 0..1
+        return areas(g.vertices, g.faces).sum() * mean
+    exact = VertexColorWeight(surface, 0, spec)
+    total = 0.0
+    for k, inst in enumerate(surface.instances):
+        g = surface.geometries[inst.geometry]
+        v = g.vertices if inst.matrix is None else apply_matrix(inst.matrix[:3], g.vertices)
+        total += float(np.sum(areas(v, g.faces) * exact.face_weights(k, inst)))
+    return total
+
+
+@pytest.mark.parametrize("spec", ["vertex-color:r", "texture:r"])
+def test_weighted_density_count_is_d_times_area_times_weight(spec):
+    """--stable --density D --weight W: a Poisson count with mean D times the weighted area
+    (docs/stable.md: no normalisation by the total weight, which would make every point
+    depend on every face). Broken variant: the default method's count, round(D x area),
+    must fail the same check."""
+    import scatter_cli
+
+    from .test_attributes import texture_mask_quad
+
+    mesh = texture_mask_quad() if spec.startswith("texture") else str(SAMPLES / "boxvertexcolors.glb")
+    d = 3000.0
+    mean = d * _weighted_area(mesh, spec)
+    got = len(scatter_cli.sample(mesh, None, density=d, stable=True, weight=spec, seed=4).points)
+    default = len(scatter_cli.sample(mesh, None, density=d, weight=spec, seed=4).points)
+    for count, passes in ((got, True), (default, False)):
+        assert (abs(count - mean) < 4 * np.sqrt(mean)) == passes, (spec, count, mean)

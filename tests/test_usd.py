@@ -392,3 +392,95 @@ def test_a_mesh_prim_without_arrays_has_no_faces(tmp_path):
     stage.GetRootLayer().Save()
     s = load_surface(tmp_path / "e.usda")
     assert [(i.name, len(s.geometries[i.geometry].faces)) for i in s.instances] == [("/empty", 0), ("/tri", 1)]
+
+
+# -- many instances: arrays over all instances at once --------------------------------------
+
+def write_forest(path, k=240):
+    """A point instancer of ``k`` instances of two prototypes taken in turn, at random
+    positions, orientations and scales (one mirrored, one squashed onto a line), and
+    instance 5 hidden."""
+    rng = np.random.default_rng(11)
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.Xform.Define(stage, "/W")
+    pi = UsdGeom.PointInstancer.Define(stage, "/W/trees")
+    UsdGeom.Xformable(pi).AddRotateXOp().Set(-90)
+    for j, (v, f) in enumerate(_meshes()[1:]):
+        define_mesh(stage, f"/W/trees/protos/p{j}", v, f)
+    pi.CreatePrototypesRel().SetTargets([f"/W/trees/protos/p{j}" for j in range(2)])
+    pi.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy((np.arange(k) % 2).astype(np.int32)))
+    pi.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(rng.uniform(-50, 50, (k, 3)).astype(np.float32)))
+    q = rng.normal(size=(k, 4))
+    pi.CreateOrientationsAttr(Vt.QuathArray.FromNumpy((q / np.linalg.norm(q, axis=1, keepdims=True)).astype(np.float16)))
+    scales = rng.uniform(0.5, 2, (k, 3))
+    scales[3] = (-1, 1, 2)
+    scales[8] = (0, 0, 1)
+    pi.CreateScalesAttr(Vt.Vec3fArray.FromNumpy(scales.astype(np.float32)))
+    pi.CreateInvisibleIdsAttr([5])
+    stage.GetRootLayer().Save()
+    return path
+
+
+def test_instancer_in_instance_order_with_geometry_stored_once(tmp_path):
+    s = load_surface(write_forest(tmp_path / "f.usdc"))
+    shown = [i for i in range(240) if i != 5]
+    assert [i.name for i in s.instances] == [f"/W/trees[{i}]/p{i % 2}" for i in shown]
+    assert len(s.geometries) == 2 and [i.geometry for i in s.instances] == [i % 2 for i in shown]
+
+
+def test_instancer_plan_bounds_and_normals_as_one_instance_at_a_time(tmp_path):
+    """The plan (face areas), the sampled box and the normals computed over all instances
+    at once are those of each instance on its own, bit for bit (an instance of zero area
+    and a mirrored one among them)."""
+    from scatter_cli.api import prepare, sampled_bounds
+    from scatter_cli.surface import apply_matrix, cofactor, corners, doubled_areas
+
+    path = write_forest(tmp_path / "f.usdc")
+    run = prepare(path, 5_000, seed=2, attributes=["normal", "object", "face"], precision="float64")
+    s, plan = run.surface, run.plan
+    areas, lo, hi = [], np.full(3, np.inf), np.full(3, -np.inf)
+    for inst in s.instances:
+        g = s.geometries[inst.geometry]
+        a = doubled_areas(corners(g.vertices, g.faces), inst.matrix)
+        used = np.isfinite(a) & (a > 0)
+        areas.append(a[used])
+        if used.any():
+            v = apply_matrix(inst.matrix, g.vertices[np.unique(g.faces[used])])
+            lo, hi = np.minimum(lo, v.min(axis=0)), np.maximum(hi, v.max(axis=0))
+    assert sum(len(a) == 0 for a in areas) == 1  # the flattened instance gets no points
+    cdf = np.cumsum(np.concatenate(areas))
+    cdf *= 0.5
+    np.testing.assert_array_equal(plan.cdf, cdf)
+    np.testing.assert_array_equal(sampled_bounds(plan), np.stack([lo, hi]))
+    out = run.collect()
+    expected = np.empty_like(out.normal)
+    for k in np.unique(out.object):
+        rows = np.flatnonzero(out.object == k)
+        inst = s.instances[k]
+        g = s.geometries[inst.geometry]
+        v = g.vertices[g.faces[out.face[rows]]]
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        a = inst.matrix[:3, :3]
+        n = apply_matrix(cofactor(a) * np.sign(np.linalg.det(a)), n)
+        expected[rows] = n / np.sqrt(np.einsum("ij,ij->i", n, n))[:, None]
+    np.testing.assert_array_equal(out.normal, expected)
+    assert (out.object == s.instances.index(next(i for i in s.instances if i.name == "/W/trees[3]/p1"))).any()
+
+
+@pytest.mark.parametrize("block", [1, 3, 1 << 16])
+@pytest.mark.parametrize("sizes", [(3,), (4,), (5,), (0, 1, 2, 3, 4, 5, 7)])
+def test_fan_faces_are_the_documented_fans(sizes, block):
+    """Uniform polygons (a reshape) and mixed ones (in blocks of polygons) give the fans
+    of the documented order, holes dropped, left-handed corners swapped."""
+    from scatter_cli.usdread import fan_faces
+
+    rng = np.random.default_rng(len(sizes) + block)
+    counts = rng.choice(sizes, 50).astype(np.int32)
+    corners = rng.integers(0, 1000, counts.sum()).astype(np.int32)
+    holes = np.array([4, 17, 17, 60, -1], dtype=np.int32)  # a repeat and out-of-range ones ignored
+    for h in (None, holes):
+        dropped = () if h is None else (4, 17)
+        expected = corners[fan(counts, dropped)]
+        np.testing.assert_array_equal(fan_faces(counts, corners, h, block=block), expected)
+        np.testing.assert_array_equal(fan_faces(counts, corners, h, True, block=block), expected[:, [0, 2, 1]])

@@ -8,7 +8,7 @@ import scatter_cli.api as api
 from scatter_cli.errors import ScatterError
 from scatter_cli.writers import write_samples
 
-from .conftest import SAMPLES
+from .conftest import SAMPLES, run_scatter
 
 pxr = pytest.importorskip("pxr")
 from pxr import Usd, UsdGeom  # noqa: E402
@@ -98,9 +98,12 @@ def test_a_count_beyond_memory_is_refused_and_leaves_no_file(tmp_path, monkeypat
     import scatter_cli.usdwrite as usdwrite
 
     monkeypatch.setattr(usdwrite, "available_memory", lambda: 10_000)
-    with pytest.raises(ScatterError, match=r"USD output is built in memory .* 1,000 points"):
+    with pytest.raises(ScatterError, match=r"t\.usdc: USD output is built in memory .* 1,000 points"):
         write(tmp_path / "t.usdc", "normal", n=1000)
     assert not list(tmp_path.iterdir())
+    monkeypatch.setattr(usdwrite, "available_memory", lambda: 1000 * usdwrite.bytes_per_point(
+        api.prepare(SAMPLES / "boxtextured.glb", 1000, attributes="normal").layout))
+    write(tmp_path / "t.usdc", "normal", n=1000)  # just enough: written
 
 
 def test_without_usd_core_one_line_saying_what_to_install(tmp_path, monkeypatch):
@@ -109,3 +112,50 @@ def test_without_usd_core_one_line_saying_what_to_install(tmp_path, monkeypatch)
     monkeypatch.setitem(sys.modules, "pxr", None)
     with pytest.raises(ScatterError, match=r"pip install 'scatter-cli\[usd\]'"):
         write(tmp_path / "t.usda", "", n=10)
+
+
+def stage_with_units(path, up_axis=None, meters_per_unit=None):
+    """A one-mesh stage (a quad cube), with upAxis and metersPerUnit authored when given."""
+    from .test_usd import define_mesh, quad_cube
+
+    stage = Usd.Stage.CreateNew(str(path))
+    define_mesh(stage, "/cube", *quad_cube())
+    if up_axis:
+        UsdGeom.SetStageUpAxis(stage, up_axis)
+    if meters_per_unit:
+        UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+    stage.GetRootLayer().Save()
+    return path
+
+
+def units_written(tmp_path, mesh, *extra):
+    """(upAxis, metersPerUnit, --stats from_input) of the stage `scatter sample MESH` writes."""
+    import json
+
+    out, report = tmp_path / "out.usda", tmp_path / "stats.json"
+    proc = run_scatter("sample", mesh, "-n", 50, "-o", out, "--stats", report, *extra)
+    assert proc.returncode == 0, proc.stderr.decode()
+    stats = json.loads(report.read_text())
+    stage = Usd.Stage.Open(str(out))
+    assert validation_errors(stage) == []
+    return UsdGeom.GetStageUpAxis(stage), UsdGeom.GetStageMetersPerUnit(stage), stats["output"]["usd"]["from_input"]
+
+
+@pytest.mark.parametrize("up_axis, meters_per_unit", [("Z", 0.01), ("Z", 0.3048), ("Y", 1000.0)])
+def test_up_axis_and_units_carried_from_a_usd_input(tmp_path, up_axis, meters_per_unit):
+    mesh = stage_with_units(tmp_path / "in.usda", up_axis, meters_per_unit)
+    assert units_written(tmp_path, mesh) == (up_axis, meters_per_unit, True)
+
+
+def test_a_stage_without_units_keeps_usds_fallbacks(tmp_path):
+    # Unauthored, a stage is Y up in centimetres (USD's fallbacks): the output says so
+    # rather than metres, so the points keep their size in a consumer that converts units.
+    mesh = stage_with_units(tmp_path / "in.usda")
+    assert units_written(tmp_path, mesh) == ("Y", 0.01, True)
+
+
+def test_gltf_input_is_y_up_metres_and_others_say_nothing(tmp_path):
+    assert units_written(tmp_path, SAMPLES / "boxtextured.glb") == ("Y", 1.0, True)
+    assert units_written(tmp_path, SAMPLES / "skull.ply") == ("Y", 1.0, False)  # the default, not from the file
+    zup = stage_with_units(tmp_path / "in.usda", "Z", 0.01)
+    assert units_written(tmp_path, zup, "--object", "/cube") == ("Z", 0.01, True)  # selection keeps them
