@@ -142,7 +142,7 @@ class AttributeMaker:
     def _prepare_smooth_normal(self):
         self._prepare_normal()  # the fallback where interpolated normals cancel out
         for gi in self._used:
-            self._tables["vn", gi] = vertex_normal_table(self.surface.geometries[gi].mesh)
+            self._tables["vn", gi] = vertex_normal_table(self.surface.geometries[gi])
 
     def _smooth_normals(self, raw, groups):
         def compute(gi, face, bary):

@@ -95,7 +95,8 @@ def load_surface(source, *, input_format: str | None = None, objects=None, plain
     if isinstance(source, (str, os.PathLike)) and _suffix(source, input_format) in USD_FORMATS:
         from .usdread import load_usd
 
-        return load_usd(os.fspath(source), input_format, objects=objects, plain=plain)
+        # smooth normals: a stage's own (primvars:normals, normals) when it has them
+        return load_usd(os.fspath(source), input_format, objects=objects, plain=plain and not smooth)
     if plain and not objects and isinstance(source, (str, os.PathLike)) and not _is_stream(os.fspath(source)):
         fast = _read_plain(os.fspath(source), input_format, smooth)
         if fast is not None:

@@ -79,15 +79,17 @@ def uv_table(mesh):
     return uv if uv.ndim == 2 and uv.shape[1] == 2 and len(uv) == len(mesh.vertices) else None
 
 
-def vertex_normal_table(mesh):
-    """(V, 3) float64 vertex normals: the file's when it has them, else
-    :func:`weighted_vertex_normals` (trimesh's own needs SciPy, which the command line
-    does not import, and without it takes time quadratic in the vertex count)."""
+def vertex_normal_table(geometry):
+    """(V, 3) float64 vertex normals of a :class:`~scatter_cli.surface.Geometry`: the
+    file's when it has them, else :func:`weighted_vertex_normals` (trimesh's own needs
+    SciPy, which the command line does not import, and without it takes time quadratic in
+    the vertex count)."""
+    mesh = geometry.mesh
     if isinstance(mesh, VertexTables):
         return mesh.vertex_normals
-    if "vertex_normals" in mesh._cache:  # trimesh keeps the file's normals there
+    if mesh is not None and "vertex_normals" in mesh._cache:  # trimesh keeps the file's normals there
         return np.asarray(mesh.vertex_normals, dtype=np.float64)
-    return weighted_vertex_normals(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64))
+    return weighted_vertex_normals(geometry.vertices, geometry.faces)
 
 
 def _placeholder(image):

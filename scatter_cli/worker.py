@@ -66,14 +66,17 @@ def sample_file(input, output, fmt, setup, warn=None):
     """
     from . import api
     from .errors import ScatterError
-    from .writers import write_samples
+    from .writers import run_precision, write_samples
 
     try:
         folder = os.path.dirname(output)
         if folder:
             os.makedirs(folder, exist_ok=True)
-        run = api.prepare(input, warn=warn, **setup["options"])
-        write_samples(run.chunks(), output, fmt, run.layout, run.size, setup.get("ascii", False))
+        options = dict(setup["options"])
+        options["precision"] = run_precision(fmt, options.get("precision", "auto"))  # as sample sets it
+        run = api.prepare(input, warn=warn, **options)
+        write_samples(run.chunks(), output, fmt, run.layout, run.size, setup.get("ascii", False),
+                      **api.output_options(run, fmt))
         return {"error": None, "count": run.size, "faces": int(run.info["faces"]), "area": float(run.info["area"])}
     except ScatterError as exc:
         message = str(exc)

@@ -13,7 +13,7 @@ import scatter_cli
 from scatter_cli.attributes import AttributeMaker
 from scatter_cli.errors import ScatterError, ScatterUsageError
 from scatter_cli.sampling import RawChunk
-from scatter_cli.surface import load_surface
+from scatter_cli.surface import Geometry, load_surface
 from scatter_cli.texture import CLAMP_TO_EDGE, MIRRORED_REPEAT, REPEAT, bilinear, wrap_index
 from scatter_cli.visuals import vertex_normal_table
 from scatter_cli.weighting import barycentric
@@ -109,10 +109,10 @@ def test_computed_vertex_normals_are_trimeshs(monkeypatch):
     fresh = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
     monkeypatch.setattr(trimesh.geometry, "weighted_vertex_normals",
                         lambda *a, **k: pytest.fail("trimesh's vertex normals were computed"))
-    np.testing.assert_allclose(vertex_normal_table(fresh), want, atol=1e-12)
+    np.testing.assert_allclose(vertex_normal_table(Geometry("fresh", fresh.vertices, fresh.faces, fresh)), want, atol=1e-12)
     # the file's own normals win over computed ones
     flipped = trimesh.Trimesh(mesh.vertices, mesh.faces, vertex_normals=-want, process=False)
-    np.testing.assert_allclose(vertex_normal_table(flipped), -want, atol=1e-12)
+    np.testing.assert_allclose(vertex_normal_table(Geometry("flipped", flipped.vertices, flipped.faces, flipped)), -want, atol=1e-12)
 
 
 def test_normal_and_smooth_normal_together_is_a_usage_error():

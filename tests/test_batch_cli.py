@@ -182,3 +182,28 @@ def test_cli_shard_usage_errors(tmp_path):
     run_scatter("sample", mesh, "-n", "10", "-a", "normal", "-o", tmp_path / "b.ply", check=True)
     proc = run_scatter("merge", tmp_path / "a.ply", tmp_path / "b.ply", "-o", tmp_path / "m.ply")
     assert proc.returncode == 1 and b"b.ply" in proc.stderr and not (tmp_path / "m.ply").exists()
+
+
+@pytest.mark.parametrize("suffix", ["usda", "las"])
+def test_batch_writes_what_sample_writes_for_formats_that_read_the_run(tmp_path, suffix):
+    """LAS takes its scale from the sampled box and USD its up axis and units from the
+    input: batch hands them over as `scatter sample` does (a Z-up USD stage in cm here)."""
+    if suffix == "las":
+        pytest.importorskip("laspy")
+    else:
+        pytest.importorskip("pxr")
+        from .test_usd_output import stage_with_units
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(SAMPLES / "boxtextured.glb", src / "box.glb")
+    meshes = ["box.glb"]
+    if suffix == "usda":
+        stage_with_units(src / "cube.usda", "Z", 0.01)
+        meshes.append("cube.usda")
+    done = run_scatter("batch", src, "-o", f"{tmp_path}/out/{{stem}}.{suffix}", "-n", "300", "-j", "1")
+    assert done.returncode == 0, done.stderr
+    for name in meshes:
+        stem = os.path.splitext(name)[0]
+        single = run_scatter("sample", src / name, "-n", "300", "-o", tmp_path / f"{stem}.{suffix}")
+        assert single.returncode == 0
+        assert (tmp_path / "out" / f"{stem}.{suffix}").read_bytes() == (tmp_path / f"{stem}.{suffix}").read_bytes()
