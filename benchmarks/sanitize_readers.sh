@@ -2,7 +2,7 @@
 # The loader fuzzing with the compiled kernels built under AddressSanitizer and
 # UndefinedBehaviorSanitizer (not for CI: slow, and it needs gcc's libasan).
 #
-#     sh benchmarks/sanitize_readers.sh [inputs]      (from the repository root)
+#     sh benchmarks/sanitize_readers.sh [inputs [seed]]      (from the repository root)
 #
 # Builds a sanitized copy of the tree in a temporary directory, so the working tree's
 # extensions stay as they are (a wheel built by pip with SCATTER_SANITIZE=1, its
@@ -13,6 +13,7 @@ set -eu
 ROOT=$(pwd)
 PYTHON=${PYTHON:-$ROOT/.venv/bin/python}
 INPUTS=${1:-20000}
+SEED=${2:-0}
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 cp -r scatter_cli tests benchmarks setup.py pyproject.toml README.md "$WORK"/
@@ -37,4 +38,4 @@ import scatter_cli._creaders as c, subprocess
 assert c.__file__.startswith('$WORK'), c.__file__
 assert 'libasan' in subprocess.run(['ldd', c.__file__], capture_output=True, text=True).stdout, 'not a sanitized build'
 print('sanitized readers:', c.__file__)"
-"$PYTHON" benchmarks/fuzz_loaders.py --inputs "$INPUTS" --save "$ROOT/fuzz-crashes"
+"$PYTHON" benchmarks/fuzz_loaders.py --inputs "$INPUTS" --seed "$SEED" --save "$ROOT/fuzz-crashes"

@@ -35,6 +35,8 @@ import sys
 import tempfile
 import time
 
+import numpy as np
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
@@ -75,27 +77,22 @@ def held_records(chunks, layout, count, bounds):
     return [writer.records(c).copy() for c in chunks], writer.header_
 
 
-def lazrs_alone(backend_name):
-    def write(records, header, out):
-        import laspy
+def lazrs_alone(records, header, out, backend_name):
+    import laspy
 
-        backend = getattr(laspy.LazBackend, backend_name)
-        with laspy.open(out, mode="w", header=header, do_compress=True, laz_backend=backend) as f:
-            for r in records:
-                f.point_writer.write_points(laspy.PackedPointRecord(r, header.point_format))
-
-    return write
+    backend = getattr(laspy.LazBackend, backend_name)
+    with laspy.open(out, mode="w", header=header, do_compress=True, laz_backend=backend) as f:
+        for r in records:
+            f.point_writer.write_points(laspy.PackedPointRecord(r, header.point_format))
 
 
 def raw_bytes(size, out, block=1 << 22):
-    data = memoryview(bytes(block))
-    with open(out, "wb") as f:
+    from scatter_cli.writers import open_output
+
+    data = np.ones(block, np.uint8).data  # written pages: a bytes(block) of zeros wrote 4-6x slower here
+    with open_output(out) as f:
         for start in range(0, size, block):
             f.write(data[: min(block, size - start)])
-
-
-REFERENCES = {"lazrs alone": lazrs_alone("LazrsParallel"), "lazrs alone, 1 thread": lazrs_alone("Lazrs"),
-              "las bytes": None}
 
 
 def timed(fn):
@@ -104,42 +101,51 @@ def timed(fn):
     return time.perf_counter() - wall, time.process_time() - cpu
 
 
-def time_formats(count, runs, folder):
+def entries(count, data, records, header, sizes):
+    """[(name, write(out))] in the order of a round: each reference next to the format it
+    is compared with, so that both meet the same state of the machine."""
     from scatter_cli.writers import write_samples
 
+    def fmt_writer(fmt):
+        chunks, layout, bounds = data["float64" if fmt in ("las", "laz") else "float32"]
+        return lambda out: write_samples(chunks, out, fmt, layout, count, bounds=bounds)
+
+    out = [(fmt, fmt_writer(fmt)) for fmt, _ in FORMATS]
+    out.insert(2, ("las bytes", lambda path: raw_bytes(sizes["las"], path)))
+    out[5:5] = [("lazrs alone", lambda path: lazrs_alone(records, header, path, "LazrsParallel")),
+                ("lazrs alone, 1 thread", lambda path: lazrs_alone(records, header, path, "Lazrs"))]
+    return out
+
+
+def time_formats(count, runs, folder):
     rows = []
+    suffix = dict(FORMATS)
     for name, attrs in LAYOUTS.items():
         data = {p: sampled_chunks(count, attrs, p) for p in ("float32", "float64")}
         records, header = held_records(*data["float64"][:2], count, data["float64"][2])
-        names = [fmt for fmt, _ in FORMATS] + list(REFERENCES)
         sizes = {}
-        wall, cpu = ({k: [] for k in names} for _ in range(2))
+        order = entries(count, data, records, header, sizes)
+        out = os.path.join(folder, "bench.las")
+        dict(order)["las"](out)  # untimed: the size the raw reference writes
+        sizes["las"] = os.path.getsize(out)
+        os.unlink(out)
+        wall, cpu = ({k: [] for k, _ in order} for _ in range(2))
         for _ in range(runs):
-            for fmt, suffix in FORMATS:
-                chunks, layout, bounds = data["float64" if fmt in ("las", "laz") else "float32"]
-                out = os.path.join(folder, f"bench.{suffix}")
-                w, c = timed(lambda: write_samples(chunks, out, fmt, layout, count, bounds=bounds))
-                wall[fmt].append(w), cpu[fmt].append(c)
-                sizes[fmt] = os.path.getsize(out)
+            for key, write in order:
+                out = os.path.join(folder, f"bench.{suffix.get(key, 'laz')}")
+                w, c = timed(lambda: write(out))
+                wall[key].append(w), cpu[key].append(c)
+                sizes[key] = os.path.getsize(out)
                 os.unlink(out)
-            for ref, write in REFERENCES.items():
-                out = os.path.join(folder, "bench-ref.laz")
-                if write is None:
-                    w, c = timed(lambda: raw_bytes(sizes["las"], out))
-                else:
-                    w, c = timed(lambda: write(records, header, out))
-                wall[ref].append(w), cpu[ref].append(c)
-                sizes[ref] = os.path.getsize(out)
-                os.unlink(out)
-        for fmt in names:
-            rows.append({"layout": name, "format": fmt, "seconds": statistics.median(wall[fmt]),
-                         "cpu_seconds": statistics.median(cpu[fmt]),
-                         "ratio_to_ply": median_ratio(wall[fmt], wall["ply"]),
-                         "cpu_ratio_to_ply": median_ratio(cpu[fmt], cpu["ply"]),
-                         "ratio_to_lazrs": median_ratio(wall[fmt], wall["lazrs alone"]) if fmt == "laz" else None,
-                         "cpu_ratio_to_lazrs": median_ratio(cpu[fmt], cpu["lazrs alone"]) if fmt == "laz" else None,
-                         "mb": sizes[fmt] / 1e6, "mpoints_per_s": count / statistics.median(wall[fmt]) / 1e6,
-                         "all": wall[fmt], "all_cpu": cpu[fmt]})
+        for key, _ in order:
+            rows.append({"layout": name, "format": key, "seconds": statistics.median(wall[key]),
+                         "cpu_seconds": statistics.median(cpu[key]),
+                         "ratio_to_ply": median_ratio(wall[key], wall["ply"]),
+                         "cpu_ratio_to_ply": median_ratio(cpu[key], cpu["ply"]),
+                         "ratio_to_lazrs": median_ratio(wall[key], wall["lazrs alone"]) if key == "laz" else None,
+                         "cpu_ratio_to_lazrs": median_ratio(cpu[key], cpu["lazrs alone"]) if key == "laz" else None,
+                         "mb": sizes[key] / 1e6, "mpoints_per_s": count / statistics.median(wall[key]) / 1e6,
+                         "all": wall[key], "all_cpu": cpu[key]})
         del data, records
         print(f"{name}: PLY {statistics.median(wall['ply']):.2f} s", file=sys.stderr)
     return rows

@@ -78,7 +78,9 @@ def _layout(lines):
         return None
     order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt[0][1])
     elements = []
-    for words in (line.split() for line in lines):
+    for k, words in enumerate(line.split() for line in lines):
+        if not words and k < len(lines) - 1:
+            return None  # a blank header line: trimesh's header parser fails on it
         if not words or words[0] in ("ply", "format", "comment", "obj_info"):
             continue
         if words[0] == "element" and len(words) == 3:

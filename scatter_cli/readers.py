@@ -134,8 +134,8 @@ def _ascii_layout(head):
     except UnicodeDecodeError:
         return None
     elements = []
-    for words in (line.split(" ") for line in lines[1:]):
-        if words == [""] or words[0] in ("comment", "obj_info"):
+    for words in (line.split(" ") for line in lines[1:-1]):  # the last: the text before end_header
+        if words[0] in ("comment", "obj_info"):
             continue
         if words == ["format", "ascii", "1.0"]:
             continue
@@ -145,7 +145,7 @@ def _ascii_layout(head):
             elements[-1][2].append(words[1:])
         else:
             return None
-    if "format ascii 1.0" not in lines or [e[0] for e in elements] != ["vertex", "face"]:
+    if lines[-1] or "format ascii 1.0" not in lines or [e[0] for e in elements] != ["vertex", "face"]:
         return None
     (_, n_vertex, vprops), (_, n_face, fprops) = elements
     names = [p[1] if len(p) == 2 else None for p in vprops]
