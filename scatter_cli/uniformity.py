@@ -65,9 +65,9 @@ def _bonferroni(pvalues):
 
 
 def _per_slab_direction(tri, areas, directions, k, test):
-    """Lists (directions, statistics, dofs, p-values) of ``test(d, edges, prob) -> (stat,
-    dof, p)`` over the k equal-area slabs along each direction (default: 3 axes + 4
-    diagonals); p is None where pooling left one bin."""
+    """The report fields k, directions, slab_statistic, slab_dof, slab_p and p_slabs of
+    ``test(d, edges, prob) -> (stat, dof, p)`` over the k equal-area slabs along each
+    direction (default: 3 axes + 4 diagonals); p is None where pooling left one bin."""
     dirs, stats, dofs, ps = [], [], [], []
     for d, edges, prob in exact.slabs(tri, areas, default_directions() if directions is None else directions, k):
         stat, dof, p = test(d, edges, prob)
@@ -75,7 +75,8 @@ def _per_slab_direction(tri, areas, directions, k, test):
         stats.append(stat)
         dofs.append(dof)
         ps.append(p if dof > 0 else None)
-    return dirs, stats, dofs, ps
+    return {"k": int(k), "directions": dirs, "slab_statistic": stats, "slab_dof": dofs, "slab_p": ps,
+            "p_slabs": _bonferroni(ps)}
 
 
 def region_test(points, tri, areas, k=32, directions=None, min_expected=5.0):
@@ -93,22 +94,17 @@ def region_test(points, tri, areas, k=32, directions=None, min_expected=5.0):
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
     n = len(pts)
-    dirs, stats, dofs, ps = _per_slab_direction(
+    slabs = _per_slab_direction(
         tri, areas, directions, k, lambda d, edges, prob: chi2_gof(exact.slab_counts(pts, d, edges), prob * n, min_expected))
     z_mean, z_cov = moment_z_scores(pts, tri, areas)
     p_z = normal_sf(np.concatenate((z_mean, z_cov))).tolist()
     return {
         "n": n,
-        "k": int(k),
-        "directions": dirs,
-        "slab_statistic": stats,
-        "slab_dof": dofs,
-        "slab_p": ps,
-        "p_slabs": _bonferroni(ps),
+        **slabs,
         "z_mean": z_mean.tolist(),
         "z_cov": z_cov.tolist(),
         "p_moments": _bonferroni(p_z),
-        "p": _bonferroni(ps + p_z),
+        "p": _bonferroni(slabs["slab_p"] + p_z),
     }
 
 
@@ -123,7 +119,7 @@ def two_sample_test(points_a, points_b, tri, areas, k=32, directions=None, min_e
     """
     a = np.asarray(points_a, dtype=float).reshape(-1, 3)
     b = np.asarray(points_b, dtype=float).reshape(-1, 3)
-    dirs, stats, dofs, ps = _per_slab_direction(
+    slabs = _per_slab_direction(
         tri, areas, directions, k,
         lambda d, edges, _: chi2_two_sample(exact.slab_counts(a, d, edges), exact.slab_counts(b, d, edges), min_expected))
     ref, _, cov, tri_k, _ = exact.centred_moments(tri, areas)
@@ -134,13 +130,8 @@ def two_sample_test(points_a, points_b, tri, areas, k=32, directions=None, min_e
     return {
         "na": len(a),
         "nb": len(b),
-        "k": int(k),
-        "directions": dirs,
-        "slab_statistic": stats,
-        "slab_dof": dofs,
-        "slab_p": ps,
-        "p_slabs": _bonferroni(ps),
+        **slabs,
         "z_mean_diff": z.tolist(),
         "p_means": _bonferroni(p_z),
-        "p": _bonferroni(ps + p_z),
+        "p": _bonferroni(slabs["slab_p"] + p_z),
     }
