@@ -130,18 +130,31 @@ class Occluder:
         """(n, 3) unit normals of faces ``face`` (n,) of instances ``instance`` (n,)."""
         return self.normals[self.offsets[instance] + face]
 
-    def exterior(self, points, normals, u, enclosed=None):
+    def exterior(self, points, normals, u, enclosed=None, escaped=None):
         """Whether each point (n, 3) on a face of unit normal ``normals`` (n, 3) sees out:
-        ((n,) bool, rays cast). ``u`` (n, 3) uniforms in [0, 1) choose each point's
+        ((n,) bool, rays cast). ``u`` (n, 3) uniforms in [0, 1) (or a function that
+        draws them, called only when a point needs the design) choose each point's
         rotation of the design; points where ``enclosed`` (n,) bool is set are hidden
-        without a ray."""
+        without a ray. ``escaped`` (n,) bool: the verdicts of the points' normal rays,
+        already cast by :meth:`normal_escapes` (for every point not enclosed); they are
+        counted, not cast again."""
         origin = points - self.center
         out = np.zeros(len(points), dtype=bool)
         todo = np.arange(len(points)) if enclosed is None else np.flatnonzero(~enclosed)
         rays = 0
         if self.normal_rays:
-            todo, rays = self._normal_rays(origin, normals, todo, out)
-        spin = random_rotations(u)
+            if escaped is None:
+                todo, rays = self._normal_rays(origin, normals, todo, out)
+            else:
+                rays = len(todo)
+                out[todo] = escaped[todo]
+                todo, more = self._normal_rays(origin, normals, todo[~escaped[todo]], out, signs=(-1.0,))
+                rays += more
+        if not len(todo) or not len(self.design):
+            return out, rays
+        u = u() if callable(u) else u
+        spin = np.empty((len(points), 4))
+        spin[todo] = random_rotations(u[todo])  # (elementwise: the rows of the whole block's rotations)
         for d in self.design:
             if not len(todo):
                 break
@@ -156,11 +169,18 @@ class Occluder:
         _, rays = self._normal_rays(points - self.center, normals, np.arange(len(points)), out)
         return ~out, rays
 
-    def _normal_rays(self, origin, normals, todo, out):
-        """Cast the normal, then the opposite direction, from points ``todo``; mark those
-        that get out in ``out``: (the others, rays cast)."""
+    def normal_escapes(self, points, normals):
+        """(m,) bool: the normal ray of each point (m, 3) on a face of unit normal
+        ``normals`` (m, 3) gets out."""
+        out = np.zeros(len(points), dtype=bool)
+        self._cast(points - self.center, normals, normals, np.arange(len(points)), out)
+        return out
+
+    def _normal_rays(self, origin, normals, todo, out, signs=(1.0, -1.0)):
+        """Cast the normal, then the opposite direction (``signs``), from points
+        ``todo``; mark those that get out in ``out``: (the others, rays cast)."""
         rays = 0
-        for sign in (1.0, -1.0):
+        for sign in signs:
             rays += len(todo)
             todo = self._cast(origin, normals, sign * normals[todo], todo, out)
         return todo, rays
