@@ -20,6 +20,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <pthread.h>
 
 static int get(PyObject *obj, int type, npy_intp size, PyArrayObject **out, const char *name)
 {
@@ -268,86 +269,92 @@ static inline double orient(const double *p, const double *q, double y, double z
     return (q[1] - p[1]) * (z - p[2]) - (q[2] - p[2]) * (y - p[1]);
 }
 
-/* enclosure.crossings for faces s0..s1-1 of one shell: push their crossings' keys
+/* enclosure.crossings for one face (corners c, box lo..hi): push its crossings' keys
  * (line + x / step / width) with ``bit``, flag unsure lines; 0 when out of memory */
-static int crossings(const Scene *sc, int64_t s0, int64_t s1, uint64_t bit, Crossings *out, uint8_t *unsure)
+static int cross_face(const Scene *sc, double c[3][3], const double *lo, const double *hi, uint64_t bit,
+                      Crossings *out, uint8_t *unsure)
 {
     const Grid *g = sc->g;
     const double s = g->step, *o = g->origin, *P = sc->probe, width = (double)g->shape[0] + 2.0;
     const int64_t nz = g->shape[2];
-    for (int64_t t = s0; t < s1; t++) {
-        double near[3][3], lo[3], hi[3];
-        corners(sc, t, near, lo, hi);
-        int64_t j0 = to_i64(ceil((lo[1] - o[1]) / s - P[1])), j1 = to_i64(floor((hi[1] - o[1]) / s - P[1]));
-        int64_t k0 = to_i64(ceil((lo[2] - o[2]) / s - P[2])), k1 = to_i64(floor((hi[2] - o[2]) / s - P[2]));
-        /* (the shell lies inside the grid: these clamps change nothing but keep every line in it) */
-        j0 = j0 < 0 ? 0 : j0, k0 = k0 < 0 ? 0 : k0;
-        j1 = j1 >= g->shape[1] ? g->shape[1] - 1 : j1, k1 = k1 >= nz ? nz - 1 : k1;
-        if (j1 < j0 || k1 < k0)
-            continue;
-        for (int c = 0; c < 3; c++)
-            for (int k = 0; k < 3; k++)
-                near[c][k] -= o[k];
-        double edge = 0.0;
-        for (int c = 0; c < 3; c++)
-            for (int k = 1; k < 3; k++) {
-                double e = fabs(near[c][k] - near[(c + 1) % 3][k]);
-                edge = e > edge ? e : edge;
+    int64_t j0 = to_i64(ceil((lo[1] - o[1]) / s - P[1])), j1 = to_i64(floor((hi[1] - o[1]) / s - P[1]));
+    int64_t k0 = to_i64(ceil((lo[2] - o[2]) / s - P[2])), k1 = to_i64(floor((hi[2] - o[2]) / s - P[2]));
+    /* (the shell lies inside the grid: these clamps change nothing but keep every line in it) */
+    j0 = j0 < 0 ? 0 : j0, k0 = k0 < 0 ? 0 : k0;
+    j1 = j1 >= g->shape[1] ? g->shape[1] - 1 : j1, k1 = k1 >= nz ? nz - 1 : k1;
+    if (j1 < j0 || k1 < k0)
+        return 1;
+    double near[3][3];
+    for (int v = 0; v < 3; v++)
+        for (int k = 0; k < 3; k++)
+            near[v][k] = c[v][k] - o[k];
+    double edge = 0.0;
+    for (int v = 0; v < 3; v++)
+        for (int k = 1; k < 3; k++) {
+            double e = fabs(near[v][k] - near[(v + 1) % 3][k]);
+            edge = e > edge ? e : edge;
+        }
+    double tol = (edge > 1e-300 ? edge : 1e-300) * s * 1e-9;
+    for (int64_t j = j0; j <= j1; j++)
+        for (int64_t k = k0; k <= k1; k++) {
+            double y = ((double)j + P[1]) * s, z = ((double)k + P[2]) * s;
+            double d0 = orient(near[1], near[2], y, z), d1 = orient(near[2], near[0], y, z),
+                   d2 = orient(near[0], near[1], y, z);
+            int inside = (d0 > tol && d1 > tol && d2 > tol) || (d0 < -tol && d1 < -tol && d2 < -tol);
+            int touch = !inside && ((d0 >= -tol && d1 >= -tol && d2 >= -tol) || (d0 <= tol && d1 <= tol && d2 <= tol));
+            int64_t line = j * nz + k;
+            if (touch)
+                unsure[line] = 1;
+            if (inside) {
+                double x = (d0 * near[0][0] + d1 * near[1][0] + d2 * near[2][0]) / (d0 + d1 + d2);
+                if (!push(out, (double)line + x / s / width, bit))
+                    return 0;
             }
-        double tol = (edge > 1e-300 ? edge : 1e-300) * s * 1e-9;
-        for (int64_t j = j0; j <= j1; j++)
-            for (int64_t k = k0; k <= k1; k++) {
-                double y = ((double)j + P[1]) * s, z = ((double)k + P[2]) * s;
-                double d0 = orient(near[1], near[2], y, z), d1 = orient(near[2], near[0], y, z),
-                       d2 = orient(near[0], near[1], y, z);
-                int inside = (d0 > tol && d1 > tol && d2 > tol) || (d0 < -tol && d1 < -tol && d2 < -tol);
-                int touch = !inside && ((d0 >= -tol && d1 >= -tol && d2 >= -tol) || (d0 <= tol && d1 <= tol && d2 <= tol));
-                int64_t line = j * nz + k;
-                if (touch)
-                    unsure[line] = 1;
-                if (inside) {
-                    double x = (d0 * near[0][0] + d1 * near[1][0] + d2 * near[2][0]) / (d0 + d1 + d2);
-                    if (!push(out, (double)line + x / s / width, bit))
-                        return 0;
-                }
-            }
-    }
+        }
     return 1;
 }
 
-/* enclosure.shell_cover for faces s0..s1-1 of one shell (box lo..hi): OR ``bit`` into
- * ``cover`` (the grid's cells) where they may touch; 0 when out of memory */
-static int shell_cover(const Scene *sc, int64_t s0, int64_t s1, const double *slo, const double *shi, uint64_t bit,
-                       uint64_t *cover)
+#define MAX_THREADS 8
+/* below this many faces a shell is done on one thread */
+#define THREAD_FACES 65536
+
+/* One thread's share of a shell's faces s0..s1-1, in its box of cells base + (n): the
+ * cells of the corners of faces no wider than a cell less grow (``point``), the boxes of
+ * the others (``diff``, a difference array, made at the first), the crossings and the
+ * unsure lines (enclosure.shell_cover and enclosure.crossings). */
+typedef struct {
+    const Scene *sc;
+    int64_t s0, s1, base[3], n[3];
+    uint64_t bit;
+    uint8_t *point, *unsure;
+    int32_t *diff;
+    Crossings *cross;
+    int ok;
+} Share;
+
+static void *mark_share(void *arg)
 {
-    const Grid *g = sc->g;
-    int64_t base[3], last[3], n[3], ny = g->shape[1], nz = g->shape[2];
-    ranges(g, slo, shi, sc->g->grow, base, last);
-    for (int k = 0; k < 3; k++)
-        n[k] = last[k] + 1 - base[k];
-    int64_t e0 = n[0] + 1, e1 = n[1] + 1, e2 = n[2] + 1;
-    uint8_t *point = calloc((size_t)(n[0] * n[1] * n[2]), 1), *grown = malloc((size_t)(n[0] * n[1] * n[2]));
-    int32_t *diff = calloc((size_t)(e0 * e1 * e2), sizeof(int32_t));
-    if (!point || !grown || !diff) {
-        free(point), free(grown), free(diff);
-        return 0;
-    }
-    int any_large = 0;
-    for (int64_t t = s0; t < s1; t++) {
-        double c3[3][3], lo[3], hi[3];
-        corners(sc, t, c3, lo, hi);
-        double w = hi[0] - lo[0];
-        w = hi[1] - lo[1] > w ? hi[1] - lo[1] : w;
-        w = hi[2] - lo[2] > w ? hi[2] - lo[2] : w;
-        if (w <= g->step - g->grow) {
-            for (int c = 0; c < 3; c++) {
-                const double *p = c3[c];
+    Share *w = arg;
+    const Grid *g = w->sc->g;
+    const int64_t *n = w->n, *base = w->base, e1 = n[1] + 1, e2 = n[2] + 1;
+    for (int64_t t = w->s0; t < w->s1 && w->ok; t++) {
+        double c[3][3], lo[3], hi[3];
+        corners(w->sc, t, c, lo, hi);
+        double span = hi[0] - lo[0];
+        span = hi[1] - lo[1] > span ? hi[1] - lo[1] : span;
+        span = hi[2] - lo[2] > span ? hi[2] - lo[2] : span;
+        if (span <= g->step - g->grow) {
+            for (int v = 0; v < 3; v++) {
                 int64_t at[3];
                 for (int k = 0; k < 3; k++)
-                    at[k] = clip(to_i64(floor((p[k] - g->origin[k]) / g->step)) - base[k], 0, n[k] - 1);
-                point[(at[0] * n[1] + at[1]) * n[2] + at[2]] = 1;
+                    at[k] = clip(to_i64(floor((c[v][k] - g->origin[k]) / g->step)) - base[k], 0, n[k] - 1);
+                w->point[(at[0] * n[1] + at[1]) * n[2] + at[2]] = 1;
             }
         } else {
+            if (!w->diff && !(w->diff = calloc((size_t)((n[0] + 1) * e1 * e2), sizeof(int32_t)))) {
+                w->ok = 0;
+                break;
+            }
             int64_t a[3], b[3];
             ranges(g, lo, hi, g->grow, a, b);
             for (int k = 0; k < 3; k++) {
@@ -357,54 +364,125 @@ static int shell_cover(const Scene *sc, int64_t s0, int64_t s1, const double *sl
             for (int corner = 0; corner < 8; corner++) {
                 int64_t x = corner & 1 ? b[0] : a[0], y = corner & 2 ? b[1] : a[1], z = corner & 4 ? b[2] : a[2];
                 int picked = (corner & 1) + ((corner >> 1) & 1) + ((corner >> 2) & 1);
-                diff[(x * e1 + y) * e2 + z] += picked % 2 ? -1 : 1;
+                w->diff[(x * e1 + y) * e2 + z] += picked % 2 ? -1 : 1;
             }
-            any_large = 1;
         }
+        w->ok = cross_face(w->sc, c, lo, hi, w->bit, w->cross, w->unsure);
     }
-    if (any_large) /* prefix sums along each axis */
-        for (int64_t x = 0; x < e0; x++)
-            for (int64_t y = 0; y < e1; y++)
-                for (int64_t z = 0; z < e2; z++) {
-                    int32_t *d = diff + (x * e1 + y) * e2 + z;
-                    if (z)
-                        d[0] += d[-1];
-                }
-    if (any_large) {
-        for (int64_t x = 0; x < e0; x++)
-            for (int64_t y = 1; y < e1; y++)
-                for (int64_t z = 0; z < e2; z++)
-                    diff[(x * e1 + y) * e2 + z] += diff[(x * e1 + y - 1) * e2 + z];
-        for (int64_t x = 1; x < e0; x++)
-            for (int64_t y = 0; y < e1; y++)
-                for (int64_t z = 0; z < e2; z++)
-                    diff[(x * e1 + y) * e2 + z] += diff[((x - 1) * e1 + y) * e2 + z];
-    }
-    /* the vertices' cells and their 26 neighbours: grown by one cell along each axis in turn */
+    return NULL;
+}
+
+/* prefix sums of a difference array d (e0, e1, e2) along each axis */
+static void summed(int32_t *d, int64_t e0, int64_t e1, int64_t e2)
+{
+    for (int64_t x = 0; x < e0; x++)
+        for (int64_t y = 0; y < e1; y++)
+            for (int64_t z = 1; z < e2; z++)
+                d[(x * e1 + y) * e2 + z] += d[(x * e1 + y) * e2 + z - 1];
+    for (int64_t x = 0; x < e0; x++)
+        for (int64_t y = 1; y < e1; y++)
+            for (int64_t z = 0; z < e2; z++)
+                d[(x * e1 + y) * e2 + z] += d[(x * e1 + y - 1) * e2 + z];
+    for (int64_t x = 1; x < e0; x++)
+        for (int64_t y = 0; y < e1; y++)
+            for (int64_t z = 0; z < e2; z++)
+                d[(x * e1 + y) * e2 + z] += d[((x - 1) * e1 + y) * e2 + z];
+}
+
+/* mask (n) grown by one cell along each axis in turn (within n): the cells and their 26
+ * neighbours; ``spare`` of the same size. Returns the grown mask (mask or spare). */
+static uint8_t *grow_cells(uint8_t *mask, uint8_t *spare, const int64_t *n)
+{
     const int64_t stride[3] = {n[1] * n[2], n[2], 1};
     for (int k = 0; k < 3; k++) {
-        memcpy(grown, point, (size_t)(n[0] * n[1] * n[2]));
+        memcpy(spare, mask, (size_t)(n[0] * n[1] * n[2]));
         for (int64_t x = 0; x < n[0]; x++)
             for (int64_t y = 0; y < n[1]; y++)
                 for (int64_t z = 0; z < n[2]; z++) {
                     int64_t c = (x * n[1] + y) * n[2] + z, at = k == 0 ? x : k == 1 ? y : z;
-                    if (point[c]) {
+                    if (mask[c]) {
                         if (at > 0)
-                            grown[c - stride[k]] = 1;
+                            spare[c - stride[k]] = 1;
                         if (at + 1 < n[k])
-                            grown[c + stride[k]] = 1;
+                            spare[c + stride[k]] = 1;
                     }
                 }
-        uint8_t *swap = point;
-        point = grown, grown = swap;
+        uint8_t *swap = mask;
+        mask = spare, spare = swap;
     }
-    for (int64_t x = 0; x < n[0]; x++)
-        for (int64_t y = 0; y < n[1]; y++)
-            for (int64_t z = 0; z < n[2]; z++)
-                if (point[(x * n[1] + y) * n[2] + z] || (any_large && diff[(x * e1 + y) * e2 + z] > 0))
-                    cover[((x + base[0]) * ny + y + base[1]) * nz + z + base[2]] |= bit;
-    free(point), free(grown), free(diff);
-    return 1;
+    return mask;
+}
+
+/* One shell, faces s0..s1-1 of box slo..shi, on up to ``threads`` threads: OR ``bit``
+ * into ``cover`` where its faces may touch, push its crossings, flag unsure lines
+ * (the order the threads find them in changes nothing: crossings are sorted by key,
+ * and equal keys all fall on one side of a probe). 0 when out of memory. */
+static int shell_pass(const Scene *sc, int64_t s0, int64_t s1, const double *slo, const double *shi, uint64_t bit,
+                      int threads, uint64_t *cover, Crossings *cross, uint8_t *unsure)
+{
+    const Grid *g = sc->g;
+    const int64_t ny = g->shape[1], nz = g->shape[2], lines = ny * nz;
+    int64_t base[3], last[3], n[3];
+    ranges(g, slo, shi, g->grow, base, last);
+    for (int k = 0; k < 3; k++)
+        n[k] = last[k] + 1 - base[k];
+    const int64_t cells = n[0] * n[1] * n[2], e0 = n[0] + 1, e1 = n[1] + 1, e2 = n[2] + 1;
+    int count = s1 - s0 < THREAD_FACES ? 1 : threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
+    Share w[MAX_THREADS];
+    Crossings more[MAX_THREADS];
+    pthread_t id[MAX_THREADS];
+    int started[MAX_THREADS] = {0}, ok = 1;
+    uint8_t *spare = malloc((size_t)cells);
+    for (int k = 0; k < count; k++) {
+        more[k] = (Crossings){NULL, 0, 0};
+        w[k] = (Share){sc, s0 + (s1 - s0) * k / count, s0 + (s1 - s0) * (k + 1) / count, {base[0], base[1], base[2]},
+                       {n[0], n[1], n[2]}, bit, calloc((size_t)cells, 1), k ? calloc((size_t)lines, 1) : unsure,
+                       NULL, k ? &more[k] : cross, 1};
+        ok &= w[k].point && w[k].unsure;
+    }
+    if (ok && spare) {
+        for (int k = 1; k < count; k++)
+            started[k] = pthread_create(&id[k], NULL, mark_share, &w[k]) == 0;
+        mark_share(&w[0]);
+        for (int k = 1; k < count; k++)
+            if (started[k])
+                pthread_join(id[k], NULL);
+            else
+                mark_share(&w[k]);
+    }
+    ok &= spare != NULL;
+    for (int k = 0; k < count; k++)
+        ok &= w[k].ok;
+    for (int k = 1; k < count && ok; k++) { /* the other shares into the first */
+        for (int64_t c = 0; c < cells; c++)
+            w[0].point[c] |= w[k].point[c];
+        for (int64_t l = 0; l < lines; l++)
+            unsure[l] |= w[k].unsure[l];
+        if (w[k].diff && !w[0].diff)
+            w[0].diff = w[k].diff, w[k].diff = NULL;
+        else if (w[k].diff)
+            for (int64_t c = 0; c < e0 * e1 * e2; c++)
+                w[0].diff[c] += w[k].diff[c];
+        for (size_t c = 0; c < more[k].n && ok; c++)
+            ok = push(cross, more[k].at[c].key, more[k].at[c].bit);
+    }
+    if (ok) {
+        if (w[0].diff)
+            summed(w[0].diff, e0, e1, e2);
+        uint8_t *point = grow_cells(w[0].point, spare, n);
+        for (int64_t x = 0; x < n[0]; x++)
+            for (int64_t y = 0; y < n[1]; y++)
+                for (int64_t z = 0; z < n[2]; z++)
+                    if (point[(x * n[1] + y) * n[2] + z] || (w[0].diff && w[0].diff[(x * e1 + y) * e2 + z] > 0))
+                        cover[((x + base[0]) * ny + y + base[1]) * nz + z + base[2]] |= bit;
+    }
+    free(spare);
+    for (int k = 0; k < count; k++) {
+        free(w[k].point), free(w[k].diff), free(more[k].at);
+        if (k)
+            free(w[k].unsure);
+    }
+    return ok;
 }
 
 typedef struct {
@@ -533,7 +611,7 @@ static void hidden_table(const Grid *g, const Crossings *cross, const uint64_t *
 /* enclosure.enclosed_faces into out (F,); 0 when out of memory */
 static int certify(const double *v, npy_intp nv, const int64_t *faces, const int64_t *part, npy_intp nf,
                    const uint8_t *closed, double offset, int cells, int max_shells, const double *probe, double limit,
-                   uint8_t *out)
+                   int threads, uint8_t *out)
 {
     int ok = 0, fail = 0;
     int64_t *sorted = NULL, *starts = NULL;
@@ -609,8 +687,7 @@ static int certify(const double *v, npy_intp nv, const int64_t *faces, const int
     for (int i = 0; i < used; i++) {
         int64_t r = shells[i].run;
         uint64_t bit = (uint64_t)1 << i;
-        if (!shell_cover(&sc, starts[r], starts[r + 1], slo + 3 * r, shi + 3 * r, bit, cover) ||
-            !crossings(&sc, starts[r], starts[r + 1], bit, &cross, unsure))
+        if (!shell_pass(&sc, starts[r], starts[r + 1], slo + 3 * r, shi + 3 * r, bit, threads, cover, &cross, unsure))
             goto done;
     }
     if (cross.n)
@@ -644,16 +721,17 @@ done:
 }
 
 PyDoc_STRVAR(enclosed_doc, "enclosed(vertices (V,3) f8, faces (F,3) i8, part (F,) i8, closed (P,) u1, offset, cells, "
-                           "max_shells, probe_x, probe_y, probe_z, limit, out (F,) u1): enclosure.enclosed_faces into out.");
+                           "max_shells, probe_x, probe_y, probe_z, limit, threads, out (F,) u1): enclosure.enclosed_faces "
+                           "into out (the same for any thread count).");
 
 static PyObject *enclosed(PyObject *self, PyObject *args)
 {
     PyObject *ov, *of, *op, *oc, *oo;
     PyArrayObject *va, *fa, *pa, *ca, *outa;
     double offset, probe[3], limit;
-    int cells, max_shells;
-    if (!PyArg_ParseTuple(args, "OOOOdiiddddO", &ov, &of, &op, &oc, &offset, &cells, &max_shells, &probe[0],
-                          &probe[1], &probe[2], &limit, &oo) ||
+    int cells, max_shells, threads;
+    if (!PyArg_ParseTuple(args, "OOOOdiiddddiO", &ov, &of, &op, &oc, &offset, &cells, &max_shells, &probe[0],
+                          &probe[1], &probe[2], &limit, &threads, &oo) ||
         !get3(ov, NPY_FLOAT64, &va, "vertices") || !get3(of, NPY_INT64, &fa, "faces") ||
         !get(oc, NPY_UINT8, -1, &ca, "closed"))
         return NULL;
@@ -681,7 +759,8 @@ static PyObject *enclosed(PyObject *self, PyObject *args)
         Py_RETURN_NONE;
     int ok;
     Py_BEGIN_ALLOW_THREADS
-    ok = certify(PyArray_DATA(va), nv, f, part, nf, PyArray_DATA(ca), offset, cells, max_shells, probe, limit, out);
+    ok = certify(PyArray_DATA(va), nv, f, part, nf, PyArray_DATA(ca), offset, cells, max_shells, probe, limit, threads,
+                 out);
     Py_END_ALLOW_THREADS
     if (!ok)
         return PyErr_NoMemory();

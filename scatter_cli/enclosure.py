@@ -273,7 +273,7 @@ def enclosed_faces(vertices, faces, part, closed, offset):
         out = np.zeros(len(faces), np.uint8)
         _kernel.enclosed(np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(faces, np.int64),
                          np.ascontiguousarray(part, np.int64), np.ascontiguousarray(closed, np.uint8),
-                         float(offset), cells, MAX_SHELLS, *PROBE, LIMIT, out)
+                         float(offset), cells, MAX_SHELLS, *PROBE, LIMIT, native.worker_count(), out)
         return out.view(bool)
     out = np.zeros(len(faces), bool)
     order = None

@@ -155,11 +155,14 @@ class ExteriorSource:
         todo = np.arange(len(faces)) if occluder.enclosed is None else np.flatnonzero(~occluder.enclosed[faces])
         order = todo[np.argsort(faces[todo])]
         points = np.concatenate([d[0].points for d in drawn])
-        parts = np.array_split(order, threads)
         escaped = np.zeros(len(faces), dtype=bool)
-        normals = occluder.normals
-        for idx, free in zip(parts, pool.map(lambda i: occluder.normal_escapes(points[i], normals[faces[i]]), parts)):
-            escaped[idx] = free
+
+        def cast(idx):  # in batches of one block: small temporaries, reused
+            for k in range(0, len(idx), BLOCK):
+                i = idx[k:k + BLOCK]
+                escaped[i] = occluder.normal_escapes(points[i], occluder.normals[faces[i]])
+
+        list(pool.map(cast, np.array_split(order, threads)))
         cuts = np.cumsum([0] + [len(d[2]) for d in drawn])
         return pool.map(lambda k: self._finish_block(*drawn[k], escaped[cuts[k]:cuts[k + 1]]), range(len(drawn)))
 

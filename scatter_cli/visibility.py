@@ -112,12 +112,12 @@ class Occluder:
                 if geometry not in parts:  # welded in the geometry's own frame
                     parts[geometry] = closed_parts(own, f)
                 p, c = parts[geometry]
-                part.append(p + sum(len(x) for x in closed))
+                part.append(p + sum(len(x) for x in closed) if closed else p)
                 closed.append(c)
-                faces.append(f + sum(len(x) for x in vertices))
+                faces.append(f + sum(len(x) for x in vertices) if vertices else f)
                 vertices.append(v)
-            self.enclosed = enclosed_faces(np.concatenate(vertices), np.concatenate(faces), np.concatenate(part),
-                                           np.concatenate(closed), self.offset)
+            self.enclosed = enclosed_faces(*(x[0] if len(x) == 1 else np.concatenate(x)
+                                             for x in (vertices, faces, part, closed)), self.offset)
         return int(np.count_nonzero(self.enclosed))
 
     def is_enclosed(self, face, instance):

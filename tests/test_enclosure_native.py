@@ -42,7 +42,7 @@ def both_paths(vertices, faces, monkeypatch, offset=OFFSET, cells_shift=0):
         out = np.zeros(len(faces), np.uint8)
         cells = int(np.clip(4 * round(len(faces) ** (1 / 3)), *enclosure.GRID)) + cells_shift
         KERNEL.enclosed(vertices, faces, part, closed.astype(np.uint8), offset, cells, enclosure.MAX_SHELLS,
-                        *enclosure.PROBE, enclosure.LIMIT, out)
+                        *enclosure.PROBE, enclosure.LIMIT, 2, out)
         return (part, closed, out.view(bool)), numpy_out
     return (part, closed, enclosure.enclosed_faces(vertices, faces, part, closed, offset)), numpy_out
 
@@ -90,6 +90,25 @@ def test_same_faces_on_random_nested_boxes_and_a_finer_grid_differs(monkeypatch)
         broken, _ = both_paths(v, f, monkeypatch, cells_shift=1)
         differs += not same(broken, numpy_out)
     assert found > 100 and differs > 0
+
+
+def test_same_faces_whatever_the_thread_count(monkeypatch):
+    """Shells large enough to be split between threads (a 327,680-face sphere holding a
+    sphere and a box): the same faces as NumPy on 1 to 3 threads."""
+    import trimesh
+
+    outer, inner = trimesh.creation.icosphere(7), trimesh.creation.icosphere(4, radius=0.4)
+    box = es.cuboid([0.45, -0.1, -0.1], [0.6, 0.1, 0.1], step=0.05)
+    v = np.vstack([outer.vertices, inner.vertices, box.reshape(-1, 3)])
+    f = np.vstack([outer.faces, inner.faces + len(outer.vertices),
+                   np.arange(len(box) * 3).reshape(-1, 3) + len(outer.vertices) + len(inner.vertices)]).astype(np.int64)
+    expected = None
+    for threads in ("1", "2", "3"):
+        monkeypatch.setenv("SCATTER_THREADS", threads)
+        kernel, numpy_out = both_paths(v, f, monkeypatch)
+        expected = numpy_out if expected is None else expected
+        assert same(kernel, expected)
+    assert expected[2][len(outer.faces):].all() and not expected[2][:len(outer.faces)].any()
 
 
 def shells_scene(draw):
@@ -179,7 +198,7 @@ def test_bad_calls_are_refused():
     v, f = box_in_box_soup()
     part, closed = enclosure.closed_parts(v, f)
     c8, out = closed.astype(np.uint8), np.zeros(len(f), np.uint8)
-    args = (enclosure.MAX_SHELLS, *enclosure.PROBE, enclosure.LIMIT)
+    args = (enclosure.MAX_SHELLS, *enclosure.PROBE, enclosure.LIMIT, 2)
     bad_face, bad_part = f.copy(), part.copy()
     bad_face[3, 1] = len(v)
     bad_part[7] = len(closed)
