@@ -11,6 +11,7 @@ Embree works in float32: the scene is centred on its bounding box first.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -96,7 +97,9 @@ class Occluder:
                        for v, f, inst in zip(world, faces, surface.instances)]
         self.enclosed = None
         # Embree builds its tree at the first query: build it now (one ray)
+        t = time.perf_counter()
         self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED")
+        self.build_seconds = time.perf_counter() - t
         # float32 spacing at the largest coordinate, times the roundings
         roundings = OFFSET_ROUNDINGS if offset_roundings is None else offset_roundings
         self.offset = float(np.spacing(np.float32(radius or 1.0))) * roundings
@@ -138,18 +141,19 @@ class Occluder:
         without a ray. ``escaped`` (n,) bool: the verdicts of the points' normal rays,
         already cast by :meth:`normal_escapes` (for every point not enclosed); they are
         counted, not cast again."""
-        origin = points - self.center
         out = np.zeros(len(points), dtype=bool)
         todo = np.arange(len(points)) if enclosed is None else np.flatnonzero(~enclosed)
         rays = 0
+        if escaped is not None and self.normal_rays:
+            rays = len(todo)
+            out[todo] = escaped[todo]
+            todo = todo[~escaped[todo]]
+            if not len(todo):
+                return out, rays
+        origin = points - self.center
         if self.normal_rays:
-            if escaped is None:
-                todo, rays = self._normal_rays(origin, normals, todo, out)
-            else:
-                rays = len(todo)
-                out[todo] = escaped[todo]
-                todo, more = self._normal_rays(origin, normals, todo[~escaped[todo]], out, signs=(-1.0,))
-                rays += more
+            todo, more = self._normal_rays(origin, normals, todo, out, signs=(1.0, -1.0) if escaped is None else (-1.0,))
+            rays += more
         if not len(todo) or not len(self.design):
             return out, rays
         u = u() if callable(u) else u
