@@ -29,4 +29,5 @@ def kernel(name):
                      extra_compile_args=flags, extra_link_args=SANITIZE if SANITIZED else [], optional=True)
 
 
-setup(ext_modules=[kernel("_csampling"), kernel("_cthinning"), kernel("_cstable"), kernel("_creaders")])
+setup(ext_modules=[kernel("_csampling"), kernel("_cthinning"), kernel("_cstable"), kernel("_creaders"),
+                     kernel("_cenclosure")])

@@ -200,6 +200,7 @@ def _occluder(surface, info):
     t = time.perf_counter()
     occluder = Occluder(surface)
     info["timings"]["ray_scene"] = time.perf_counter() - t
+    info["timings"]["bvh_build"] = occluder.build_seconds  # (Embree's tree: part of ray_scene)
     return occluder
 
 

@@ -18,12 +18,20 @@ is the one the rays would give (docs/exterior.md, "Enclosed faces"). The reasoni
 
 Faces of shells that cross, touch or come closer to another than a cell are not
 enclosed (their candidates are cast as before); so are faces inside surfaces that are
-not closed. Nothing here calls Embree.
+not closed; so are faces with a coordinate beyond ``LIMIT`` in magnitude, and every face
+when the grid's cells are no wider than the rays' offset. Nothing here calls Embree.
+
+The compiled kernel ``_cenclosure`` does the same integer and float64 operations in the
+same order (tests/test_enclosure_native.py holds the two to the same faces).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from . import native
+
+_kernel = native.kernel("_cenclosure")
 
 # Cells along the longest side of the scene's box: about 4 (cube root of the faces),
 # within these bounds.
@@ -33,6 +41,9 @@ MAX_SHELLS = 63
 # Line probes sit at these fractions of a cell (irrational: off the round coordinates of
 # axis-aligned models).
 PROBE = (0.41421356237309503, 0.7320508075688772, 0.2360679774997898)
+# Faces with a coordinate beyond this (or not finite) belong to no shell and are not
+# enclosed: every product below then stays finite.
+LIMIT = 1e100
 
 
 def components(count: int, a, b) -> np.ndarray:
@@ -99,6 +110,8 @@ def closed_parts(vertices, faces):
 
 def _parts(ids, faces):
     """closed_parts for vertex ids ``ids`` (V,) int64 (equal ids: one vertex)."""
+    if _kernel is not None:
+        return _kernel.parts(np.ascontiguousarray(ids, np.int64), np.ascontiguousarray(faces, np.int64))
     w = ids[faces]
     size = int(ids.max()) + 1
     key = np.concatenate([np.minimum(w[:, i], w[:, j]) * size + np.maximum(w[:, i], w[:, j])
@@ -229,8 +242,8 @@ def crossings(grid, vertices, faces, lo, hi):
     inside = (d > tol).all(axis=1) | (d < -tol).all(axis=1)
     touch = ((d >= -tol).all(axis=1) | (d <= tol).all(axis=1)) & ~inside
     line = j * nz + k
-    d = d[inside]
-    x = np.einsum("ij,ij->i", d, near[inside][:, :, 0]) / d.sum(axis=1)
+    d, nx_ = d[inside], near[inside][:, :, 0]
+    x = (d[:, 0] * nx_[:, 0] + d[:, 1] * nx_[:, 1] + d[:, 2] * nx_[:, 2]) / (d[:, 0] + d[:, 1] + d[:, 2])
     return line[inside], x, np.unique(line[touch])
 
 
@@ -255,16 +268,21 @@ def enclosed_faces(vertices, faces, part, closed, offset):
 
     vertices (V, 3) float64 in world space, faces (F, 3) int64; part (F,) int64 their
     part (a shell when ``closed[part]``); offset: how far off its face a ray starts."""
+    cells = int(np.clip(4 * round(len(faces) ** (1 / 3)), *GRID))
+    if _kernel is not None:
+        out = np.zeros(len(faces), np.uint8)
+        _kernel.enclosed(np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(faces, np.int64),
+                         np.ascontiguousarray(part, np.int64), np.ascontiguousarray(closed, np.uint8),
+                         float(offset), cells, MAX_SHELLS, *PROBE, LIMIT, native.worker_count(), out)
+        return out.view(bool)
     out = np.zeros(len(faces), bool)
     order = None
     if np.any(part[1:] < part[:-1]):  # each part's faces in one run
         order = np.argsort(part, kind="stable")
         faces, part = faces[order], part[order]
     lo, hi = bounds(vertices, faces)
-    if np.isfinite(vertices).all():
-        finite = np.ones(len(faces), bool)
-    else:
-        finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
+    usable = (np.abs(vertices) <= LIMIT).all(axis=1)  # NaN: False
+    finite = np.ones(len(faces), bool) if usable.all() else usable[faces].all(axis=1)
     starts = np.flatnonzero(np.r_[True, part[1:] != part[:-1]])
     ends = np.r_[starts[1:], len(part)]
     shell = closed[part[starts]] & np.logical_and.reduceat(finite, starts)
@@ -283,12 +301,13 @@ def enclosed_faces(vertices, faces, part, closed, offset):
     maybe &= finite
     if not maybe.any():
         return out
-    cells = int(np.clip(4 * round(len(faces) ** (1 / 3)), *GRID))
     grid = Grid(slo[shell].min(axis=0), shi[shell].max(axis=0), cells)
     grow = 2.0 * offset + 1e-9 * grid.step
+    if not grow < grid.step:  # cells finer than the rays' offset resolve nothing
+        return out
     cover = np.zeros(grid.shape, np.uint64)
-    with np.errstate(invalid="ignore"):
-        vertex_cells = np.floor((vertices - grid.origin) / grid.step).astype(np.int64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        vertex_cells = np.floor((np.where(usable[:, None], vertices, 0.0) - grid.origin) / grid.step).astype(np.int64)
     lines, xs, bits, unsure = [], [], [], []
     for bit, i in enumerate(shells):
         mine = slice(starts[i], ends[i])

@@ -11,6 +11,7 @@ Embree works in float32: the scene is centred on its bounding box first.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -96,7 +97,9 @@ class Occluder:
                        for v, f, inst in zip(world, faces, surface.instances)]
         self.enclosed = None
         # Embree builds its tree at the first query: build it now (one ray)
+        t = time.perf_counter()
         self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED")
+        self.build_seconds = time.perf_counter() - t
         # float32 spacing at the largest coordinate, times the roundings
         roundings = OFFSET_ROUNDINGS if offset_roundings is None else offset_roundings
         self.offset = float(np.spacing(np.float32(radius or 1.0))) * roundings
@@ -112,12 +115,12 @@ class Occluder:
                 if geometry not in parts:  # welded in the geometry's own frame
                     parts[geometry] = closed_parts(own, f)
                 p, c = parts[geometry]
-                part.append(p + sum(len(x) for x in closed))
+                part.append(p + sum(len(x) for x in closed) if closed else p)
                 closed.append(c)
-                faces.append(f + sum(len(x) for x in vertices))
+                faces.append(f + sum(len(x) for x in vertices) if vertices else f)
                 vertices.append(v)
-            self.enclosed = enclosed_faces(np.concatenate(vertices), np.concatenate(faces), np.concatenate(part),
-                                           np.concatenate(closed), self.offset)
+            self.enclosed = enclosed_faces(*(x[0] if len(x) == 1 else np.concatenate(x)
+                                             for x in (vertices, faces, part, closed)), self.offset)
         return int(np.count_nonzero(self.enclosed))
 
     def is_enclosed(self, face, instance):
@@ -130,18 +133,32 @@ class Occluder:
         """(n, 3) unit normals of faces ``face`` (n,) of instances ``instance`` (n,)."""
         return self.normals[self.offsets[instance] + face]
 
-    def exterior(self, points, normals, u, enclosed=None):
+    def exterior(self, points, normals, u, enclosed=None, escaped=None):
         """Whether each point (n, 3) on a face of unit normal ``normals`` (n, 3) sees out:
-        ((n,) bool, rays cast). ``u`` (n, 3) uniforms in [0, 1) choose each point's
+        ((n,) bool, rays cast). ``u`` (n, 3) uniforms in [0, 1) (or a function that
+        draws them, called only when a point needs the design) choose each point's
         rotation of the design; points where ``enclosed`` (n,) bool is set are hidden
-        without a ray."""
-        origin = points - self.center
+        without a ray. ``escaped`` (n,) bool: the verdicts of the points' normal rays,
+        already cast by :meth:`normal_escapes` (for every point not enclosed); they are
+        counted, not cast again."""
         out = np.zeros(len(points), dtype=bool)
         todo = np.arange(len(points)) if enclosed is None else np.flatnonzero(~enclosed)
         rays = 0
+        if escaped is not None and self.normal_rays:
+            rays = len(todo)
+            out[todo] = escaped[todo]
+            todo = todo[~escaped[todo]]
+            if not len(todo):
+                return out, rays
+        origin = points - self.center
         if self.normal_rays:
-            todo, rays = self._normal_rays(origin, normals, todo, out)
-        spin = random_rotations(u)
+            todo, more = self._normal_rays(origin, normals, todo, out, signs=(1.0, -1.0) if escaped is None else (-1.0,))
+            rays += more
+        if not len(todo) or not len(self.design):
+            return out, rays
+        u = u() if callable(u) else u
+        spin = np.empty((len(points), 4))
+        spin[todo] = random_rotations(u[todo])  # (elementwise: the rows of the whole block's rotations)
         for d in self.design:
             if not len(todo):
                 break
@@ -156,11 +173,18 @@ class Occluder:
         _, rays = self._normal_rays(points - self.center, normals, np.arange(len(points)), out)
         return ~out, rays
 
-    def _normal_rays(self, origin, normals, todo, out):
-        """Cast the normal, then the opposite direction, from points ``todo``; mark those
-        that get out in ``out``: (the others, rays cast)."""
+    def normal_escapes(self, points, normals):
+        """(m,) bool: the normal ray of each point (m, 3) on a face of unit normal
+        ``normals`` (m, 3) gets out."""
+        out = np.zeros(len(points), dtype=bool)
+        self._cast(points - self.center, normals, normals, np.arange(len(points)), out)
+        return out
+
+    def _normal_rays(self, origin, normals, todo, out, signs=(1.0, -1.0)):
+        """Cast the normal, then the opposite direction (``signs``), from points
+        ``todo``; mark those that get out in ``out``: (the others, rays cast)."""
         rays = 0
-        for sign in (1.0, -1.0):
+        for sign in signs:
             rays += len(todo)
             todo = self._cast(origin, normals, sign * normals[todo], todo, out)
         return todo, rays

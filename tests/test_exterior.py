@@ -114,6 +114,28 @@ def test_classifier_drops_under_1e3_of_exterior_and_keeps_no_hidden(name):
     assert dropped <= LEVEL * exterior
 
 
+@pytest.mark.parametrize("broken", [False, True])
+def test_normal_rays_cast_together_in_face_order_give_the_same_verdicts(broken):
+    """The pass casts the normal rays of a round's candidates together, in face order
+    (ExteriorSource._classify_round): the verdicts and ray counts are those of each block
+    classified alone, on scenes where some normal rays are blocked; the broken variant
+    (the opposite normals cast first) must change them."""
+    changed = 0
+    for name in ("car", "cup", "bowl"):
+        surface = load_surface(getattr(es, name)()[0])
+        occluder = visibility.Occluder(surface)
+        chunk = SamplePlan(surface).draw(0, 20000, 4)
+        alone = classify(occluder, chunk, 4)
+        normals = occluder.face_normals(chunk.face, chunk.instance)
+        order = np.argsort(occluder.offsets[chunk.instance] + chunk.face, kind="stable")[::-1]
+        escaped = np.empty(len(order), bool)
+        escaped[order] = occluder.normal_escapes(chunk.points[order], -normals[order] if broken else normals[order])
+        together = classify(occluder, chunk, 4, escaped=escaped)
+        assert broken or 0 < escaped.sum() < len(escaped)
+        changed += not np.array_equal(alone[0], together[0]) or alone[1] != together[1]
+    assert (changed > 0) == broken
+
+
 @pytest.mark.parametrize("name", ["box_in_box", "cup"])
 def test_rays_from_the_face_itself_drop_exterior_points(name):
     dropped, _, exterior = classify_cells(name, FromTheFace, n=2000)
