@@ -121,9 +121,18 @@ static int bits128(unsigned __int128 x)
     return hi ? 128 - __builtin_clzll(hi) : lo ? 64 - __builtin_clzll(lo) : 0;
 }
 
+/* 2^e as a double, for -1022 <= e <= 1023: a product by it is exact (ldexp's cost without its checks). */
+static inline double power_of_two(int e)
+{
+    uint64_t bits = (uint64_t)(e + 1023) << 52;
+    double d;
+    memcpy(&d, &bits, sizeof d);
+    return d;
+}
+
 /* m * 10^e10 rounded to the nearest double (ties to even), for 0 < m < 2^64 and
- * |e10| <= 19, with exact 128-bit integers: a product, or a quotient with at least 62
- * bits and a remainder for the sticky bit. */
+ * |e10| <= 19, with exact 128-bit integers: a product, or a quotient in [2^62, 2^64)
+ * (so one 128-by-64-bit division step) and a remainder for the sticky bit. */
 static double exact_decimal(uint64_t m, int e10)
 {
     unsigned __int128 q;
@@ -131,8 +140,8 @@ static double exact_decimal(uint64_t m, int e10)
     if (e10 >= 0) {
         q = (unsigned __int128)m * POW10_INT[e10];
     } else {
-        unsigned __int128 d = POW10_INT[-e10];
-        shift = 127 - (64 - __builtin_clzll(m));
+        uint64_t d = POW10_INT[-e10];
+        shift = 63 + __builtin_clzll(m) - __builtin_clzll(d); /* n in [2^62 d, 2^64 d) */
         unsigned __int128 n = (unsigned __int128)m << shift;
         q = n / d;
         inexact = n % d != 0;
@@ -150,7 +159,7 @@ static double exact_decimal(uint64_t m, int e10)
     } else {
         drop = 0;
     }
-    return ldexp((double)(uint64_t)q, drop - shift);
+    return (double)(uint64_t)q * power_of_two(drop - shift); /* q < 2^53: exact, and a normal result */
 }
 
 /* Eight ASCII digits at p (p + 8 within the buffer): 1 and their value in *out, else 0.
@@ -1082,6 +1091,18 @@ static int plain_line_rest(cursor *c)
     return 0;
 }
 
+/* Exactly three numbers, then the end of the line (moving past its break), as numbers()
+ * then end_line() take them: 0 with the numbers in xyz (room for 3), else -1. */
+static int vertex_numbers(cursor *c, double *xyz)
+{
+    for (int k = 0; k < 3; k++) {
+        skip_spaces(c);
+        if (c->p >= c->end || is_break(*c->p) || parse_double(c, &xyz[k]) < 0)
+            return -1;
+    }
+    return end_line(c);
+}
+
 /* One stretch of an ASCII STL body, from a line start to `stop` (just after a line break,
  * or the end): its vertices, and 0 (endsolid, with no other solid after it in the file),
  * 1 (hand the file to trimesh), 2 (reached `stop` first) or -1 (no memory). */
@@ -1101,20 +1122,21 @@ static int stl_body(stl_part *s)
         skip_blank_lines(&c);
         if (c.p >= c.end)
             return 2;
-        if (starts_nocase(&c, "vertex")) {
+        char first = *c.p | 0x20; /* lower case for letters: which keyword to test */
+        if (first == 'v' && starts_nocase(&c, "vertex")) {
             c.p += 6;
-            double xyz[3];
-            if (grow_room(&s->v, sizeof xyz) < 0)
-                return -1;
-            if (!at_token_end(&c) || numbers(&c, xyz) != 3 || end_line(&c) < 0)
+            if (!at_token_end(&c))
                 return 1;
-            memcpy(s->v.data + s->v.len, xyz, sizeof xyz);
-            s->v.len += sizeof xyz;
-        } else if (starts_nocase(&c, "endsolid")) {
+            if (grow_room(&s->v, 3 * sizeof(double)) < 0)
+                return -1;
+            if (vertex_numbers(&c, (double *)(s->v.data + s->v.len)) < 0)
+                return 1;
+            s->v.len += 3 * sizeof(double);
+        } else if (first == 'e' && starts_nocase(&c, "endsolid")) {
             c.p += 8; /* another solid after it: another geometry */
             return contains_nocase(c.p, s->file_end, "solid") ? 1 : 0;
-        } else if (starts_nocase(&c, "facet") || starts_nocase(&c, "outer") || starts_nocase(&c, "endloop") ||
-                   starts_nocase(&c, "endfacet")) {
+        } else if ((first == 'f' && starts_nocase(&c, "facet")) || (first == 'o' && starts_nocase(&c, "outer")) ||
+                   (first == 'e' && (starts_nocase(&c, "endloop") || starts_nocase(&c, "endfacet")))) {
             if (plain_line_rest(&c) < 0)
                 return 1;
         } else {
