@@ -330,19 +330,23 @@ static int end_line(cursor *c)
     return -1;
 }
 
-/* Only tab, LF, CR and printable ASCII: other bytes mean decoding, Unicode line breaks or
- * whitespace that only trimesh's own handling decides. */
+/* 1 for a byte other than tab, LF, CR and printable ASCII: such bytes mean decoding,
+ * Unicode line breaks or whitespace that only trimesh's own handling decides. */
+static inline unsigned char not_plain(unsigned char b)
+{
+    unsigned char control = (unsigned char)(b - 0x20) >= 0x5f; /* below 0x20 or 0x7f and up */
+    return control & (b != '\t') & (b != '\n') & (b != '\r');
+}
+
+/* Only plain bytes (see not_plain). */
 static int plain_text(const char *s, Py_ssize_t n)
 {
     const unsigned char *u = (const unsigned char *)s;
     for (Py_ssize_t i = 0; i < n;) {
         Py_ssize_t stop = n - i > 4096 ? i + 4096 : n;
         unsigned char bad = 0;
-        for (; i < stop; i++) { /* no early exit inside a block: the compiler vectorises it */
-            unsigned char b = u[i];
-            unsigned char control = (unsigned char)(b - 0x20) >= 0x5f; /* below 0x20 or 0x7f and up */
-            bad |= control & (b != '\t') & (b != '\n') & (b != '\r');
-        }
+        for (; i < stop; i++) /* no early exit inside a block: the compiler vectorises it */
+            bad |= not_plain(u[i]);
         if (bad)
             return 0;
     }
@@ -1077,15 +1081,18 @@ static int contains_nocase(const char *p, const char *end, const char *word)
     return 0;
 }
 
-/* The rest of a keyword line, which must not hold a word trimesh searches for. */
+/* The rest of a keyword line, which must be plain text (not_plain) without a word trimesh
+ * searches for. */
 static int plain_line_rest(cursor *c)
 {
     const char *e = memchr(c->p, '\n', (size_t)(c->end - c->p));
     e = e ? e : c->end;
-    int maybe = 0; /* a 'v' or 's' at all: the search is needed only then */
-    for (const char *q = c->p; q < e; q++)
+    unsigned char maybe = 0, bad = 0; /* maybe: a 'v' or 's' at all, the search is needed only then */
+    for (const unsigned char *q = (const unsigned char *)c->p; q < (const unsigned char *)e; q++) {
         maybe |= (*q | 0x20) == 'v' || (*q | 0x20) == 's';
-    if (maybe && (contains_nocase(c->p, e, "vertex") || contains_nocase(c->p, e, "solid")))
+        bad |= not_plain(*q);
+    }
+    if (bad || (maybe && (contains_nocase(c->p, e, "vertex") || contains_nocase(c->p, e, "solid"))))
         return -1;
     c->p = e < c->end ? e + 1 : e;
     return 0;
@@ -1105,18 +1112,18 @@ static int vertex_numbers(cursor *c, double *xyz)
 
 /* One stretch of an ASCII STL body, from a line start to `stop` (just after a line break,
  * or the end): its vertices, and 0 (endsolid, with no other solid after it in the file),
- * 1 (hand the file to trimesh), 2 (reached `stop` first) or -1 (no memory). */
+ * 1 (hand the file to trimesh), 2 (reached `stop` first) or -1 (no memory). The whole file
+ * must be plain text (not_plain): the grammar admits only plain bytes on the lines it
+ * reads but for the rest of keyword lines, which plain_line_rest checks, and the bytes
+ * after endsolid, checked here for this stretch and by stl_join for the stretches after. */
 typedef struct {
-    const char *p, *stop, *file_end, *check_from;
+    const char *p, *stop, *file_end;
     grow v;
-    int status, plain; /* plain: the stretch from check_from holds only plain text */
+    int status;
 } stl_part;
 
 static int stl_body(stl_part *s)
 {
-    s->plain = plain_text(s->check_from, s->stop - s->check_from);
-    if (!s->plain)
-        return 1;
     cursor c = {s->p, s->stop};
     for (;;) {
         skip_blank_lines(&c);
@@ -1134,7 +1141,7 @@ static int stl_body(stl_part *s)
             s->v.len += 3 * sizeof(double);
         } else if (first == 'e' && starts_nocase(&c, "endsolid")) {
             c.p += 8; /* another solid after it: another geometry */
-            return contains_nocase(c.p, s->file_end, "solid") ? 1 : 0;
+            return !plain_text(c.p, c.end - c.p) || contains_nocase(c.p, s->file_end, "solid") ? 1 : 0;
         } else if ((first == 'f' && starts_nocase(&c, "facet")) || (first == 'o' && starts_nocase(&c, "outer")) ||
                    (first == 'e' && (starts_nocase(&c, "endloop") || starts_nocase(&c, "endfacet")))) {
             if (plain_line_rest(&c) < 0)
@@ -1171,7 +1178,7 @@ static int stl_join(stl_part *parts, int n)
         }
         if (parts[k].status == 0) {
             for (int j = k + 1; j < n; j++)
-                if (!parts[j].plain)
+                if (!plain_text(parts[j].p, parts[j].stop - parts[j].p))
                     return 1; /* as when the whole file is checked first */
             return 0;
         }
@@ -1205,7 +1212,7 @@ static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
                     const char *nl = memchr(mid, '\n', (size_t)(end - mid));
                     stop = nl ? nl + 1 : end;
                 }
-                parts[n] = (stl_part){from, stop, end, n ? from : text, {0}, 1, 0};
+                parts[n] = (stl_part){from, stop, end, {0}, 1};
                 n++;
                 from = stop;
                 if (stop == end)
