@@ -3,6 +3,7 @@ memory a load takes, and load time per mesh on a collection of small files, fast
 against trimesh.
 
     PYTHONPATH=. python benchmarks/loading.py [--runs 5] [--small 300] [--dir DIR] [--no-cloudcompare]
+        [--formats "ASCII STL,binary STL"]
 
 Part 1 runs `scatter sample FILE -n 1000000 -o out.ply -q` for each format, the formats
 taken in turn round after round (so a change in the machine's load hits them alike), and
@@ -11,7 +12,8 @@ format's ratio to binary PLY from the same rounds. Part 2 loads each icosphere f
 fresh process and prints its peak memory beyond the arrays it returns (tests/loadmemory.py).
 Part 3 loads small meshes in one process, each with the fast readers
 (load_surface(plain=True)) and with trimesh.load (process=False), and prints the median
-time per mesh of each.
+time per mesh of each. ``--formats``: parts 1 and 2 for those formats only (and binary PLY,
+the baseline), CloudCompare and part 3 left out.
 """
 
 from __future__ import annotations
@@ -100,7 +102,7 @@ def part_whole_commands(paths, runs, cloudcompare, work):
     print("|---|---:|---:|---:|---:|---|")
     for label in jobs:
         t = statistics.median(times[label])
-        path = paths.get(label, paths["OBJ"])
+        path = paths.get(label) or paths["OBJ"]
         target = TARGETS.get(label)
         verdict = "" if target is None else f"<= {target}x: {'met' if t / base <= target else 'NOT met'}"
         print(f"| {label} | {path.stat().st_size / 1e6:.0f} | {t:.2f} | {statistics.median(peaks[label]):.0f} | "
@@ -178,14 +180,19 @@ def main():
     ap.add_argument("--small", type=int, default=300)
     ap.add_argument("--dir", default=None, help="keep the generated meshes here (default: a temporary directory)")
     ap.add_argument("--no-cloudcompare", action="store_true")
+    ap.add_argument("--formats", help="comma-separated labels, e.g. 'ASCII STL,binary STL'")
     args = ap.parse_args()
+    chosen = None if args.formats is None else {"binary PLY", *(f.strip() for f in args.formats.split(","))}
+    if chosen and chosen - {label for label, _, _ in FORMATS}:
+        ap.error(f"unknown formats: {', '.join(sorted(chosen - {label for label, _, _ in FORMATS}))}")
     with tempfile.TemporaryDirectory() as work:
         folder = Path(args.dir or work)
-        cc = not args.no_cloudcompare and shutil.which("CloudCompare") is not None
-        paths = big_files(folder / "big")
+        cc = not args.no_cloudcompare and not chosen and shutil.which("CloudCompare") is not None
+        paths = {k: p for k, p in big_files(folder / "big").items() if not chosen or k in chosen}
         part_whole_commands(paths, args.runs, cc, work)
         part_memory(paths)
-        part_small_files(small_files(folder / "small", args.small), max(1, args.runs // 2))
+        if not chosen:
+            part_small_files(small_files(folder / "small", args.small), max(1, args.runs // 2))
 
 
 if __name__ == "__main__":

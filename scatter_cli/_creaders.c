@@ -121,9 +121,18 @@ static int bits128(unsigned __int128 x)
     return hi ? 128 - __builtin_clzll(hi) : lo ? 64 - __builtin_clzll(lo) : 0;
 }
 
+/* 2^e as a double, for -1022 <= e <= 1023: a product by it is exact (ldexp's cost without its checks). */
+static inline double power_of_two(int e)
+{
+    uint64_t bits = (uint64_t)(e + 1023) << 52;
+    double d;
+    memcpy(&d, &bits, sizeof d);
+    return d;
+}
+
 /* m * 10^e10 rounded to the nearest double (ties to even), for 0 < m < 2^64 and
- * |e10| <= 19, with exact 128-bit integers: a product, or a quotient with at least 62
- * bits and a remainder for the sticky bit. */
+ * |e10| <= 19, with exact 128-bit integers: a product, or a quotient in [2^62, 2^64)
+ * (so one 128-by-64-bit division step) and a remainder for the sticky bit. */
 static double exact_decimal(uint64_t m, int e10)
 {
     unsigned __int128 q;
@@ -131,8 +140,8 @@ static double exact_decimal(uint64_t m, int e10)
     if (e10 >= 0) {
         q = (unsigned __int128)m * POW10_INT[e10];
     } else {
-        unsigned __int128 d = POW10_INT[-e10];
-        shift = 127 - (64 - __builtin_clzll(m));
+        uint64_t d = POW10_INT[-e10];
+        shift = 63 + __builtin_clzll(m) - __builtin_clzll(d); /* n in [2^62 d, 2^64 d) */
         unsigned __int128 n = (unsigned __int128)m << shift;
         q = n / d;
         inexact = n % d != 0;
@@ -150,7 +159,7 @@ static double exact_decimal(uint64_t m, int e10)
     } else {
         drop = 0;
     }
-    return ldexp((double)(uint64_t)q, drop - shift);
+    return (double)(uint64_t)q * power_of_two(drop - shift); /* q < 2^53: exact, and a normal result */
 }
 
 /* Eight ASCII digits at p (p + 8 within the buffer): 1 and their value in *out, else 0.
@@ -321,19 +330,23 @@ static int end_line(cursor *c)
     return -1;
 }
 
-/* Only tab, LF, CR and printable ASCII: other bytes mean decoding, Unicode line breaks or
- * whitespace that only trimesh's own handling decides. */
+/* 1 for a byte other than tab, LF, CR and printable ASCII: such bytes mean decoding,
+ * Unicode line breaks or whitespace that only trimesh's own handling decides. */
+static inline unsigned char not_plain(unsigned char b)
+{
+    unsigned char control = (unsigned char)(b - 0x20) >= 0x5f; /* below 0x20 or 0x7f and up */
+    return control & (b != '\t') & (b != '\n') & (b != '\r');
+}
+
+/* Only plain bytes (see not_plain). */
 static int plain_text(const char *s, Py_ssize_t n)
 {
     const unsigned char *u = (const unsigned char *)s;
     for (Py_ssize_t i = 0; i < n;) {
         Py_ssize_t stop = n - i > 4096 ? i + 4096 : n;
         unsigned char bad = 0;
-        for (; i < stop; i++) { /* no early exit inside a block: the compiler vectorises it */
-            unsigned char b = u[i];
-            unsigned char control = (unsigned char)(b - 0x20) >= 0x5f; /* below 0x20 or 0x7f and up */
-            bad |= control & (b != '\t') & (b != '\n') & (b != '\r');
-        }
+        for (; i < stop; i++) /* no early exit inside a block: the compiler vectorises it */
+            bad |= not_plain(u[i]);
         if (bad)
             return 0;
     }
@@ -1068,53 +1081,69 @@ static int contains_nocase(const char *p, const char *end, const char *word)
     return 0;
 }
 
-/* The rest of a keyword line, which must not hold a word trimesh searches for. */
+/* The rest of a keyword line, which must be plain text (not_plain) without a word trimesh
+ * searches for. */
 static int plain_line_rest(cursor *c)
 {
     const char *e = memchr(c->p, '\n', (size_t)(c->end - c->p));
     e = e ? e : c->end;
-    int maybe = 0; /* a 'v' or 's' at all: the search is needed only then */
-    for (const char *q = c->p; q < e; q++)
+    unsigned char maybe = 0, bad = 0; /* maybe: a 'v' or 's' at all, the search is needed only then */
+    for (const unsigned char *q = (const unsigned char *)c->p; q < (const unsigned char *)e; q++) {
         maybe |= (*q | 0x20) == 'v' || (*q | 0x20) == 's';
-    if (maybe && (contains_nocase(c->p, e, "vertex") || contains_nocase(c->p, e, "solid")))
+        bad |= not_plain(*q);
+    }
+    if (bad || (maybe && (contains_nocase(c->p, e, "vertex") || contains_nocase(c->p, e, "solid"))))
         return -1;
     c->p = e < c->end ? e + 1 : e;
     return 0;
 }
 
+/* Exactly three numbers, then the end of the line (moving past its break), as numbers()
+ * then end_line() take them: 0 with the numbers in xyz (room for 3), else -1. */
+static int vertex_numbers(cursor *c, double *xyz)
+{
+    for (int k = 0; k < 3; k++) {
+        skip_spaces(c);
+        if (c->p >= c->end || is_break(*c->p) || parse_double(c, &xyz[k]) < 0)
+            return -1;
+    }
+    return end_line(c);
+}
+
 /* One stretch of an ASCII STL body, from a line start to `stop` (just after a line break,
  * or the end): its vertices, and 0 (endsolid, with no other solid after it in the file),
- * 1 (hand the file to trimesh), 2 (reached `stop` first) or -1 (no memory). */
+ * 1 (hand the file to trimesh), 2 (reached `stop` first) or -1 (no memory). The whole file
+ * must be plain text (not_plain): the grammar admits only plain bytes on the lines it
+ * reads but for the rest of keyword lines, which plain_line_rest checks, and the bytes
+ * after endsolid, checked here for this stretch and by stl_join for the stretches after. */
 typedef struct {
-    const char *p, *stop, *file_end, *check_from;
+    const char *p, *stop, *file_end;
     grow v;
-    int status, plain; /* plain: the stretch from check_from holds only plain text */
+    int status;
 } stl_part;
 
 static int stl_body(stl_part *s)
 {
-    s->plain = plain_text(s->check_from, s->stop - s->check_from);
-    if (!s->plain)
-        return 1;
     cursor c = {s->p, s->stop};
     for (;;) {
         skip_blank_lines(&c);
         if (c.p >= c.end)
             return 2;
-        if (starts_nocase(&c, "vertex")) {
+        char first = *c.p | 0x20; /* lower case for letters: which keyword to test */
+        if (first == 'v' && starts_nocase(&c, "vertex")) {
             c.p += 6;
-            double xyz[3];
-            if (grow_room(&s->v, sizeof xyz) < 0)
-                return -1;
-            if (!at_token_end(&c) || numbers(&c, xyz) != 3 || end_line(&c) < 0)
+            if (!at_token_end(&c))
                 return 1;
-            memcpy(s->v.data + s->v.len, xyz, sizeof xyz);
-            s->v.len += sizeof xyz;
-        } else if (starts_nocase(&c, "endsolid")) {
+            if (grow_room(&s->v, 3 * sizeof(double)) < 0)
+                return -1;
+            if (vertex_numbers(&c, (double *)(s->v.data + s->v.len)) < 0)
+                return 1;
+            s->v.len += 3 * sizeof(double);
+        } else if (first == 'e' && starts_nocase(&c, "endsolid")) {
             c.p += 8; /* another solid after it: another geometry */
-            return contains_nocase(c.p, s->file_end, "solid") ? 1 : 0;
-        } else if (starts_nocase(&c, "facet") || starts_nocase(&c, "outer") || starts_nocase(&c, "endloop") ||
-                   starts_nocase(&c, "endfacet")) {
+            return !plain_text(c.p, c.end - c.p) || contains_nocase(c.p, s->file_end, "solid") ? 1 : 0;
+        } else if ((first == 'f' && starts_nocase(&c, "facet")) || (first == 'o' && starts_nocase(&c, "outer")) ||
+                   (first == 'e' && (starts_nocase(&c, "endloop") || starts_nocase(&c, "endfacet")))) {
             if (plain_line_rest(&c) < 0)
                 return 1;
         } else {
@@ -1149,7 +1178,7 @@ static int stl_join(stl_part *parts, int n)
         }
         if (parts[k].status == 0) {
             for (int j = k + 1; j < n; j++)
-                if (!parts[j].plain)
+                if (!plain_text(parts[j].p, parts[j].stop - parts[j].p))
                     return 1; /* as when the whole file is checked first */
             return 0;
         }
@@ -1183,7 +1212,7 @@ static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
                     const char *nl = memchr(mid, '\n', (size_t)(end - mid));
                     stop = nl ? nl + 1 : end;
                 }
-                parts[n] = (stl_part){from, stop, end, n ? from : text, {0}, 1, 0};
+                parts[n] = (stl_part){from, stop, end, {0}, 1};
                 n++;
                 from = stop;
                 if (stop == end)

@@ -256,6 +256,43 @@ def test_auto_precision_switch_is_reported(tmp_path):
     assert scatter_cli.sample(stray, 10).points.dtype == np.float32
 
 
+def signed_zero_vertices(n, seed):
+    """(n, 3): column 0 only signed zeros (both bounds a zero), column 1 zeros and
+    positives (the minimum a zero), column 2 anything down to infinities."""
+    rng = np.random.default_rng(seed)
+    v = np.empty((n, 3))
+    v[:, 0] = rng.choice([-0.0, 0.0], n)
+    v[:, 1] = rng.choice([-0.0, 0.0, 1.0, 2.5], n)
+    v[:, 2] = rng.choice([-0.0, 0.0, -np.inf, np.inf, 1.0], n) * rng.standard_normal(n)
+    return v
+
+
+@pytest.mark.parametrize("rows", [1, 7, 64, 1 << 16])
+@pytest.mark.parametrize("n", [1, 6, 7, 8, 63, 64, 65, 1000])
+def test_column_bounds_are_numpys_bit_for_bit(n, rows):
+    """The blocked bounds (precision, LAS offsets) are v.min/max(axis=0)'s, signed zeros
+    and infinities included, whatever the block size; NaN wins as in NumPy."""
+    from scatter_cli.api import _column_bounds
+
+    for seed in range(4):
+        v = signed_zero_vertices(n, seed)
+        if seed == 3:
+            v[n // 2, 1] = np.nan
+        lo, hi = _column_bounds(v, rows)
+        assert lo.tobytes() == v.min(axis=0).tobytes() and hi.tobytes() == v.max(axis=0).tobytes()
+
+
+def test_column_bounds_without_the_last_block_fail_the_same_check():
+    """The paired failure: bounds that skip the last partial block (a loop over whole
+    blocks only) miss the extremes in it."""
+    from scatter_cli.api import _column_bounds
+
+    v = np.random.default_rng(0).standard_normal((65, 3))
+    v[64] = [-9.0, 9.0, -9.0]
+    lo, hi = _column_bounds(v[:64], 8)  # what such a loop sees of v with blocks of 8
+    assert lo.tobytes() != v.min(axis=0).tobytes() and hi.tobytes() != v.max(axis=0).tobytes()
+
+
 # ---------------------------------------------------------------- the warp at the ends
 
 

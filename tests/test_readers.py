@@ -180,7 +180,14 @@ HANDED_OFF = {
     "stl": ["solid a\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0") + "endsolid a\nsolid b\n"
             + STL_FACET.format("0 0 0", "1 0 0", "0 0 1") + "endsolid b\n",
             "solid vertex\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0") + "endsolid\n",
-            "solid\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0") + "\n"],
+            "solid\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0") + "\n",
+            # bytes other than printable ASCII, tab, CR and LF anywhere (trimesh decodes the whole file):
+            # in the header, the rest of a keyword line, a vertex line, after endsolid
+            "solid caf\xe9\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0") + "endsolid\n",
+            "solid\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0").replace("0 0 1", "0 0 1\x00") + "endsolid\n",
+            "solid\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0").replace("outer loop", "outer\x0cloop") + "endsolid\n",
+            "solid\n" + STL_FACET.format("0 0 0", "1 0 0\x7f", "0 1 0") + "endsolid\n",
+            "solid\n" + STL_FACET.format("0 0 0", "1 0 0", "0 1 0") + "endsolid\n\x80"],
     "ply": [PLY_HEAD.format(t="float", n=2) + PLY_V + "3 0 1 2\n\n3 2 3 4\n",
             PLY_HEAD.format(t="float", n=2) + PLY_V + "3 0 1 2\n5 0 1 2 3 4\n"],
 }
