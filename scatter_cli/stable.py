@@ -742,13 +742,11 @@ class StableSource:
             n = len(ids)
             points = np.empty((n, 3))
             b = np.empty((n, 2)) if want_bary else None
-            face = None if t.identity else np.empty(n, np.int64)
+            face = np.empty(n, np.int64)
             g = self.surface.geometries[self.surface.instances[0].geometry]
             # in face order on a large mesh: arrival order reads the tables at random
             _kernel.place(np.ascontiguousarray(ids), bits, t.key, None if t.identity else t.face, g.faces,
                           t.world_vertices(0), t.corners, points, b, face, len(t) >= SORT_FACES)
-            if face is None:  # used face k is face k
-                face = (ids >> np.uint64(bits)).astype(np.int64)
             return self._finish(start, ids, bits, face, b, points, want_bary)
         used, ctr = unpack(ids, bits)
         state = self._state(used, ctr)
