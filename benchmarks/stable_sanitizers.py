@@ -7,8 +7,9 @@ and calls the kernel with out-of-range indices (it must refuse them). Any report
 
     python benchmarks/stable_sanitizers.py      (gcc with libasan/libubsan; Linux)
 
-Run at c71580a, and again with the arrival sort and id placement of 2026-12-02: no
-report; the bad calls refused.
+Run at c71580a, again with the arrival sort and id placement of 2026-12-02, and again
+with arrivals written straight into time buckets and the corner rows (2026-12-02, later):
+no report; the bad calls refused.
 """
 
 import glob
@@ -25,7 +26,7 @@ import numpy
 ROOT = Path(__file__).resolve().parents[1]
 
 CHECK = r'''
-import numpy as np, sys, trimesh
+import numpy as np, os, sys, trimesh
 import scatter_cli
 from scatter_cli import stable
 assert stable._kernel is not None and sys.argv[1] in stable._kernel.__file__
@@ -33,6 +34,13 @@ rng = np.random.default_rng(0)
 for name in ("skull.ply", "cesiummilktruck.glb", "narrow_triangles.obj", "moebius-160-10.ply"):
     for kw in (dict(count=20000), dict(count=None, density=5.0), dict(count=0), dict(count=None, radius=2.0)):
         scatter_cli.sample(sys.argv[2] + "/" + name, stable=True, attributes=("face", "bary"), **kw)
+# over 2^16 arrivals: face ranges share the time buckets, three threads sort in place
+# (side arrays); then every bucket overflows and the pass reruns with exact room
+os.environ["SCATTER_THREADS"] = "3"
+for sds in (stable.ROOM_SDS, -50.0):
+    stable.ROOM_SDS = sds
+    scatter_cli.sample(sys.argv[2] + "/skull.ply", 200000, stable=True, attributes=("face", "bary"))
+scatter_cli.sample(sys.argv[2] + "/boxtextured.glb", 20000, stable=True, weight="texture:g")
 for k in range(30):
     v = rng.normal(size=(50, 3))
     v[rng.integers(0, 50, 3)] = np.nan if k % 3 == 0 else 0.0
@@ -43,16 +51,19 @@ for k in range(30):
     except scatter_cli.ScatterError:
         pass
 key, rate = np.zeros(3, np.uint64), np.ones(3)
-t, ids, one = np.zeros(4), np.zeros(4, np.uint64), np.ones(1, np.int64)
-bad = [lambda: stable._kernel.arrivals(key, rate, 1.0, 2.0, stable.POISSON_CDF, 0, 5, 8, None, None),
+t, ids, none = np.zeros(4), np.zeros(4, np.uint64), (np.empty(0), np.empty(0, np.uint64))
+bad = [lambda: stable._kernel.arrivals(key, rate, 1.0, 2.0, stable.POISSON_CDF, 0, 5, 8, 4.0, 2, 4,
+                                       np.zeros(1, np.int64), np.full(1, 4), t, ids),
+       lambda: stable._kernel.arrivals(key, rate, 1.0, 2.0, stable.POISSON_CDF, 0, 3, 8, 4.0, 2, 4,
+                                       np.zeros(1, np.int64), np.full(1, 9), t, ids),
        lambda: stable._kernel.faces(np.zeros((3, 3)), np.array([[0, 1, 7]]), 0, 1, 0, np.empty(1, np.uint8),
-                                    np.empty(1, np.uint64), np.empty(1)),
+                                    np.empty(1, np.uint64), np.empty(1), np.empty((1, 9))),
        lambda: stable._kernel.place(np.array([9 << 8], np.uint64), 8, key, None, np.zeros((3, 3), np.int64),
-                                    np.zeros((3, 3)), np.empty((1, 3)), None, None, False),
-       lambda: stable._kernel.order_count(t, ids, np.array([2]), np.array([3]), 1.0, 2, 8, np.zeros(2, np.int64)),
-       lambda: stable._kernel.order_scatter(t, ids, np.zeros(1, np.int64), one, 1.0, 2, 8, np.array([5, 0]),
-                                            np.empty(1), np.empty(1, np.uint64)),
-       lambda: stable._kernel.order_sort(t, ids, np.array([0, 1, 9]), 0, 2, 1.0, 2, 8, key, 8)]
+                                    np.zeros((3, 3)), None, np.empty((1, 3)), None, None, False),
+       lambda: stable._kernel.place(np.array([9 << 8], np.uint64), 8, key, None, np.zeros((3, 3), np.int64),
+                                    np.zeros((3, 3)), np.zeros((3, 9)), np.empty((1, 3)), None, None, False),
+       lambda: stable._kernel.order(t, ids, np.array([0, 2]), np.array([3, 1]), 1, 0, 2, 2.0, 1, 4, key, 8, *none),
+       lambda: stable._kernel.order(t, ids, np.array([0, 2]), np.array([0, 2]), 1, 1, 2, 2.0, 1, 4, key, 8, *none)]
 for call in bad:
     try:
         call()

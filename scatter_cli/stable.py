@@ -47,7 +47,9 @@ LANES = 4  # per arrival: time, then up to three warp inputs
 FACE_BLOCK = 1 << 16  # faces keyed at a time
 _kernel = native.kernel("_cstable")
 ARRIVAL_BLOCK = 1 << 20  # time blocks expanded at a time
-ROOM_SDS = 8.0  # a face range's arrival arrays hold its mean count plus this many standard deviations
+ROOM_SDS = 6.0  # a face range's share of a time bucket holds its mean count plus this many standard deviations
+PIECES = 2  # face ranges a worker thread
+FINE_BITS = 12  # a coarse bucket of the kernel's arrival sort holds 2^12 to 2^15 time keys
 RAY_LANE = 1 << 32  # lanes RAY_LANE + 4 j + k of a block: arrival j's ray rotation (--exterior)
 
 
@@ -171,6 +173,7 @@ class FaceTable:
         self.surface = surface
         self._columns = {}
         self.non_finite = 0
+        self.corners = None  # (F, 9) float64 placement rows of a small single mesh (kernel path)
         got = []  # per instance: (used faces (None: all), rot, key, rate, area of its usable faces)
         for k, inst in enumerate(surface.instances):
             if _kernel is not None and weight is None:
@@ -228,8 +231,11 @@ class FaceTable:
         faces = self.surface.geometries[self.surface.instances[k].geometry].faces
         n = len(faces)
         rot, key, area = np.empty(n, np.uint8), np.empty(n, np.uint64), np.empty(n)
+        if len(self.surface.instances) == 1 and n < SORT_FACES:
+            # a point's face row in one read: placement in arrival order reads faces at random
+            self.corners = np.empty((n, 9))
         word = seed_word(seed)
-        in_blocks(lambda i, j: _kernel.faces(vertices, faces, i, j, word, rot, key, area), n, 1 << 15)
+        in_blocks(lambda i, j: _kernel.faces(vertices, faces, i, j, word, rot, key, area, self.corners), n, 1 << 15)
         if n and area.min() > 0 and area.max() < np.inf:  # two reductions check most meshes
             return None, rot, key, area, float(np.sum(area))
         finite = np.isfinite(area)
@@ -451,74 +457,81 @@ def counter_bits(table, tau):
 
 
 def kernel_arrivals(table, tau, bits):
-    """The kernel's arrivals before ``tau`` of every used face, in face ranges on the
-    worker threads, in one pass: (t (M,) float64, id (M,) uint64, starts (S,), counts (S,)):
-    range s wrote its arrivals to ``[starts[s], starts[s] + counts[s])``.
+    """The kernel's arrivals before ``tau`` of every used face, in arrival order: (time (m,)
+    float64, id (m,) uint64, duplicates), sorted by (time, face key, counter) as
+    :func:`arrival_order` sorts them; duplicates as :func:`_duplicates`.
 
-    Each range gets room for its mean count plus ROOM_SDS standard deviations; in the rare
-    case that one holds more, the pass runs again with room for the counts it returned.
+    A counting sort on the time key ``floor(t * K / tau)`` (K a power of two, about the
+    expected count), in two levels on the worker threads. Face ranges write their arrivals
+    straight into coarse buckets of the key, range by range within each bucket (each with
+    room for its mean count plus ROOM_SDS standard deviations; in the rare case that one
+    holds more, the pass runs again with room for the counts it returned). Then each
+    coarse bucket, small enough for the cache, is sorted on the rest of its key and exactly
+    within equal keys, and written back from the start of the same arrays.
     """
     n = len(table)
     threads = native.worker_count()
-    work = n + tau * table.total  # faces and arrivals
-    pieces = 1 if threads == 1 or work < 1 << 16 or n < 4 * threads else 4 * threads
-    cuts = np.linspace(0, n, pieces + 1).astype(np.int64).tolist()
-    mean = [tau * float(np.sum(table.rate[a:b])) for a, b in zip(cuts[:-1], cuts[1:])]
-    room = [max(0, int(m + ROOM_SDS * math.sqrt(m) + 64)) for m in mean]
-    args = (table.key, table.rate, float(tau), BLOCK_MEAN, POISSON_CDF)
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        for _ in range(2):
-            starts = np.concatenate([[0], np.cumsum(room)[:-1]]).astype(np.int64)
-            t, ids = np.empty(sum(room)), np.empty(sum(room), np.uint64)
-
-            def fill(k):
-                s = slice(starts[k], starts[k] + room[k])
-                return _kernel.arrivals(*args, cuts[k], cuts[k + 1], bits, t[s], ids[s])
-
-            counts = list(pool.map(fill, range(pieces)))
-            if all(c <= r for c, r in zip(counts, room)):
-                return t, ids, starts, np.asarray(counts, dtype=np.int64)
-            room = counts
-    raise AssertionError("arrivals: the counts changed between two passes")
-
-
-FINE_BITS = 12  # a coarse bucket of the kernel's arrival sort holds 2^12 to 2^15 time keys
-
-
-def kernel_order(t, ids, starts, counts, key, bits, tau):
-    """The kernel's arrival order of the runs ``t[starts[s]:starts[s] + counts[s]]`` (and
-    ``ids`` likewise), all before ``tau``: (time (m,), id (m,), duplicates), sorted by (time,
-    face key, counter) as :func:`arrival_order` sorts them.
-
-    A counting sort on the time key ``floor(t * K / tau)`` (K about m), in two levels on the
-    worker threads: each thread scatters its runs into a few hundred coarse buckets (at its
-    own positions within each), then each coarse bucket, small enough for the
-    cache, is sorted on the rest of its key and exactly within equal keys.
-    """
-    m = int(counts.sum())
-    key_bits = max(1, m.bit_length())  # about 1 to 2 arrivals a key
+    expected = tau * table.total
+    pieces = 1 if threads == 1 or n + expected < 1 << 16 or n < 4 * threads else PIECES * threads
+    cuts = _balanced_cuts(table.rate, tau, pieces)
+    key_bits = max(1, int(expected).bit_length())  # about 1 to 2 arrivals a key
     fine_bits = min(key_bits, max(FINE_BITS, key_bits - 8), FINE_BITS + 3)
     coarse = 1 << (key_bits - fine_bits)
     total = coarse << fine_bits
     scale = total / float(tau)
-    threads = native.worker_count() if m >= 1 << 16 else 1
-    groups = [np.arange(k, len(starts), threads) for k in range(threads)]
-    runs = [(t, ids, starts[g], counts[g], scale, fine_bits, total) for g in groups]
+    mean = np.array([tau * float(np.sum(table.rate[a:b])) / coarse for a, b in zip(cuts[:-1], cuts[1:])])
+    room = np.tile(np.maximum(0, mean + ROOM_SDS * np.sqrt(mean) + 16).astype(np.int64), (coarse, 1))
+    args = (table.key, table.rate, float(tau), BLOCK_MEAN, POISSON_CDF)
     with ThreadPoolExecutor(max_workers=threads) as pool:
-        hist = np.zeros((threads, coarse), np.int64)
-        list(pool.map(lambda k: _kernel.order_count(*runs[k], hist[k]), range(threads)))
-        bounds = np.zeros(coarse + 1, np.int64)
-        np.cumsum(hist.sum(axis=0), out=bounds[1:])
-        t_out, id_out = np.empty(m), np.empty(m, np.uint64)
-        nexts = bounds[:-1] + np.cumsum(hist, axis=0) - hist  # thread k writes after threads 0..k-1
-        list(pool.map(lambda k: _kernel.order_scatter(*runs[k], np.ascontiguousarray(nexts[k]), t_out, id_out),
-                      range(threads)))
-        del t, ids
-        cuts = np.searchsorted(bounds, np.linspace(0, m, threads + 1)).tolist()
-        cuts[0], cuts[-1] = 0, coarse
-        dups = pool.map(lambda k: _kernel.order_sort(t_out, id_out, bounds, cuts[k], cuts[k + 1], scale, fine_bits,
-                                                     total, key, bits), range(threads))
-        return t_out, id_out, any(list(dups))
+        for _ in range(2):
+            start = (np.cumsum(room) - room.ravel()).reshape(coarse, pieces)
+            size = int(room.sum())
+            t, ids = np.empty(size), np.empty(size, np.uint64)
+            nexts = [start[:, k].copy() for k in range(pieces)]  # advanced by the kernel
+            ends = [np.ascontiguousarray(start[:, k] + room[:, k]) for k in range(pieces)]
+            list(pool.map(lambda k: _kernel.arrivals(*args, cuts[k], cuts[k + 1], bits, scale, fine_bits, total,
+                                                     nexts[k], ends[k], t, ids), range(pieces)))
+            counts = np.stack(nexts, axis=1) - start
+            if (counts <= room).all():
+                return _kernel_order(pool, t, ids, start.ravel(), counts.ravel(), (pieces, scale, fine_bits, total),
+                                     table.key, bits)
+            room = counts
+    raise AssertionError("arrivals: the counts changed between two passes")
+
+
+def _balanced_cuts(rate, tau, pieces):
+    """[pieces + 1] face indices cutting ``rate`` (F,) into ranges of about equal work (a
+    face plus its arrivals before ``tau``)."""
+    if pieces == 1:
+        return [0, len(rate)]
+    work = np.cumsum(rate * tau + 1.0)
+    return [0] + np.searchsorted(work, work[-1] * np.arange(1, pieces) / pieces).tolist() + [len(rate)]
+
+
+def _kernel_order(pool, t, ids, start, counts, buckets, key, bits):
+    """Sort the bucketed arrivals (segments ``start``, ``counts`` (C P,), see
+    :func:`kernel_arrivals`) in place, bucket ranges of about equal counts on the threads:
+    (time (m,), id (m,), duplicates). A thread writes the positions below its first
+    segment to side arrays (a thread below may still read them), copied in afterwards."""
+    parts, coarse = buckets[0], len(start) // buckets[0]
+    bounds = np.zeros(coarse + 1, np.int64)
+    np.cumsum(counts.reshape(coarse, parts).sum(axis=1), out=bounds[1:])
+    m = int(bounds[-1])
+    sorters = native.worker_count() if m >= 1 << 16 else 1
+    qcuts = np.searchsorted(bounds, np.linspace(0, m, sorters + 1)).tolist()
+    qcuts[0], qcuts[-1] = 0, coarse
+    sides = []
+    for q0, q1 in zip(qcuts[:-1], qcuts[1:]):
+        direct = int(start[q0 * parts]) if q0 < coarse else len(t)
+        k = max(0, min(direct, int(bounds[q1])) - int(bounds[q0]))
+        sides.append((int(bounds[q0]), np.empty(k), np.empty(k, np.uint64)))
+    dups = pool.map(lambda k: _kernel.order(t, ids, start, counts, parts, qcuts[k], qcuts[k + 1], *buckets[1:], key,
+                                            bits, *sides[k][1:]), range(sorters))
+    dup = any(list(dups))
+    for lo, t_side, id_side in sides:
+        t[lo : lo + len(t_side)] = t_side
+        ids[lo : lo + len(id_side)] = id_side
+    return t[:m], ids[:m], dup
 
 
 def arrival_order(t, face, ctr, key):
@@ -616,12 +629,11 @@ class StableSource:
         bits = counter_bits(self.table, tau)
         key = self.table.key
         if _kernel is not None:
-            t, ids, starts, counts = kernel_arrivals(self.table, tau, bits)
-            if self._accepts:
-                t, ids = (np.concatenate([x[s : s + c] for s, c in zip(starts, counts)]) for x in (t, ids))
+            t, ids, dup = kernel_arrivals(self.table, tau, bits)
+            if self._accepts:  # the accepted ones, still in order (the order is total)
                 keep = np.flatnonzero(self._accept(ids, bits))
-                t, ids, starts, counts = t[keep], ids[keep], np.zeros(1, np.int64), np.array([len(keep)], np.int64)
-            t, ids, dup = kernel_order(t, ids, starts, counts, key, bits, tau)
+                t, ids = t[keep], ids[keep]
+                dup = _duplicates(t, *unpack(ids, bits), key)
             return t, ids, bits, dup
         t, face, ctr = all_arrivals(self.table, tau)
         if self._accepts:
@@ -730,13 +742,11 @@ class StableSource:
             n = len(ids)
             points = np.empty((n, 3))
             b = np.empty((n, 2)) if want_bary else None
-            face = None if t.identity else np.empty(n, np.int64)
+            face = np.empty(n, np.int64)
             g = self.surface.geometries[self.surface.instances[0].geometry]
             # in face order on a large mesh: arrival order reads the tables at random
             _kernel.place(np.ascontiguousarray(ids), bits, t.key, None if t.identity else t.face, g.faces,
-                          t.world_vertices(0), points, b, face, len(t) >= SORT_FACES)
-            if face is None:  # used face k is face k
-                face = (ids >> np.uint64(bits)).astype(np.int64)
+                          t.world_vertices(0), t.corners, points, b, face, len(t) >= SORT_FACES)
             return self._finish(start, ids, bits, face, b, points, want_bary)
         used, ctr = unpack(ids, bits)
         state = self._state(used, ctr)

@@ -395,11 +395,15 @@ def _all_bytes(samples):
 
 
 CASES = [("skull.ply", dict(count=20_000)), ("skull.ply", dict(count=None, density=30.0)),
-         ("pediment_join_plate_12.stl", dict(count=None, radius=1.5)), ("cesiummilktruck.glb", dict(count=5000))]
+         ("pediment_join_plate_12.stl", dict(count=None, radius=1.5)), ("cesiummilktruck.glb", dict(count=5000)),
+         # weights: the face table from NumPy; textures filter the kernel's sorted arrivals
+         ("boxvertexcolors.glb", dict(count=5000, weight="vertex-color:r")),
+         ("boxtextured.glb", dict(count=5000, weight="texture:g"))]
+needs_kernel = pytest.mark.skipif(stable._kernel is None and os.environ.get("SCATTER_REQUIRE_KERNELS", "") in ("", "0"),
+                                  reason="compiled kernels not built (SCATTER_REQUIRE_KERNELS=1 makes this a failure)")
 
 
-@pytest.mark.skipif(stable._kernel is None and os.environ.get("SCATTER_REQUIRE_KERNELS", "") in ("", "0"),
-                    reason="compiled kernels not built (SCATTER_REQUIRE_KERNELS=1 makes this a failure)")
+@needs_kernel
 @pytest.mark.parametrize("name, kw", CASES)
 def test_kernel_and_numpy_paths_give_the_same_bytes(name, kw, monkeypatch):
     import scatter_cli
@@ -409,6 +413,67 @@ def test_kernel_and_numpy_paths_give_the_same_bytes(name, kw, monkeypatch):
     compiled = scatter_cli.sample(str(SAMPLES / name), **args)
     monkeypatch.setattr(stable, "_kernel", None)
     assert _all_bytes(scatter_cli.sample(str(SAMPLES / name), **args)) == _all_bytes(compiled)
+
+
+class _SideSizes:
+    """The stable kernel, recording the side arrays each order() call is given."""
+
+    def __init__(self, kernel):
+        self._kernel, self.sides = kernel, []
+
+    def __getattr__(self, name):
+        return getattr(self._kernel, name)
+
+    def order(self, *args):
+        self.sides.append(len(args[-1]))
+        return self._kernel.order(*args)
+
+
+@needs_kernel
+@pytest.mark.parametrize("threads, room", [("2", None), ("3", None), ("2", -50.0)])
+def test_kernel_sorts_across_threads_in_numpys_order(threads, room, monkeypatch):
+    """Over 2^16 arrivals: several face ranges write into each time bucket, several
+    threads sort bucket ranges in place (each writing its lowest positions to side arrays
+    while the thread below still reads them), and with room -50 sd every bucket overflows
+    and the pass reruns with exact room. The arrivals and their order are NumPy's."""
+    table = stable.FaceTable(load_surface(str(SAMPLES / "skull.ply")), 5)
+    tau = 150_000 / table.total
+    bits = stable.counter_bits(table, tau)
+    t0, face, ctr = stable.all_arrivals(table, tau)
+    order = stable.arrival_order(t0, face, ctr, table.key)
+    monkeypatch.setenv("SCATTER_THREADS", threads)
+    if room is not None:
+        monkeypatch.setattr(stable, "ROOM_SDS", room)
+    spy = _SideSizes(stable._kernel)
+    monkeypatch.setattr(stable, "_kernel", spy)
+    t, ids, dup = stable.kernel_arrivals(table, tau, bits)
+    assert len(spy.sides) == int(threads)
+    # with slack in the buckets, every thread but the first writes below its own segments
+    assert (min(spy.sides[1:]) > 0) if room is None else (max(spy.sides) == 0)
+    assert t.tobytes() == t0[order].tobytes()
+    assert ids.tobytes() == stable.pack(face, ctr, bits)[order].tobytes()
+    assert not dup
+
+
+@needs_kernel
+def test_kernel_refuses_bad_buckets_and_segments():
+    k, key, rate = stable._kernel, np.zeros(4, np.uint64), np.ones(4)
+    t, ids, none = np.zeros(8), np.zeros(8, np.uint64), (np.empty(0), np.empty(0, np.uint64))
+    arrivals = (key, rate, 1.0, 2.0, stable.POISSON_CDF, 0, 4, 8, 8.0, 2, 8)
+    with pytest.raises(ValueError, match="bad range"):  # a bucket that starts past its end
+        k.arrivals(*arrivals, np.array([5, 0]), np.array([4, 8]), t, ids)
+    with pytest.raises(ValueError, match="bad range"):  # a bucket that ends past the arrays
+        k.arrivals(*arrivals, np.array([0, 4]), np.array([4, 9]), t, ids)
+    with pytest.raises(ValueError, match="bad buckets"):  # two buckets for keys that need three
+        k.arrivals(*arrivals[:-1], 9, np.zeros(2, np.int64), np.full(2, 8), t, ids)
+    start, count = np.array([0, 3]), np.array([4, 2])  # segment 0 runs into segment 1
+    with pytest.raises(ValueError, match="segments"):
+        k.order(t, ids, start, count, 1, 0, 2, 8.0, 2, 8, key, 8, *none)
+    with pytest.raises(ValueError, match="side"):  # positions 0..2 of bucket 1 go to the side
+        k.order(t, ids, np.array([0, 3]), np.array([0, 3]), 1, 1, 2, 8.0, 2, 8, key, 8, *none)
+    with pytest.raises(TypeError):  # corner rows of the wrong size
+        k.place(np.zeros(1, np.uint64), 8, key, None, np.zeros((4, 3), np.int64), np.zeros((3, 3)), np.zeros((3, 9)),
+                np.empty((1, 3)), None, None, False)
 
 
 def test_scene_instances_are_keyed_in_world_space():
