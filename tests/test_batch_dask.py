@@ -94,6 +94,16 @@ def test_dask_writes_what_sample_writes(tmp_path, cluster, meshes):
          for r in local]
 
 
+def batch_in_thread(client, inputs, out):
+    """``scatter_cli.batch`` of ``inputs`` to ``out/{stem}`` on the cluster, in a thread:
+    (the thread, a dict that gets the records)."""
+    result = {}
+    thread = threading.Thread(target=lambda: result.update(records=scatter_cli.batch(
+        inputs, str(out / "{stem}"), client=client, count=300, attributes="normal,face")))
+    thread.start()
+    return thread, result
+
+
 def test_a_dask_worker_killed_mid_batch(tmp_path, cluster, meshes):
     """The lost worker's task runs again on the other one: every good mesh is written."""
     client, address, workers = cluster
@@ -104,10 +114,7 @@ def test_a_dask_worker_killed_mid_batch(tmp_path, cluster, meshes):
     bad = tmp_path / "in" / "bad.ply.obj"
     bad.write_text("f 1 2 3\n")
     inputs = [fifo, bad, *paths]
-    result = {}
-    thread = threading.Thread(target=lambda: result.update(records=scatter_cli.batch(
-        inputs, str(tmp_path / "out" / "{stem}"), client=client, count=300, attributes="normal,face")))
-    thread.start()
+    thread, result = batch_in_thread(client, inputs, tmp_path / "out")
     feeder = Feeder(fifo, over=lambda: not thread.is_alive())
     try:
         reader = feeder.next_reader()
@@ -245,10 +252,7 @@ def test_a_group_that_loses_its_workers_runs_again_one_mesh_a_task(tmp_path, fra
     fifo.parent.mkdir()
     os.mkfifo(fifo)
     inputs = [paths[0], paths[1], fifo, *paths[2:]]  # tasks: the first four, then the last two
-    result = {}
-    thread = threading.Thread(target=lambda: result.update(records=scatter_cli.batch(
-        inputs, str(tmp_path / "out" / "{stem}"), client=client, count=300, attributes="normal,face")))
-    thread.start()
+    thread, result = batch_in_thread(client, inputs, tmp_path / "out")
     feeder = Feeder(fifo, over=lambda: not thread.is_alive())
     try:
         for _ in range(4):  # (allowed-failures + 1) lost workers for the group, as many for the killer alone
@@ -262,3 +266,18 @@ def test_a_group_that_loses_its_workers_runs_again_one_mesh_a_task(tmp_path, fra
     assert records[2]["error"] == f"{fifo}: the Dask worker sampling it was lost 2 times (Dask's allowed-failures)"
     assert outputs(tmp_path / "out") == ref
     assert not [p for p in tmp_path.rglob("*.part")]
+
+
+def test_group_size_follows_the_measured_time_per_mesh():
+    size = dask_engine.GroupSize()
+    assert size.size == 1  # nothing measured yet
+    size.learn([{"seconds": 0.004}] * 10)
+    assert size.size == 12  # 0.05 s / 4 ms
+    size.learn([{"seconds": 0.096}])  # a bigger mesh among them: the mean (12.4 ms) is what counts
+    assert size.size == 4
+    big = dask_engine.GroupSize()
+    big.learn([{"seconds": 3.0}] * 4)
+    assert big.size == 1
+    skipped = dask_engine.GroupSize()
+    skipped.learn([{"seconds": 0.0}] * 4)
+    assert skipped.size == dask_engine.MAX_GROUP
