@@ -25,8 +25,9 @@ from .errors import ScatterError, ScatterUsageError
 
 _local = threading.local()
 WINDOW_PER_THREAD = 16  # tasks in flight per worker thread: enough to keep them busy, not millions
+FIRST_PER_THREAD = 2  # tasks of one mesh per worker thread first, until a record tells the time per mesh
 GATHER_EVERY = 0.2  # seconds a finished task's records may wait to be fetched with others
-TASK_SECONDS = 0.05  # the sampling time a task aims at (see GroupSize)
+TASK_SECONDS = 0.2  # the sampling time a task aims at (see GroupSize)
 MAX_GROUP = 16  # meshes a task samples at most
 
 
@@ -74,7 +75,8 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
     tasks = {}  # future -> its jobs [(index, input, output, fmt, skip)], until its records are in
     size = GroupSize()
     try:
-        window = WINDOW_PER_THREAD * max(1, sum(client.nthreads().values()))
+        threads = max(1, sum(client.nthreads().values()))
+        window = WINDOW_PER_THREAD * threads
         pending = distributed.as_completed(loop=client.loop)
         jobs = _task_jobs(jobs_iter, fmt, skip_existing)
 
@@ -85,17 +87,18 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
                 tasks.update(zip(futures, groups))
                 pending.update(futures)
 
-        def refill():
-            groups = [g for g in (list(itertools.islice(jobs, size.size)) for _ in range(window - pending.count())) if g]
+        def refill(room=window):
+            groups = [g for g in (list(itertools.islice(jobs, size.size)) for _ in range(room - pending.count())) if g]
             submit(groups, [f"scatter-{batch_id}-{g[0][0]}" for g in groups])
 
-        refill()
+        refill(FIRST_PER_THREAD * threads)
         ready, since = [], 0.0
         for finished in pending.batches():
             if not ready:
                 since = time.monotonic()
             ready.extend(finished)
-            if pending.is_empty() or len(ready) >= window // 2 or time.monotonic() - since >= GATHER_EVERY:
+            if (pending.is_empty() or not size.meshes or len(ready) >= window // 2
+                    or time.monotonic() - since >= GATHER_EVERY):
                 alone = []
                 for future, got in zip(ready, _records(client, ready, distributed)):
                     group = tasks.pop(future)
@@ -133,8 +136,9 @@ class GroupSize:
     time, more than a small mesh's sampling), at most ``MAX_GROUP``; one until records
     tell how long a mesh takes, so a collection of huge meshes is never grouped."""
 
+    size = 1
+
     def __init__(self):
-        self.size = 1
         self.meshes = 0
         self.seconds = 0.0
 

@@ -94,12 +94,22 @@ def test_dask_writes_what_sample_writes(tmp_path, cluster, meshes):
          for r in local]
 
 
-def batch_in_thread(client, inputs, out):
+class GroupsOfFour(dask_engine.GroupSize):
+    """Tasks of four meshes from the first."""
+
+    size = 4
+
+    def learn(self, records):
+        super().learn(records)
+        self.size = 4
+
+
+def batch_in_thread(client, inputs, out, **options):
     """``scatter_cli.batch`` of ``inputs`` to ``out/{stem}`` on the cluster, in a thread:
     (the thread, a dict that gets the records)."""
     result = {}
     thread = threading.Thread(target=lambda: result.update(records=scatter_cli.batch(
-        inputs, str(out / "{stem}"), client=client, count=300, attributes="normal,face")))
+        inputs, str(out / "{stem}"), client=client, count=300, attributes="normal,face", **options)))
     thread.start()
     return thread, result
 
@@ -137,28 +147,24 @@ def test_a_dask_worker_killed_mid_batch(tmp_path, cluster, meshes):
     assert not alive(reader)  # the sampling process died with its Dask worker
 
 
-def test_a_rerun_task_reports_written_what_this_batch_wrote(tmp_path, meshes):
-    """--skip-existing: Dask runs a finished task again when the worker holding its record is
-    lost; the mesh it wrote is reported written (as an uninterrupted batch reports it), not
-    skipped. One one-thread worker samples the first mesh, then blocks on the FIFO; it is
-    killed before the command fetched the first mesh's record (it fetches records in
-    bunches), and a new worker runs both tasks again."""
+def test_a_rerun_task_reports_written_what_this_batch_wrote(tmp_path, meshes, monkeypatch):
+    """--skip-existing: a task that Dask runs again after losing its worker reports the
+    meshes it had written there written (as an uninterrupted batch reports them), not
+    skipped. One task of two meshes on a one-thread worker: it writes the first, then
+    blocks on the FIFO; its worker is killed, and a new worker runs the task again."""
     base, paths, ref = meshes
+    monkeypatch.setattr(dask_engine, "GroupSize", GroupsOfFour)
     client, address, workers, procs = start_cluster(1)
     try:
         fifo = tmp_path / "in" / "fifo.npy.obj"
         fifo.parent.mkdir()
         os.mkfifo(fifo)
-        out = tmp_path / "out"
         first = os.path.splitext(paths[0].name)[0]
-        proc = popen_user(scatter_command("batch", paths[0], fifo, "-o", f"{out}/{{stem}}", "-n", "300", "-a",
-                                          "normal,face", "--skip-existing", "--engine", "dask", "--scheduler", address,
-                                          "--report", tmp_path / "report.jsonl"),
-                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        feeder = Feeder(fifo, over=lambda: proc.poll() is not None)
+        thread, result = batch_in_thread(client, [paths[0], fifo], tmp_path / "out", skip_existing=True)
+        feeder = Feeder(fifo, over=lambda: not thread.is_alive())
         try:
             reader = feeder.next_reader()
-            assert (out / first).read_bytes() == ref[first]  # written by this batch, before the FIFO's task
+            assert (tmp_path / "out" / first).read_bytes() == ref[first]  # written by this batch, this task
             os.kill(parent_of(reader), signal.SIGKILL)
             procs.append(start_worker(address))
             again = feeder.next_reader()
@@ -166,14 +172,13 @@ def test_a_rerun_task_reports_written_what_this_batch_wrote(tmp_path, meshes):
             feeder.feed((SAMPLES / "narrow_triangles.obj").read_bytes())
         finally:
             feeder.close()
-        stdout, stderr = proc.communicate(timeout=HANG)
+        thread.join(HANG)
     finally:
         client.close()
         stop(procs)
-    assert proc.returncode == 0, stderr.decode()
-    report = [json.loads(line) for line in (tmp_path / "report.jsonl").read_text().splitlines()]
-    assert [(r["input"], r["status"]) for r in report] == [(str(paths[0]), "written"), (str(fifo), "written")]
-    assert outputs(out) == {first: ref[first], "fifo.npy": ref["narrow_triangles.npy"]}
+    assert [(r["input"], r["status"]) for r in result["records"]] == [(str(paths[0]), "written"),
+                                                                       (str(fifo), "written")]
+    assert outputs(tmp_path / "out") == {first: ref[first], "fifo.npy": ref["narrow_triangles.npy"]}
     assert not [p for p in tmp_path.rglob("*.part")]
 
 
@@ -234,13 +239,6 @@ def test_a_mesh_whose_workers_keep_dying_fails_alone(tmp_path, fragile_cluster, 
     assert not [p for p in tmp_path.rglob("*.part")]
 
 
-class GroupsOfFour:
-    size = 4
-
-    def learn(self, records):
-        pass
-
-
 def test_a_group_that_loses_its_workers_runs_again_one_mesh_a_task(tmp_path, fragile_cluster, meshes, monkeypatch):
     """A task of four meshes, one of them killing each worker that reads it: when Dask gives
     the task up, its meshes run again one a task; the three others are written, the killer
@@ -271,10 +269,10 @@ def test_a_group_that_loses_its_workers_runs_again_one_mesh_a_task(tmp_path, fra
 def test_group_size_follows_the_measured_time_per_mesh():
     size = dask_engine.GroupSize()
     assert size.size == 1  # nothing measured yet
-    size.learn([{"seconds": 0.004}] * 10)
-    assert size.size == 12  # 0.05 s / 4 ms
-    size.learn([{"seconds": 0.096}])  # a bigger mesh among them: the mean (12.4 ms) is what counts
-    assert size.size == 4
+    size.learn([{"seconds": 0.02}] * 10)
+    assert size.size == 10  # 0.2 s / 20 ms
+    size.learn([{"seconds": 0.2}])  # a bigger mesh among them: the mean (36 ms) is what counts
+    assert size.size == 5
     big = dask_engine.GroupSize()
     big.learn([{"seconds": 3.0}] * 4)
     assert big.size == 1
