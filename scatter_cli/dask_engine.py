@@ -59,9 +59,9 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
     ``WINDOW_PER_THREAD`` tasks per worker thread are in flight, submitted in blocks (one
     message to the scheduler per block, not one per task). The records of finished tasks
     are fetched together (one request for many), at most ``GATHER_EVERY`` seconds late or
-    one completion late, whichever is later. A group that gives no records (its workers
-    were lost past Dask's allowed-failures) is run again one mesh a task, so only a mesh
-    that kills its workers fails.
+    one completion late, whichever is later (at once until the time per mesh is known).
+    A group that gives no records (its workers were lost past Dask's allowed-failures) is
+    run again one mesh a task, so only a mesh that kills its workers fails.
 
     With ``skip_existing`` whether each output exists is decided here, once, before its
     task exists: a task Dask runs again after losing a worker that had written the output
