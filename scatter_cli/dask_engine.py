@@ -1,13 +1,14 @@
-"""The Dask engine of ``scatter batch``: one task per mesh on a ``dask.distributed`` cluster.
+"""The Dask engine of ``scatter batch``: tasks of a few meshes on a ``dask.distributed`` cluster.
 
-A task is a pure function of (input path, output path, format, options): it samples the
-mesh to the output on the worker, atomically, and returns the report record, so Dask
-running it again after losing a worker writes the same bytes. Each Dask worker thread
-keeps a :class:`scatter_cli.worker.Lane`, a long-lived child process, so a task that
-crashes, runs past ``--timeout`` or past ``--max-memory`` fails alone (a record with
-status ``failed``, which Dask does not retry) and the Dask worker lives on. Dask itself
-reruns the tasks of a worker that was lost, up to its ``allowed-failures``; past that the
-mesh is reported failed.
+A task is a pure function of its meshes' (input path, output path, format, skip) and the
+options: it samples each mesh to its output on the worker, atomically, and returns their
+report records, so Dask running it again after losing a worker writes the same bytes.
+Each Dask worker thread keeps a :class:`scatter_cli.worker.Lane`, a long-lived child
+process, so a mesh that crashes it, runs past ``--timeout`` or past ``--max-memory``
+fails alone (a record with status ``failed``, which Dask does not retry) and the Dask
+worker lives on. Dask itself reruns the tasks of a worker that was lost, up to its
+``allowed-failures``; past that the task's meshes are run again one a task, and the one
+that still loses its workers is reported failed.
 
 Dask is imported here only: the optional extra ``dask``.
 """
@@ -24,7 +25,10 @@ from .errors import ScatterError, ScatterUsageError
 
 _local = threading.local()
 WINDOW_PER_THREAD = 16  # tasks in flight per worker thread: enough to keep them busy, not millions
-GATHER_EVERY = 0.2  # seconds a finished task's record may wait to be fetched with others
+FIRST_PER_THREAD = 2  # tasks of one mesh per worker thread first, until a record tells the time per mesh
+GATHER_EVERY = 0.2  # seconds a finished task's records may wait to be fetched with others
+TASK_SECONDS = 0.2  # the sampling time a task aims at (see GroupSize)
+MAX_GROUP = 16  # meshes a task samples at most
 
 
 def _import_distributed():
@@ -51,52 +55,97 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
              skip_existing=False, done):
     """Run the jobs ``(index, input, output)`` as tasks; ``done(index, record)`` as each ends.
 
-    At most ``WINDOW_PER_THREAD`` tasks per worker thread are in flight, submitted in
-    blocks (one message to the scheduler per block, not one per mesh). The records of
-    finished tasks are fetched together (one request for many), at most
-    ``GATHER_EVERY`` seconds late or one completion late, whichever is later.
-    """
-    from .writers import infer_format
+    A task samples a group of consecutive meshes (:class:`GroupSize`). At most
+    ``WINDOW_PER_THREAD`` tasks per worker thread are in flight, submitted in blocks (one
+    message to the scheduler per block, not one per task). The records of finished tasks
+    are fetched together (one request for many), at most ``GATHER_EVERY`` seconds late or
+    one completion late, whichever is later (at once until the time per mesh is known).
+    A group that gives no records (its workers were lost past Dask's allowed-failures) is
+    run again one mesh a task, so only a mesh that kills its workers fails.
 
+    With ``skip_existing`` whether each output exists is decided here, once, before its
+    task exists: a task Dask runs again after losing a worker that had written the output
+    writes it again (the same bytes) and reports it written, not skipped.
+    """
     distributed = _import_distributed()
     own = client is None
     if own:
         client = connect(scheduler)
     batch_id = uuid.uuid4().hex[:8]
-    jobs = {}  # future -> (index, input, output), until its record is in
+    tasks = {}  # future -> its jobs [(index, input, output, fmt, skip)], until its records are in
+    size = GroupSize()
     try:
-        window = WINDOW_PER_THREAD * max(1, sum(client.nthreads().values()))
+        threads = max(1, sum(client.nthreads().values()))
+        window = WINDOW_PER_THREAD * threads
         pending = distributed.as_completed(loop=client.loop)
+        jobs = _task_jobs(jobs_iter, fmt, skip_existing)
 
-        def refill():
-            block = list(itertools.islice(jobs_iter, window - pending.count()))
-            if block:
-                futures = client.map(sample_task, [j[1] for j in block], [j[2] for j in block],
-                                     [infer_format(j[2], fmt) for j in block],
-                                     key=[f"scatter-{batch_id}-{j[0]}" for j in block], pure=False, setup=setup,
-                                     timeout=timeout, max_memory=max_memory, skip_existing=skip_existing)
-                jobs.update(zip(futures, block))
+        def submit(groups, keys):
+            if groups:
+                futures = client.map(sample_group, groups, key=keys, pure=False, setup=setup, timeout=timeout,
+                                     max_memory=max_memory)
+                tasks.update(zip(futures, groups))
                 pending.update(futures)
 
-        refill()
+        def refill(room=window):
+            groups = [g for g in (list(itertools.islice(jobs, size.size)) for _ in range(room - pending.count())) if g]
+            submit(groups, [f"scatter-{batch_id}-{g[0][0]}" for g in groups])
+
+        refill(FIRST_PER_THREAD * threads)
         ready, since = [], 0.0
         for finished in pending.batches():
             if not ready:
                 since = time.monotonic()
             ready.extend(finished)
+            if (pending.is_empty() or not size.meshes or len(ready) >= window // 2
+                    or time.monotonic() - since >= GATHER_EVERY):
+                alone = []
+                for future, got in zip(ready, _records(client, ready, distributed)):
+                    group = tasks.pop(future)
+                    if isinstance(got, list):
+                        size.learn(got)
+                        for job, rec in zip(group, got):
+                            done(job[0], rec)
+                    elif len(group) > 1:
+                        alone.extend([job] for job in group)
+                    else:
+                        done(group[0][0], _lost(got, group[0][1], group[0][2], distributed))
+                submit(alone, [f"scatter-{batch_id}-{g[0][0]}-alone" for g in alone])
+                ready = []
             if pending.count() <= window // 2:
                 refill()
-            if pending.is_empty() or len(ready) >= window // 2 or time.monotonic() - since >= GATHER_EVERY:
-                for future, rec in zip(ready, _records(client, ready, distributed)):
-                    index, input, output = jobs.pop(future)
-                    done(index, rec if isinstance(rec, dict) else _lost(rec, input, output, distributed))
-                ready = []
     except BaseException:
-        client.cancel(list(jobs))
+        client.cancel(list(tasks))
         raise
     finally:
         if own:
             client.close()
+
+
+def _task_jobs(jobs_iter, fmt, skip_existing):
+    """The jobs as tasks take them: ``(index, input, output, format, skip)``."""
+    from .writers import infer_format
+
+    for index, input, output in jobs_iter:
+        yield index, input, output, infer_format(output, fmt), skip_existing and os.path.isfile(output)
+
+
+class GroupSize:
+    """How many meshes the next task samples: enough that a task takes about
+    ``TASK_SECONDS`` (Dask's own cost per task is milliseconds of scheduler and worker
+    time, more than a small mesh's sampling), at most ``MAX_GROUP``; one until records
+    tell how long a mesh takes, so a collection of huge meshes is never grouped."""
+
+    size = 1
+
+    def __init__(self):
+        self.meshes = 0
+        self.seconds = 0.0
+
+    def learn(self, records):
+        self.meshes += len(records)
+        self.seconds += sum(r["seconds"] for r in records)
+        self.size = max(1, min(MAX_GROUP, int(TASK_SECONDS * self.meshes / max(self.seconds, 1e-9))))
 
 
 def _records(client, futures, distributed):
@@ -124,16 +173,17 @@ def _lost(exc, input, output, distributed):
     return record(input, output, "failed", name_the_file(why, input))
 
 
-def sample_task(input, output, fmt, *, setup, timeout, max_memory, skip_existing):
-    """The report record of one mesh, sampled on this Dask worker (see :mod:`scatter_cli.worker`)."""
+def sample_group(jobs, *, setup, timeout, max_memory):
+    """The report records of the meshes ``jobs`` [(index, input, output, format, skip)], sampled
+    one after another on this Dask worker (see :mod:`scatter_cli.worker`)."""
     from .worker import Lane
 
     lane = getattr(_local, "lane", None)
-    key = (repr(setup), timeout, max_memory, skip_existing)
+    key = (repr(setup), timeout, max_memory)
     if lane is None or lane.key != key:
         if lane is not None:
             lane.close()
-        lane = Lane(setup, None, timeout, max_memory, skip_existing)
+        lane = Lane(setup, None, timeout, max_memory)
         lane.key = key
         _local.lane = lane
-    return lane.process(input, output, fmt)
+    return [lane.process(input, output, fmt, skip) for _, input, output, fmt, skip in jobs]

@@ -289,11 +289,14 @@ class Lane:
         self.worker = None
         self.stopped = False
 
-    def process(self, input, output, fmt):
-        """The report record of one mesh (``input``, ``output``, ``status``, ``error``, ...)."""
+    def process(self, input, output, fmt, skip=None):
+        """The report record of one mesh (``input``, ``output``, ``status``, ``error``, ...).
+
+        ``skip``: whether an existing output is skipped (default: the lane's ``skip_existing``).
+        """
         t = time.perf_counter()
         self.stale.clear(output)
-        if self.skip_existing and os.path.isfile(output):
+        if (self.skip_existing if skip is None else skip) and os.path.isfile(output):
             return record(input, output, "skipped", None, seconds=time.perf_counter() - t)
         try:
             if self.worker is None:

@@ -94,10 +94,68 @@ def wait_for_reader(fifo, timeout=30, over=None):
     raise AssertionError("no reader of the FIFO found")
 
 
-def fifo_reader(fifo):
-    """The pid of a process (not this one) that has ``fifo`` open, or None."""
+HANG = 600  # seconds: only a batch that hangs (neither goes on nor ends) gets this far
+
+
+class Feeder:
+    """The writing end of a FIFO input of a batch whose readers get killed.
+
+    Opened at the first reader and held to the end: a reader that opens the FIFO later
+    (the task run again) then blocks until fed. (Closing it after a kill and opening it
+    again let a reader that came between read end-of-file: its mesh failed as empty and
+    nobody ever opened the FIFO again.) Waits end on an event: a reader not seen before,
+    or the batch's end (``over()``, a failure).
+    """
+
+    def __init__(self, fifo, over):
+        self.fifo, self.over = fifo, over
+        self.fd = None
+        self.seen = set()
+
+    def next_reader(self):
+        """The pid of the next process that opens the FIFO to read it."""
+        deadline = time.monotonic() + HANG
+        while time.monotonic() < deadline:
+            if self.fd is None:
+                try:
+                    self.fd = os.open(self.fifo, os.O_WRONLY | os.O_NONBLOCK)  # fails until a reader comes
+                except OSError:
+                    pass
+            pid = None if self.fd is None else fifo_reader(self.fifo, exclude=self.seen)
+            if pid is not None:
+                self.seen.add(pid)
+                return pid
+            if self.over():
+                raise AssertionError(f"the batch ended with no new reader of {self.fifo}")
+            time.sleep(0.02)
+        raise AssertionError(f"the batch hung: no new reader of {self.fifo} and no end in {HANG} s")
+
+    def feed(self, data):
+        """Write ``data`` to the reader and close: it reads ``data``, then end-of-file."""
+        with os.fdopen(self.fd, "wb") as f:
+            self.fd = None
+            os.set_blocking(f.fileno(), True)
+            f.write(data)
+
+    def close(self):
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+
+
+def alive(pid):
+    """Whether process ``pid`` is running (a zombie is not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in "ZX"
+    except OSError:
+        return False
+
+
+def fifo_reader(fifo, exclude=()):
+    """The pid of a process (not this one, nor one of ``exclude``) that has ``fifo`` open, or None."""
     for pid in filter(str.isdigit, os.listdir("/proc")):
-        if int(pid) == os.getpid():
+        if int(pid) == os.getpid() or int(pid) in exclude:
             continue
         try:
             fds = os.listdir(f"/proc/{pid}/fd")
@@ -115,18 +173,3 @@ def fifo_reader(fifo):
 def parent_of(pid):
     with open(f"/proc/{pid}/stat") as f:
         return int(f.read().rsplit(")", 1)[1].split()[1])
-
-
-def gone(pid, timeout=30):
-    """Wait until process ``pid`` has exited (a zombie counts)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            with open(f"/proc/{pid}/stat") as f:
-                state = f.read().rsplit(")", 1)[1].split()[0]
-        except OSError:
-            return
-        if state in "ZX":
-            return
-        time.sleep(0.02)
-    raise AssertionError(f"process {pid} still alive")

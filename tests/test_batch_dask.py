@@ -12,9 +12,10 @@ import threading
 import pytest
 
 import scatter_cli
+from scatter_cli import dask_engine
 
 from .conftest import SAMPLES, popen_user, scatter_command
-from .batchtools import collection, gone, outputs, parent_of, reference, reader_fd, wait_for_reader
+from .batchtools import HANG, Feeder, alive, collection, outputs, parent_of, reference
 
 distributed = pytest.importorskip("distributed")
 
@@ -34,9 +35,7 @@ def start_cluster(workers, scheduler_env=None):
     quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     procs = [popen_user([*dask, "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], env=scheduler_env,
                         **quiet)]
-    worker = [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--no-nanny",
-              "--no-dashboard", "--host", "127.0.0.1"]
-    procs += [popen_user(worker, **quiet) for _ in range(workers)]
+    procs += [start_worker(address) for _ in range(workers)]
     try:
         client = distributed.Client(address, timeout=60, set_as_default=False)
         client.wait_for_workers(workers, timeout=60)
@@ -44,6 +43,12 @@ def start_cluster(workers, scheduler_env=None):
         stop(procs)
         raise
     return client, address, procs[1:], procs
+
+
+def start_worker(address):
+    """A one-thread `dask worker` process for the scheduler at ``address``."""
+    return popen_user([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--no-nanny",
+                       "--no-dashboard", "--host", "127.0.0.1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
 def stop(procs):
@@ -89,6 +94,26 @@ def test_dask_writes_what_sample_writes(tmp_path, cluster, meshes):
          for r in local]
 
 
+class GroupsOfFour(dask_engine.GroupSize):
+    """Tasks of four meshes from the first."""
+
+    size = 4
+
+    def learn(self, records):
+        super().learn(records)
+        self.size = 4
+
+
+def batch_in_thread(client, inputs, out, **options):
+    """``scatter_cli.batch`` of ``inputs`` to ``out/{stem}`` on the cluster, in a thread:
+    (the thread, a dict that gets the records)."""
+    result = {}
+    thread = threading.Thread(target=lambda: result.update(records=scatter_cli.batch(
+        inputs, str(out / "{stem}"), client=client, count=300, attributes="normal,face", **options)))
+    thread.start()
+    return thread, result
+
+
 def test_a_dask_worker_killed_mid_batch(tmp_path, cluster, meshes):
     """The lost worker's task runs again on the other one: every good mesh is written."""
     client, address, workers = cluster
@@ -99,28 +124,61 @@ def test_a_dask_worker_killed_mid_batch(tmp_path, cluster, meshes):
     bad = tmp_path / "in" / "bad.ply.obj"
     bad.write_text("f 1 2 3\n")
     inputs = [fifo, bad, *paths]
-    result = {}
-    thread = threading.Thread(target=lambda: result.update(records=scatter_cli.batch(
-        inputs, str(tmp_path / "out" / "{stem}"), client=client, count=300, attributes="normal,face")))
-    thread.start()
-    over = lambda: not thread.is_alive()  # noqa: E731
-    reader = wait_for_reader(fifo, timeout=120, over=over)
-    dask_worker = parent_of(reader)
-    assert dask_worker in [w.pid for w in workers]
-    os.kill(dask_worker, signal.SIGKILL)
-    gone(reader)  # the sampling process dies with its Dask worker
-    os.close(reader_fd.pop())
-    wait_for_reader(fifo, timeout=120, over=over)  # the task again, on the other worker
-    with os.fdopen(reader_fd.pop(), "wb") as f:
-        os.set_blocking(f.fileno(), True)
-        f.write((SAMPLES / "narrow_triangles.obj").read_bytes())
-    thread.join(120)
+    thread, result = batch_in_thread(client, inputs, tmp_path / "out")
+    feeder = Feeder(fifo, over=lambda: not thread.is_alive())
+    try:
+        reader = feeder.next_reader()
+        dask_worker = parent_of(reader)
+        assert dask_worker in [w.pid for w in workers]
+        os.kill(dask_worker, signal.SIGKILL)
+        again = feeder.next_reader()  # the task again, on the other worker
+        assert parent_of(again) in [w.pid for w in workers if w.pid != dask_worker]
+        feeder.feed((SAMPLES / "narrow_triangles.obj").read_bytes())
+    finally:
+        feeder.close()
+    thread.join(HANG)
     records = result["records"]
     assert [r["status"] for r in records] == ["written", "failed"] + ["written"] * len(paths)
     assert "bad.ply.obj" in records[1]["error"]
     got = outputs(tmp_path / "out")
     assert got.pop("fifo.npy") == ref["narrow_triangles.npy"]
     assert got == ref
+    assert not [p for p in tmp_path.rglob("*.part")]
+    assert not alive(reader)  # the sampling process died with its Dask worker
+
+
+def test_a_rerun_task_reports_written_what_this_batch_wrote(tmp_path, meshes, monkeypatch):
+    """--skip-existing: a task that Dask runs again after losing its worker reports the
+    meshes it had written there written (as an uninterrupted batch reports them), not
+    skipped. One task of two meshes on a one-thread worker: it writes the first, then
+    blocks on the FIFO; its worker is killed, and a new worker runs the task again."""
+    base, paths, ref = meshes
+    monkeypatch.setattr(dask_engine, "GroupSize", GroupsOfFour)
+    client, address, workers, procs = start_cluster(1)
+    try:
+        fifo = tmp_path / "in" / "fifo.npy.obj"
+        fifo.parent.mkdir()
+        os.mkfifo(fifo)
+        first = os.path.splitext(paths[0].name)[0]
+        thread, result = batch_in_thread(client, [paths[0], fifo], tmp_path / "out", skip_existing=True)
+        feeder = Feeder(fifo, over=lambda: not thread.is_alive())
+        try:
+            reader = feeder.next_reader()
+            assert (tmp_path / "out" / first).read_bytes() == ref[first]  # written by this batch, this task
+            os.kill(parent_of(reader), signal.SIGKILL)
+            procs.append(start_worker(address))
+            again = feeder.next_reader()
+            assert parent_of(again) == procs[-1].pid
+            feeder.feed((SAMPLES / "narrow_triangles.obj").read_bytes())
+        finally:
+            feeder.close()
+        thread.join(HANG)
+    finally:
+        client.close()
+        stop(procs)
+    assert [(r["input"], r["status"]) for r in result["records"]] == [(str(paths[0]), "written"),
+                                                                       (str(fifo), "written")]
+    assert outputs(tmp_path / "out") == {first: ref[first], "fifo.npy": ref["narrow_triangles.npy"]}
     assert not [p for p in tmp_path.rglob("*.part")]
 
 
@@ -134,7 +192,7 @@ def fragile_cluster():
     client, address, workers, procs = start_cluster(3, env)
     try:
         assert client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.allowed_failures) == 1
-        yield address, workers
+        yield client, address, workers, procs
     finally:
         client.close()
         stop(procs)
@@ -143,7 +201,7 @@ def fragile_cluster():
 def test_a_mesh_whose_workers_keep_dying_fails_alone(tmp_path, fragile_cluster, meshes):
     """Each time a worker opens the FIFO, it is killed: Dask gives the task up (KilledWorker)
     and the batch reports that mesh failed, one line, and writes every other mesh."""
-    address, workers = fragile_cluster
+    client, address, workers, procs = fragile_cluster
     base, paths, ref = meshes
     src = tmp_path / "in"
     src.mkdir()
@@ -157,16 +215,16 @@ def test_a_mesh_whose_workers_keep_dying_fails_alone(tmp_path, fragile_cluster, 
     proc = popen_user(scatter_command("batch", src, "-o", f"{out}/{{rel}}", "-n", "300", "-a", "normal,face",
                                       "--engine", "dask", "--scheduler", address, "--report", tmp_path / "report.jsonl"),
                       stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    over = lambda: proc.poll() is not None  # noqa: E731
+    feeder = Feeder(fifo, over=lambda: proc.poll() is not None)
     killed = []
-    for _ in range(2):  # allowed-failures + 1 lost workers
-        reader = wait_for_reader(fifo, timeout=120, over=over)
-        killed.append(parent_of(reader))
-        assert killed[-1] in [w.pid for w in workers]
-        os.kill(killed[-1], signal.SIGKILL)
-        gone(reader)
-        os.close(reader_fd.pop())
-    stdout, stderr = proc.communicate(timeout=120)
+    try:
+        for _ in range(2):  # allowed-failures + 1 lost workers
+            killed.append(parent_of(feeder.next_reader()))
+            assert killed[-1] in [w.pid for w in workers]
+            os.kill(killed[-1], signal.SIGKILL)
+    finally:
+        feeder.close()  # a third run of the task would read an empty file: a different error
+    stdout, stderr = proc.communicate(timeout=HANG)
     assert len(set(killed)) == 2
     assert proc.returncode == 1, stderr.decode()
     errors = [line for line in stderr.decode().splitlines() if line.startswith("error:")]
@@ -179,3 +237,45 @@ def test_a_mesh_whose_workers_keep_dying_fails_alone(tmp_path, fragile_cluster, 
         assert {p.name: p.read_bytes() for p in (out / copy).iterdir()} == ref
     assert not (out / "0-killer.ply").exists()
     assert not [p for p in tmp_path.rglob("*.part")]
+
+
+def test_a_group_that_loses_its_workers_runs_again_one_mesh_a_task(tmp_path, fragile_cluster, meshes, monkeypatch):
+    """A task of four meshes, one of them killing each worker that reads it: when Dask gives
+    the task up, its meshes run again one a task; the three others are written, the killer
+    alone fails."""
+    client, address, workers, procs = fragile_cluster
+    base, paths, ref = meshes
+    monkeypatch.setattr(dask_engine, "GroupSize", GroupsOfFour)
+    fifo = tmp_path / "in" / "killer.ply.obj"
+    fifo.parent.mkdir()
+    os.mkfifo(fifo)
+    inputs = [paths[0], paths[1], fifo, *paths[2:]]  # tasks: the first four, then the last two
+    thread, result = batch_in_thread(client, inputs, tmp_path / "out")
+    feeder = Feeder(fifo, over=lambda: not thread.is_alive())
+    try:
+        for _ in range(4):  # (allowed-failures + 1) lost workers for the group, as many for the killer alone
+            os.kill(parent_of(feeder.next_reader()), signal.SIGKILL)
+            procs.append(start_worker(address))
+    finally:
+        feeder.close()  # a fifth run would read an empty file: a different error
+    thread.join(HANG)
+    records = result["records"]
+    assert [r["status"] for r in records] == ["written", "written", "failed"] + ["written"] * (len(paths) - 2)
+    assert records[2]["error"] == f"{fifo}: the Dask worker sampling it was lost 2 times (Dask's allowed-failures)"
+    assert outputs(tmp_path / "out") == ref
+    assert not [p for p in tmp_path.rglob("*.part")]
+
+
+def test_group_size_follows_the_measured_time_per_mesh():
+    size = dask_engine.GroupSize()
+    assert size.size == 1  # nothing measured yet
+    size.learn([{"seconds": 0.02}] * 10)
+    assert size.size == 10  # 0.2 s / 20 ms
+    size.learn([{"seconds": 0.2}])  # a bigger mesh among them: the mean (36 ms) is what counts
+    assert size.size == 5
+    big = dask_engine.GroupSize()
+    big.learn([{"seconds": 3.0}] * 4)
+    assert big.size == 1
+    skipped = dask_engine.GroupSize()
+    skipped.learn([{"seconds": 0.0}] * 4)
+    assert skipped.size == dask_engine.MAX_GROUP
