@@ -991,21 +991,28 @@ static PyObject *read_off(PyObject *self, PyObject *args)
 }
 
 /* The body of an ASCII PLY: nv vertex lines of `props` numbers (x, y, z at columns
- * xyz[0..2], rounded to float32 where single[k]), then nf lines `k i0 .. ik-1`, k 3 or 4. */
+ * xyz[0..2], rounded to float32 where single[k]), then nf lines `k i0 .. ik-1`, k 3 or 4.
+ * `extra` (bytes, optional): more columns to keep, as parsed, in an (nv, len) float64
+ * array returned third. */
 static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
 {
     Py_buffer buf;
-    Py_ssize_t offset;
+    Py_ssize_t offset, ne = 0;
     long long nv, nf;
     int props, x, y, z, sx, sy, sz;
-    if (!PyArg_ParseTuple(args, "y*nLLiiiiiii", &buf, &offset, &nv, &nf, &props, &x, &y, &z, &sx, &sy, &sz))
+    const unsigned char *extra = NULL;
+    if (!PyArg_ParseTuple(args, "y*nLLiiiiiii|y#", &buf, &offset, &nv, &nf, &props, &x, &y, &z, &sx, &sy, &sz,
+                          &extra, &ne))
         return NULL;
     const char *text = buf.buf;
     int col[3] = {x, y, z}, single[3] = {sx, sy, sz};
-    double *v = NULL;
+    double *v = NULL, *e = NULL;
     polys q = {{0}, {0}, {0}, MAX_CORNERS + 1, 0};
     int status = 1;
-    if (offset < 0 || offset > buf.len || nv <= 0 || nf <= 0 || props < 3) {
+    int bad_extra = ne > 8;
+    for (Py_ssize_t j = 0; j < ne && !bad_extra; j++)
+        bad_extra = extra[j] >= props;
+    if (offset < 0 || offset > buf.len || nv <= 0 || nf <= 0 || props < 3 || bad_extra) {
         PyBuffer_Release(&buf);
         Py_RETURN_NONE;
     }
@@ -1013,7 +1020,8 @@ static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
     Py_BEGIN_ALLOW_THREADS
     if (plain_text(c.p, c.end - c.p) && nv <= (c.end - c.p) / 6 + 1 && nf <= (c.end - c.p) / 8 + 1) {
         v = malloc((size_t)nv * 24);
-        status = v ? 0 : -1;
+        e = ne ? malloc((size_t)nv * (size_t)ne * 8) : NULL;
+        status = v && (e || !ne) ? 0 : -1;
         for (int64_t i = 0; i < nv && !status; i++) {
             for (int k = 0; k < props && !status; k++) {
                 double d;
@@ -1025,6 +1033,9 @@ static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
                 for (int a = 0; a < 3; a++)
                     if (col[a] == k)
                         v[3 * i + a] = single[a] ? (double)(float)d : d;
+                for (Py_ssize_t a = 0; a < ne; a++)
+                    if (extra[a] == k)
+                        e[ne * i + a] = d;
             }
             if (!status && end_line(&c) < 0)
                 status = 1;
@@ -1039,7 +1050,19 @@ static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
     }
     Py_END_ALLOW_THREADS
     PyBuffer_Release(&buf);
-    return polys_result(v, nv, &q, status);
+    PyObject *result = polys_result(v, nv, &q, status);
+    if (!ne || !result || result == Py_None) {
+        free(e);
+        return result;
+    }
+    PyObject *ea = owned_array(e, nv, ne, NPY_FLOAT64);
+    if (!ea) {
+        Py_DECREF(result);
+        return NULL;
+    }
+    PyObject *both = Py_BuildValue("(OON)", PyTuple_GET_ITEM(result, 0), PyTuple_GET_ITEM(result, 1), ea);
+    Py_DECREF(result);
+    return both;
 }
 
 /* ---- ASCII STL ---- */
@@ -1224,7 +1247,8 @@ static PyMethodDef methods[] = {
     {"read_obj", read_obj, METH_VARARGS, "read_obj(buffer) -> (vertices, faces, group face counts) or None"},
     {"read_off", read_off, METH_VARARGS, "read_off(buffer) -> (vertices, faces) or None"},
     {"read_ply_ascii", read_ply_ascii, METH_VARARGS,
-     "read_ply_ascii(buffer, offset, nv, nf, props, x, y, z, x32, y32, z32) -> (vertices, faces) or None"},
+     "read_ply_ascii(buffer, offset, nv, nf, props, x, y, z, x32, y32, z32, extra=b'') -> (vertices, faces[, "
+     "extra columns]) or None"},
     {"read_stl_ascii", read_stl_ascii, METH_VARARGS, "read_stl_ascii(buffer, threads=1) -> vertices (3F, 3) or None"},
     {NULL, NULL, 0, NULL},
 };

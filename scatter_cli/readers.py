@@ -21,15 +21,18 @@ _STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attr
 _MAX_HEADER = 1 << 16
 
 
-def read_mesh(path, file_type, smooth=False):
+def read_mesh(path, file_type, smooth=False, color=False):
     """A list of (vertices (V, 3) float64, faces (F, 3) int64), one per geometry in
     trimesh's order; for a GLB, a scene: (geometries [(name, vertices, faces)], instances
     [(name, geometry index, (4, 4) matrix or None)]) (gltfread.py); or None (hand the
-    file to trimesh). ``smooth``: hand over files with normals or UVs of their own (the
-    caller computes smooth normals from the faces, as trimesh does for the others).
+    file to trimesh). ``smooth``: smooth normals are wanted: a PLY's own normals come as
+    a third item of its geometry, a dict (plyread.vertex_tables); other files with
+    normals or UVs of their own are handed over (the caller computes smooth normals from
+    the faces, as trimesh does for the others). ``color``: vertex colours are wanted:
+    only PLY is read (its colours in that dict), every other format handed over.
     """
     reader = _READERS.get(file_type)
-    if reader is None:
+    if reader is None or (color and file_type != "ply"):
         return None
     try:
         with open(path, "rb") as f:
@@ -37,6 +40,8 @@ def read_mesh(path, file_type, smooth=False):
     except OSError:
         return None
     try:
+        if file_type == "ply":
+            return reader(data, smooth, color)
         if smooth and not _normals_from_faces(data, file_type):
             return None
         return reader(data, smooth) if file_type == "glb" else reader(data)
@@ -53,25 +58,7 @@ def _normals_from_faces(data, file_type):
     no normals of the file's own, and no UVs that split the vertices (OBJ ``vt``)."""
     if file_type == "obj":  # any vt or vn, even in a name or comment: trimesh decides
         return data.find(b"vt") < 0 and data.find(b"vn") < 0
-    if file_type == "ply":
-        names = _vertex_properties(bytes(data[:_MAX_HEADER]))
-        return names is not None and set(names) <= {"x", "y", "z", "red", "green", "blue", "alpha"}
     return file_type in ("stl", "off", "glb")  # GLB: the reader looks for NORMAL attributes
-
-
-def _vertex_properties(head):
-    """The names of a PLY's vertex properties (from its header), or None."""
-    end = head.find(b"end_header")
-    if end < 0:
-        return None
-    names, element = [], None
-    for line in head[:end].split(b"\n"):
-        words = line.split()
-        if words[:1] == [b"element"]:
-            element = words[1:2]
-        elif words[:1] == [b"property"] and element == [b"vertex"]:
-            names.append(words[-1].decode("ascii", "replace"))
-    return names
 
 
 def _obj(data):
@@ -108,24 +95,60 @@ def _stl(data):
     return [(vertices, np.arange(len(vertices), dtype=np.int64).reshape(-1, 3))]
 
 
-def _ply(data):
+def _ply(data, smooth=False, color=False):
     from .plyread import read_triangles_from
 
-    got = read_triangles_from(data)
+    got = read_triangles_from(data, smooth, color)
     if got is not None:
         return [got]
     layout = _ascii_layout(bytes(data[:_MAX_HEADER]))
     c = kernel("_creaders")
     if layout is None or not c:
         return None
-    got = c.read_ply_ascii(data, *layout)
+    if smooth or color:
+        return _ply_ascii_tables(c, data, *layout, smooth, color)
+    got = c.read_ply_ascii(data, *layout[0])
     return [got] if got else None
 
 
+def _ply_ascii_tables(c, data, args, props, smooth, color):
+    """_ply's answer for an ASCII PLY with the vertex tables asked for (the columns
+    converted to their declared types from the parsed doubles, as trimesh does), or None."""
+    from .plyread import _COLORS, _NORMALS, _TEXTURE_COORDINATES, vertex_tables
+
+    if _TEXTURE_COORDINATES & {name for name, _ in props}:
+        return None
+    names = (_NORMALS if smooth else ()) + (_COLORS if color else ())
+    wanted = [k for k, (name, _) in enumerate(props) if name in names]
+    if any(k > 255 for k in wanted):
+        return None
+    got = c.read_ply_ascii(data, *args, bytes(wanted))
+    if not got:
+        return None
+    vertices, faces, parsed = got if wanted else (*got, None)
+    columns = {props[k][0]: _declared(parsed[:, j], props[k][1]) for j, k in enumerate(wanted)}
+    del got, parsed
+    if any(column is None for column in columns.values()):
+        return None
+    tables = vertex_tables(columns, smooth, color)
+    return None if tables is None else [(vertices, faces, tables)]
+
+
+def _declared(column, kind):
+    """(V,) parsed doubles -> the declared type (trimesh's ``astype``), or None where a
+    cast to an integer type would be undefined (outside its range, not finite)."""
+    if kind[0] in "iu":
+        info = np.iinfo(kind)
+        if not ((column > info.min - 1) & (column < info.max + 1)).all():
+            return None
+    return column.astype(kind)
+
+
 def _ascii_layout(head):
-    """(body offset, vertex count, face count, vertex properties, x, y, z columns, and
-    whether each of x, y, z is float32) for an ASCII PLY of ``vertex`` (scalar properties)
-    then ``face`` (one list of int indices), or None."""
+    """((body offset, vertex count, face count, vertex properties, x, y, z columns, and
+    whether each of x, y, z is float32), [(name, NumPy type) of each vertex property])
+    for an ASCII PLY of ``vertex`` (scalar properties) then ``face`` (one list of int
+    indices), or None."""
     end = head.find(b"end_header\n")
     if not head.startswith(b"ply\n") or end < 0 or b"\r" in head[:end]:
         return None
@@ -162,7 +185,8 @@ def _ascii_layout(head):
     kinds = [_TYPES[vprops[k][0]] for k in columns]
     if any(t not in ("f4", "f8") for t in kinds):
         return None
-    return (end + len(b"end_header\n"), n_vertex, n_face, len(vprops), *columns, *(int(t == "f4") for t in kinds))
+    args = (end + len(b"end_header\n"), n_vertex, n_face, len(vprops), *columns, *(int(t == "f4") for t in kinds))
+    return args, [(name, _TYPES[p[0]]) for name, p in zip(names, vprops)]
 
 
 def _glb(data, smooth=False):

@@ -318,7 +318,7 @@ def carries_normals_or_uv(path):
         return b"vt" in data or b"vn" in data
     if path.suffix == ".ply":
         head = data[: data.find(b"end_header")]
-        return any(w in head.split() for w in (b"nx", b"u", b"s", b"texture_u"))
+        return any(w in head.split() for w in (b"u", b"s", b"texture_u"))
     return path.suffix == ".glb" and b'"NORMAL"' in data
 
 

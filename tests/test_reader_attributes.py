@@ -1,0 +1,231 @@
+"""The fast PLY readers' vertex normals and colours are trimesh's (``process=False``).
+
+For files re-saved with normals and colours, and for built cases of each rule (colour
+types, alpha, float scaling, partial normals, texture coordinates), a job asking for
+``color`` or ``smooth-normal`` gives the same triangles and the same output bytes
+whether the fast readers or trimesh loaded the file, and each case checks that the fast
+path answered (or, for what it does not cover, that it handed the file over).
+"""
+
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+
+import scatter_cli
+from scatter_cli import plyread
+from scatter_cli.readers import read_mesh
+from scatter_cli.surface import load_surface
+from scatter_cli.visuals import VertexTables, weighted_vertex_normals
+
+from .conftest import run_scatter, run_user
+from .loadmemory import load_memory
+from .test_readers import MESHES, assert_same_load, positions_and_faces, run_user_text
+
+ATTRIBUTES = ("face,bary,color", "face,smooth-normal", "color,smooth-normal")
+PLY_NAMES = {"f4": "float", "f8": "double", "u1": "uchar", "i1": "char", "u2": "ushort", "i2": "short",
+             "i4": "int", "u4": "uint"}
+
+
+def write_ply(path, columns, faces, fmt="ascii"):
+    """A PLY of vertex ``columns`` [(name, NumPy type, (V,) values)] and ``faces`` (a list
+    of index lists, any sizes for ASCII; triangles for binary), in ``fmt``: ascii,
+    binary_little_endian or binary_big_endian."""
+    n = len(columns[0][2])
+    head = ["ply", f"format {fmt} 1.0", f"element vertex {n}"]
+    head += [f"property {PLY_NAMES[t]} {name}" for name, t, _ in columns]
+    head += [f"element face {len(faces)}", "property list uchar int vertex_indices", "end_header"]
+    with open(path, "wb") as f:
+        f.write(("\n".join(head) + "\n").encode())
+        if fmt == "ascii":
+            cells = [[repr(float(x)) if t[0] == "f" else str(int(x)) for x in np.asarray(v, dtype=t)]
+                     for _, t, v in columns]
+            rows = [" ".join(r) for r in zip(*cells)] + [" ".join(map(str, [len(q), *q])) for q in faces]
+            f.write(("\n".join(rows) + "\n").encode())
+        else:
+            order = "<" if fmt == "binary_little_endian" else ">"
+            rec = np.zeros(n, dtype=[(name, order + t) for name, t, _ in columns])
+            for name, _, values in columns:
+                rec[name] = values
+            frec = np.zeros(len(faces), dtype=[("n", "u1"), ("i", order + "i4", 3)])
+            frec["n"], frec["i"] = 3, faces
+            f.write(rec.tobytes() + frec.tobytes())
+    return path
+
+
+def sample_bytes(source, attributes):
+    s = scatter_cli.sample(source, count=2000, seed=7, attributes=attributes)
+    return [s.points.tobytes()] + [s.attributes[k].tobytes() for k in sorted(s.attributes)]
+
+
+def assert_fast_and_same(path, attributes=ATTRIBUTES):
+    """The fast readers answer with their tables, and every job gives trimesh's bytes."""
+    color = any("color" in a for a in attributes)
+    assert read_mesh(path, "ply", smooth=True, color=color) is not None
+    fast = load_surface(path, plain=True, smooth=True, color=color)
+    assert all(isinstance(g.mesh, VertexTables) for g in fast.geometries)
+    assert_same_load(path)
+    slow = load_surface(path)
+    for a in attributes:
+        assert sample_bytes(path, a) == sample_bytes(slow, a), a
+
+
+def attributed_columns(mesh_path, most_faces=3000, seed=0):
+    """A sample mesh's first faces with random RGBA colours and normals that are not the
+    ones computed from the faces (so a reader that dropped them would fail)."""
+    vertices, faces = positions_and_faces(mesh_path)
+    used, faces = np.unique(faces[:most_faces], return_inverse=True)
+    vertices, faces = vertices[used], faces.reshape(-1, 3)
+    rng = np.random.default_rng(seed)
+    normals = np.nan_to_num(weighted_vertex_normals(vertices, faces)) + rng.normal(0, 0.3, (len(vertices), 3))
+    colors = rng.integers(0, 256, (len(vertices), 4))
+    columns = [(a, "f4", vertices[:, k]) for k, a in enumerate("xyz")]
+    columns += [(a, "f4", normals[:, k]) for k, a in enumerate(("nx", "ny", "nz"))]
+    columns += [(a, "u1", colors[:, k]) for k, a in enumerate(("red", "green", "blue", "alpha"))]
+    return columns, faces
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+@pytest.mark.parametrize("mesh", MESHES, ids=[m.name for m in MESHES])
+def test_resaved_meshes_with_normals_and_colours_sample_as_with_trimesh(mesh, fmt, tmp_path):
+    columns, faces = attributed_columns(mesh)
+    path = write_ply(tmp_path / f"{mesh.stem}.ply", columns, faces.tolist(), fmt)
+    assert_fast_and_same(path)
+
+
+def _tri(n=6):
+    """A small strip: n vertices, n - 2 triangles."""
+    x = np.arange(n, dtype=float)
+    return [("x", "f4", x), ("y", "f4", x % 2 + 0.25 * x), ("z", "f4", np.sin(x))], [[k, k + 1, k + 2] for k in range(n - 2)]
+
+
+POS, TRI = _tri()
+RGB = [("red", "u1", [255, 0, 3, 90, 128, 7]), ("green", "u1", [0, 255, 60, 1, 2, 250]),
+       ("blue", "u1", [9, 8, 7, 255, 0, 100])]
+CASES = {
+    "uchar rgb": RGB,
+    "uchar rgba": RGB + [("alpha", "u1", [0, 255, 17, 128, 1, 200])],
+    "float rgb, clipped and rounded": [(a, "f4", v) for a, v in zip(("red", "green", "blue"), (
+        [0.0, 1.0, 0.5, 0.25, 1.3, -0.2], [0.999, 0.001, 0.502, 0.498, 0.7, 0.1], [0.2, 0.4, 0.6, 0.8, 1.0, 0.0]))],
+    "double rgba": [(a, "f8", np.linspace(0.05 * k, 1.0, 6)) for k, a in enumerate(("red", "green", "blue", "alpha"))],
+    "ushort rgb, wrapped": [(a, "u2", [0, 255, 256, 300, 65535, 1000]) for a in ("red", "green", "blue")],
+    "char rgb, negative": [(a, "i1", [-1, -128, 127, 0, 5, -7]) for a in ("red", "green", "blue")],
+    "uchar rgb, float alpha": RGB + [("alpha", "f4", [0.0, 1.0, 0.5, 0.25, 0.75, 0.1])],
+    "colours between the coordinates": RGB,
+    "double normals": [("nx", "f8", [0.1, 0, 0, 1, -1, 0.3]), ("ny", "f8", [0, 1, 0, 0.5, 0, 0.3]),
+                       ("nz", "f8", [1, 0, 2.5, 0, 0, -0.9])],
+    "int normals": [(a, "i4", [1, 0, -1, 2, 0, 3]) for a in ("nx", "ny", "nz")],
+    "two of three normals": [("nx", "f4", [1, 0, 0, 1, 0, 1]), ("ny", "f4", [0, 1, 0, 0, 1, 0])],
+    "normals, colours and other properties": [("quality", "f4", np.arange(6.0))] + RGB
+    + [(a, "f4", [0.5, -0.5, 0.25, 1, 0, 0.125]) for a in ("nx", "ny", "nz")],
+    "none": [],
+}
+
+
+def case_columns(name):
+    extra = CASES[name]
+    if name == "colours between the coordinates":
+        return POS[:1] + extra + POS[1:]
+    return POS + extra
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian", "binary_big_endian"])
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_colour_and_normal_rules_match_trimesh(case, fmt, tmp_path):
+    """Every colour type, alpha or none, float scaling, partial and integer normals; a
+    file without colours fails ``-a color`` with the same error either way."""
+    path = write_ply(tmp_path / "m.ply", case_columns(case), TRI, fmt)
+    if not {"red", "green", "blue"} <= {name for name, _, _ in CASES[case]}:
+        assert read_mesh(path, "ply", smooth=True, color=True) is not None
+        for source in (path, load_surface(path)):
+            with pytest.raises(scatter_cli.ScatterError, match="no vertex colours"):
+                scatter_cli.sample(source, count=10, attributes="color")
+        assert_fast_and_same(path, ATTRIBUTES[1:2])
+    else:
+        assert_fast_and_same(path)
+
+
+def test_ascii_quads_keep_their_colours(tmp_path):
+    path = write_ply(tmp_path / "q.ply", POS + CASES["uchar rgba"], [[0, 1, 2, 3], [1, 2, 3], [2, 3, 4, 5]])
+    assert_fast_and_same(path)
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+@pytest.mark.parametrize("names", [("u", "v"), ("s", "t"), ("texture_u", "texture_v")])
+def test_texture_coordinates_go_to_trimesh(names, fmt, tmp_path):
+    """trimesh splits the vertices by UV and then keeps neither the file's normals nor its
+    colours: the fast readers hand such a job over (a plain job they still read)."""
+    uv = [(n, "f4", np.linspace(0, 1, 6) ** (k + 1)) for k, n in enumerate(names)]
+    path = write_ply(tmp_path / "t.ply", POS + CASES["uchar rgb"] + CASES["double normals"] + uv, TRI, fmt)
+    assert read_mesh(path, "ply") is not None
+    assert read_mesh(path, "ply", smooth=True) is None and read_mesh(path, "ply", color=True) is None
+
+
+@pytest.mark.parametrize("value", ["256", "-1", "300.5"])
+def test_ascii_values_outside_the_declared_type_go_to_trimesh(value, tmp_path):
+    """Casting such a value to uchar is undefined in C (trimesh's result is the
+    platform's): handed over rather than guessed."""
+    path = write_ply(tmp_path / "o.ply", POS + RGB, TRI)
+    text = path.read_text().replace(" 255 0 9\n", f" {value} 0 9\n", 1)
+    assert f" {value} 0 9\n" in text
+    path.write_text(text)
+    assert read_mesh(path, "ply", color=True) is None
+    assert read_mesh(path, "ply", smooth=True) is not None  # the colours are not cast for normals
+    assert_fast_and_same(path, ATTRIBUTES[1:2])
+
+
+def test_the_comparison_fails_readers_that_drop_normals_or_alpha(tmp_path, monkeypatch):
+    """The broken variants: a reader that ignored the file's normals, or gave every
+    colour an opaque alpha, answers but gives other bytes than trimesh."""
+    columns, faces = attributed_columns(MESHES[0], most_faces=400)
+    path = write_ply(tmp_path / "b.ply", columns, faces.tolist(), "binary_little_endian")
+    slow = load_surface(path)
+    real = plyread.vertex_tables
+
+    def no_normals(columns, smooth, color):
+        return {k: v for k, v in real(columns, smooth, color).items() if k != "normals"}
+
+    def opaque(columns, smooth, color):
+        got = real(columns, smooth, color)
+        got["vertex_colors"][:, 3] = 255
+        return got
+
+    for broken, attributes in ((no_normals, "smooth-normal"), (opaque, "color")):
+        monkeypatch.setattr(plyread, "vertex_tables", broken)
+        assert isinstance(load_surface(path, plain=True, smooth=True, color=True).geometries[0].mesh, VertexTables)
+        assert sample_bytes(path, attributes) != sample_bytes(slow, attributes)
+
+
+@pytest.mark.parametrize("attributes", ["color", "face,smooth-normal"])
+def test_a_colour_or_normal_job_on_a_ply_never_imports_trimesh(attributes, tmp_path):
+    path = write_ply(tmp_path / "m.ply", POS + CASES["uchar rgba"] + CASES["double normals"], TRI)
+    args = ["sample", str(path), "-n", "100", "-a", attributes, "-o", str(tmp_path / "o.ply")]
+    code = f"import sys\nfrom scatter_cli import cli\nassert cli.main({args!r}) == 0\nprint('trimesh' in sys.modules)"
+    proc = run_user([sys.executable, "-c", code], text=True)
+    assert proc.stdout.strip() == "False", proc.stderr
+
+
+def test_the_command_writes_the_same_bytes_either_way(tmp_path):
+    """The whole command on an ASCII PLY, fast and through trimesh (SCATTER_NUMPY=1: no
+    compiled readers)."""
+    path = write_ply(tmp_path / "m.ply", POS + CASES["uchar rgba"] + CASES["double normals"], [[0, 1, 2, 3], *TRI])
+    outs = []
+    for env in ({}, {"SCATTER_NUMPY": "1"}):
+        out = tmp_path / f"out{len(outs)}.ply"
+        run_scatter("sample", path, "-n", "2000", "-a", "face,bary,color,smooth-normal", "-o", out, env=env, check=True)
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+def test_a_load_with_normals_and_colours_takes_at_most_the_file_size_beyond_what_it_returns(fmt, tmp_path):
+    """As the plain loads' bound (test_readers.py), the tables counted among the returned
+    arrays: the icosphere(7) with float normals and RGBA colours."""
+    mesh = trimesh.creation.icosphere(subdivisions=7)
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    columns = [(a, "f4", v[:, k]) for k, a in enumerate("xyz")] + [(a, "f4", v[:, k]) for k, a in enumerate(("nx", "ny", "nz"))]
+    columns += [(a, "u1", (np.arange(len(v)) * (k + 3)) % 256) for k, a in enumerate(("red", "green", "blue", "alpha"))]
+    path = write_ply(tmp_path / "ico.ply", columns, f, fmt)
+    got = load_memory(path, run_user_text, tables=True)
+    assert got["extra"] <= got["file"], got
