@@ -95,7 +95,8 @@ def _rgba(c):
     """(V, 3|4) colours of any type -> (V, 4) float64 of trimesh's uint8 RGBA (to_rgba)."""
     if c.dtype.kind == "f":
         c[~np.isfinite(c)] = 0.0
-        c = np.clip(c * 255, 0.0, 255).round()
+        with np.errstate(over="ignore"):  # float32 beyond 3.4e38 / 255: inf, clipped to 255
+            c = np.clip(c * 255, 0.0, 255).round()
     if c.shape[1] == 3:
         c = np.column_stack((c, 255 * np.ones(len(c))))
     return c.astype(np.uint8).astype(np.float64)
