@@ -21,7 +21,7 @@ _STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attr
 _MAX_HEADER = 1 << 16
 
 
-def read_mesh(path, file_type, smooth=False, color=False):
+def read_mesh(path, file_type, smooth=False, color=False, uv=False):
     """A list of (vertices (V, 3) float64, faces (F, 3) int64), one per geometry in
     trimesh's order; for a GLB, a scene: (geometries [(name, vertices, faces)], instances
     [(name, geometry index, (4, 4) matrix or None)]) (gltfread.py); or None (hand the
@@ -30,9 +30,12 @@ def read_mesh(path, file_type, smooth=False, color=False):
     normals or UVs of their own are handed over (the caller computes smooth normals from
     the faces, as trimesh does for the others). ``color``: vertex colours are wanted:
     only PLY is read (its colours in that dict), every other format handed over.
+    ``uv``: texture coordinates are wanted: only OBJ is read. An OBJ read for ``smooth``
+    or ``uv`` has the geometries trimesh makes of groups with ``vt`` or ``vn`` refs (its
+    vertex split, objsplit.py) and their UVs and normals in that dict.
     """
     reader = _READERS.get(file_type)
-    if reader is None or (color and file_type != "ply"):
+    if reader is None or (color and file_type != "ply") or (uv and file_type != "obj"):
         return None
     try:
         with open(path, "rb") as f:
@@ -42,6 +45,8 @@ def read_mesh(path, file_type, smooth=False, color=False):
     try:
         if file_type == "ply":
             return reader(data, smooth, color)
+        if file_type == "obj" and (smooth or uv):
+            return _obj(data, tables=True)
         if smooth and not _normals_from_faces(data, file_type):
             return None
         return reader(data, smooth) if file_type == "glb" else reader(data)
@@ -54,21 +59,36 @@ def read_mesh(path, file_type, smooth=False, color=False):
 
 
 def _normals_from_faces(data, file_type):
-    """Whether trimesh's mesh of this file has its vertex normals computed from the faces:
-    no normals of the file's own, and no UVs that split the vertices (OBJ ``vt``)."""
-    if file_type == "obj":  # any vt or vn, even in a name or comment: trimesh decides
-        return data.find(b"vt") < 0 and data.find(b"vn") < 0
+    """Whether trimesh's mesh of this file has its vertex normals computed from the faces
+    (no normals or UVs of the file's own); OBJ and PLY read theirs."""
     return file_type in ("stl", "off", "glb")  # GLB: the reader looks for NORMAL attributes
 
 
-def _obj(data):
+def _obj(data, tables=False):
+    """``tables``: with the UVs and normals of groups whose refs carry them (a third
+    item, a dict), their vertices split as trimesh splits them."""
     c = kernel("_creaders")
-    got = c and c.read_obj(data)
+    got = c and c.read_obj(data, tables)
     if not got:
         return None
-    vertices, faces, counts = got
+    vertices, faces, counts = got[:3]
     ends = np.cumsum(counts)
-    return [(vertices, faces[end - n : end]) for n, end in zip(counts, ends)]
+    if not tables:
+        return [(vertices, faces[end - n : end]) for n, end in zip(counts, ends)]
+    from .objsplit import split_group
+
+    forms, vt, vn = got[3:]
+    del got
+    parts = []
+    for n, end, form in zip(counts, ends, forms):
+        if form == 1:  # plain v refs: the file's vertices, normals computed from the faces
+            parts.append((vertices, faces[end - n : end], {}))
+            continue
+        part = split_group(vertices, faces[end - n : end], form.bit_length() - 1, vt, vn)
+        if part is None:
+            return None
+        parts.append(part)
+    return parts
 
 
 def _off(data):

@@ -41,6 +41,16 @@ def _obj():
     return ("\n".join(lines) + "\n").encode()
 
 
+def _obj_uv():
+    """v/vt/vn refs that split vertices (a vertex with several vt), quads, negative refs
+    and two materials: the vertex split's rules."""
+    lines = [f"v {x} {y} {z}" for x, y, z in TRI_V + [(1.0, 1.0, 0.5)]]
+    lines += ["vt 0 0", "vt 1 0", "vt 0 1", "vt 0.5 0.5", "vn 0 0 1", "vn 0.5 -1 0"]
+    lines += ["usemtl a", "f 1/1/1 2/2/1 5/3/2 3/4/2", "f 2/1/2 4/2/1 5/4/1 1/3/1", "usemtl b",
+              "f -1/-1/-1 -2/2/-2 -3/-4/2", "usemtl a", "f 1/4/2 3/3/1 4/1/1 2/2/2"]
+    return ("\n".join(lines) + "\n").encode()
+
+
 def _stl_ascii():
     out = ["solid t"]
     for f in TRI_F:
@@ -131,6 +141,7 @@ SEEDS = {
     "glb": ("glb", _glb()),
     "ply-ascii-attributes": ("ply", _ply_ascii_attributes()),
     "ply-binary-attributes": ("ply", _ply_binary_attributes()),
+    "obj-uv": ("obj", _obj_uv()),
 }
 
 # Tokens that break parsers: special floats, huge and negative counts and indices, odd bytes.
@@ -259,21 +270,23 @@ def differential(data: bytes, suffix: str, workdir) -> str:
     b = [slow.world_vertices(i)[slow.geometries[i.geometry].faces] for i in slow.instances]
     if len(a) != len(b) or any(x.shape != y.shape or x.tobytes() != y.tobytes() for x, y in zip(a, b)):
         raise AssertionError("the fast reader and trimesh give different triangles")
-    if suffix == "ply":
-        _same_attributes(path, slow)
+    if suffix in ("ply", "obj"):
+        _same_attributes(path, suffix, slow)
     return "same"
 
 
-def _same_attributes(path, slow):
-    """Where the fast PLY reader also answers for normals and colours, the sampled
-    smooth normals and colours are trimesh's (or both paths fail alike)."""
+def _same_attributes(path, suffix, slow):
+    """Where the fast PLY or OBJ reader also answers for its attributes (PLY normals and
+    colours, OBJ UVs and normals), the sampled values are trimesh's (or both paths fail
+    alike)."""
     import scatter_cli
     from scatter_cli.errors import ScatterError
     from scatter_cli.readers import read_mesh
 
-    if read_mesh(path, "ply", smooth=True, color=True) is None:
+    other = "color" if suffix == "ply" else "uv"
+    if read_mesh(path, suffix, smooth=True, **{other: True}) is None:
         return
-    for attributes in ("smooth-normal", "color"):
+    for attributes in ("smooth-normal", other, f"face,bary,{other},smooth-normal"):
         got = []
         for source in (path, slow):
             try:

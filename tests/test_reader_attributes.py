@@ -1,10 +1,13 @@
-"""The fast PLY readers' vertex normals and colours are trimesh's (``process=False``).
+"""The fast readers' attribute tables are trimesh's (``process=False``): PLY vertex
+normals and colours, OBJ UVs and normals with the vertices split as trimesh splits them.
 
-For files re-saved with normals and colours, and for built cases of each rule (colour
-types, alpha, float scaling, partial normals, texture coordinates), a job asking for
-``color`` or ``smooth-normal`` gives the same triangles and the same output bytes
-whether the fast readers or trimesh loaded the file, and each case checks that the fast
-path answered (or, for what it does not cover, that it handed the file over).
+For files re-saved with these attributes, and for built cases of each rule (PLY colour
+types, alpha, float scaling, partial normals, texture coordinates; OBJ ref forms, quads,
+polygons, negative refs, materials), a job asking for ``color``, ``uv`` or
+``smooth-normal`` gives the same triangles and the same output bytes whether the fast
+readers or trimesh loaded the file (for OBJ also the same vertex, face, UV and normal
+arrays), and each case checks that the fast path answered (or, for what it does not
+cover, that it handed the file over).
 """
 
 import sys
@@ -17,12 +20,13 @@ import scatter_cli
 from scatter_cli import plyread
 from scatter_cli.readers import read_mesh
 from scatter_cli.surface import load_surface
-from scatter_cli.visuals import VertexTables, weighted_vertex_normals
+from scatter_cli.visuals import VertexTables, uv_table, vertex_normal_table, weighted_vertex_normals
 
 from .conftest import run_scatter, run_user
 from .loadmemory import load_memory
 from .test_readers import MESHES, assert_same_load, positions_and_faces, run_user_text
 
+MESHES_BY_NAME = {m.name: m for m in MESHES}
 ATTRIBUTES = ("face,bary,color", "face,smooth-normal", "color,smooth-normal")
 PLY_NAMES = {"f4": "float", "f8": "double", "u1": "uchar", "i1": "char", "u2": "ushort", "i2": "short",
              "i4": "int", "u4": "uint"}
@@ -197,27 +201,6 @@ def test_the_comparison_fails_readers_that_drop_normals_or_alpha(tmp_path, monke
         assert sample_bytes(path, attributes) != sample_bytes(slow, attributes)
 
 
-@pytest.mark.parametrize("attributes", ["color", "face,smooth-normal"])
-def test_a_colour_or_normal_job_on_a_ply_never_imports_trimesh(attributes, tmp_path):
-    path = write_ply(tmp_path / "m.ply", POS + CASES["uchar rgba"] + CASES["double normals"], TRI)
-    args = ["sample", str(path), "-n", "100", "-a", attributes, "-o", str(tmp_path / "o.ply")]
-    code = f"import sys\nfrom scatter_cli import cli\nassert cli.main({args!r}) == 0\nprint('trimesh' in sys.modules)"
-    proc = run_user([sys.executable, "-c", code], text=True)
-    assert proc.stdout.strip() == "False", proc.stderr
-
-
-def test_the_command_writes_the_same_bytes_either_way(tmp_path):
-    """The whole command on an ASCII PLY, fast and through trimesh (SCATTER_NUMPY=1: no
-    compiled readers)."""
-    path = write_ply(tmp_path / "m.ply", POS + CASES["uchar rgba"] + CASES["double normals"], [[0, 1, 2, 3], *TRI])
-    outs = []
-    for env in ({}, {"SCATTER_NUMPY": "1"}):
-        out = tmp_path / f"out{len(outs)}.ply"
-        run_scatter("sample", path, "-n", "2000", "-a", "face,bary,color,smooth-normal", "-o", out, env=env, check=True)
-        outs.append(out.read_bytes())
-    assert outs[0] == outs[1]
-
-
 @pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
 def test_a_load_with_normals_and_colours_takes_at_most_the_file_size_beyond_what_it_returns(fmt, tmp_path):
     """As the plain loads' bound (test_readers.py), the tables counted among the returned
@@ -229,3 +212,190 @@ def test_a_load_with_normals_and_colours_takes_at_most_the_file_size_beyond_what
     path = write_ply(tmp_path / "ico.ply", columns, f, fmt)
     got = load_memory(path, run_user_text, tables=True)
     assert got["extra"] <= got["file"], got
+
+
+# -- OBJ: vt and vn refs, the vertices split as trimesh splits them -------------------
+
+OBJ_ATTRIBUTES = ("face,bary,uv", "face,smooth-normal", "uv,smooth-normal")
+
+
+def assert_obj_as_trimesh(path, attributes=OBJ_ATTRIBUTES):
+    """The fast reader answers; each geometry's vertices, faces, UVs and normals are
+    trimesh's, bit for bit (so the split and its vertex order are); and every job gives
+    trimesh's bytes."""
+    assert read_mesh(path, "obj", smooth=True, uv=True) is not None
+    fast = load_surface(path, plain=True, smooth=True, uv=True)
+    slow = load_surface(path)
+    assert [g.name for g in fast.geometries] == [g.name for g in slow.geometries]
+    for f, s in zip(fast.geometries, slow.geometries):
+        assert isinstance(f.mesh, VertexTables)
+        if f.mesh.uv is None and f.mesh.normals is None:
+            continue  # a group of plain refs: the file's vertices (trimesh keeps the used ones)
+        assert f.vertices.tobytes() == s.vertices.tobytes() and f.faces.tobytes() == s.faces.tobytes()
+        a, b = uv_table(f.mesh), uv_table(s.mesh)
+        assert (a is None) == (b is None) and (a is None or a.tobytes() == b.tobytes())
+        assert vertex_normal_table(f).tobytes() == vertex_normal_table(s).tobytes()
+    assert_same_load(path)
+    for a in attributes:
+        got = []
+        for source in (path, slow):
+            try:
+                got.append(sample_bytes(source, a))
+            except scatter_cli.ScatterError as exc:
+                got.append(str(exc))
+        assert got[0] == got[1], a
+
+
+def obj_text(vertices, faces, form, seed=0, negative=False):
+    """An OBJ of ``vertices`` and ``faces`` (index lists) whose vt and vn refs are drawn
+    so that a vertex meets several UVs and normals (a split) and triples repeat."""
+    rng = np.random.default_rng(seed)
+    nt, nn = len(vertices) // 2 + 3, len(vertices) // 3 + 2
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in np.asarray(vertices, dtype=float).tolist()]
+    if "vt" in form:
+        lines += [f"vt {u!r} {v!r}" for u, v in rng.random((nt, 2)).tolist()]
+    if "vn" in form:
+        lines += [f"vn {a!r} {b!r} {c!r}" for a, b, c in rng.normal(size=(nn, 3)).tolist()]
+    for q in faces:
+        refs = []
+        for v in q:
+            t, n = (v * 7 + rng.integers(0, 2)) % nt, (v * 5 + rng.integers(0, 2)) % nn
+            if negative:
+                v, t, n = v - len(vertices), t - nt, n - nn
+            else:
+                v, t, n = v + 1, t + 1, n + 1
+            refs.append({"v/vt/vn": f"{v}/{t}/{n}", "v/vt": f"{v}/{t}", "v//vn": f"{v}//{n}"}[form])
+        lines.append("f " + " ".join(refs))
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("form", ["v/vt/vn", "v/vt", "v//vn"])
+@pytest.mark.parametrize("mesh", MESHES, ids=[m.name for m in MESHES])
+def test_resaved_meshes_with_uvs_and_normals_sample_as_with_trimesh(mesh, form, tmp_path):
+    vertices, faces = positions_and_faces(mesh)
+    used, faces = np.unique(faces[:3000], return_inverse=True)
+    path = tmp_path / f"{mesh.stem}.obj"
+    path.write_text(obj_text(vertices[used], faces.reshape(-1, 3).tolist(), form))
+    assert_obj_as_trimesh(path)
+
+
+def test_the_sample_obj_with_uvs_samples_as_with_trimesh():
+    assert_obj_as_trimesh(MESHES_BY_NAME["spot_triangulated.obj"])
+
+
+GRID_V = [(x, y, 0.1 * x * y) for y in range(4) for x in range(4)]
+GRID_QUADS = [[4 * y + x, 4 * y + x + 1, 4 * y + x + 5, 4 * y + x + 4] for y in range(3) for x in range(3)]
+FAN_V = [(0.0, 0.0, 0.0)] + [(np.cos(a), np.sin(a), 0.2 * np.sin(3 * a)) for a in np.linspace(0, 2 * np.pi, 41)[:-1]]
+FAN = [[0, k, k % 40 + 1] for k in range(1, 41)]
+MATERIALS = ("mtllib none.mtl\nusemtl red\nf 1/1/1 2/2/1 3/3/2\nusemtl blue\nf 2/2/2 4/3/1 3/1/1 5/2/2\n"
+             "usemtl red\nf 4/1/2 5/3/2 6/2/1\nusemtl green\nf 1/3/1 5/1/2 6/2/2\n")
+V6 = "".join(f"v {k * 0.5} {(k * k) % 5 - 1.5} {k % 3}\n" for k in range(6)) + "vt 0 0\nvt 1 0\nvt 0.5 1\nvn 0 0 1\nvn 0 1 0\n"
+OBJ_CASES = {
+    "all quads, v/vt/vn": obj_text(GRID_V, GRID_QUADS, "v/vt/vn"),
+    "all quads, v/vt": obj_text(GRID_V, GRID_QUADS, "v/vt", seed=1),
+    "triangles and quads, v/vt/vn": obj_text(GRID_V, GRID_QUADS[:4] + [q[:3] for q in GRID_QUADS[4:]], "v/vt/vn"),
+    "pentagons, v//vn": obj_text(GRID_V, [[0, 1, 2, 6, 5], [5, 6, 10, 9, 4]], "v//vn"),
+    "negative refs": obj_text(GRID_V, GRID_QUADS, "v/vt/vn", negative=True),
+    "a centre meeting 40 uvs": obj_text(FAN_V, FAN, "v/vt", seed=3),
+    "materials": V6 + MATERIALS,
+    "positive and negative refs to one vertex": V6 + "f 1/1/1 2/2/2 3/3/1\nf -6/-3/-2 -4/1/1 4/2/2\n",
+    "vt index 0": V6 + "f 1/0/1 2/2/2 3/3/1\nf 2/1/1 3/0/2 4/1/1\n",
+    "uvw texture coordinates": V6.replace("vt 0 0\nvt 1 0\nvt 0.5 1\n", "vt 0 0 0\nvt 1 0 1\nvt 0.5 1 0\n")
+    + "f 1/1 2/2 3/3\nf 2/1 3/3 4/2\n",
+    "crlf and continuations": (V6 + "f 1/1/1 2/2/2 \\\n3/3/1\nf 2/1/1 3/3/2 4/2/1\n").replace("\n", "\r\n"),
+    "a group without refs": V6 + "usemtl a\nf 1/1/1 2/2/2 3/3/1\nusemtl b\nf 2 3 4\n",
+    "vertex colours": "".join(f"v {k} {k % 2} {k % 3} 0.5 0.25 1\n" for k in range(5)) + "vt 0 0\nvt 1 1\n"
+    + "f 1/1 2/2 3/1\nf 3/2 4/1 5/2\n",
+}
+
+
+@pytest.mark.parametrize("case", sorted(OBJ_CASES))
+def test_obj_uv_and_normal_rules_match_trimesh(case, tmp_path):
+    path = tmp_path / "m.obj"
+    path.write_bytes(OBJ_CASES[case].encode())
+    assert_obj_as_trimesh(path)
+
+
+OBJ_HANDED = {
+    "mixed forms in a group": V6 + "f 1/1/1 2/2/2 3/3/1\nf 2/1 3/3 4/2\n",
+    "vt out of range": V6 + "f 1/4/1 2/2/2 3/3/1\n",
+    "vn out of range": V6 + "f 1/1/3 2/2/2 3/3/1\n",
+    "v//vn without vn lines": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1//1 2//1 3//1\n",
+    "v/vt without vt lines": "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2/1 3/1\n",
+}
+
+
+@pytest.mark.parametrize("case", sorted(OBJ_HANDED))
+def test_obj_refs_the_split_does_not_cover_go_to_trimesh(case, tmp_path):
+    path = tmp_path / "m.obj"
+    path.write_bytes(OBJ_HANDED[case].encode())
+    assert read_mesh(path, "obj") is not None or case == "mixed forms in a group"
+    assert read_mesh(path, "obj", smooth=True, uv=True) is None
+
+
+def test_the_obj_comparison_fails_a_split_in_file_order(tmp_path, monkeypatch):
+    """The broken variant: a split that numbers the (v, vt, vn) triples in order of first
+    use (a natural guess) instead of trimesh's hash order: the same corners and the same
+    sampled UVs (which do not see the order), but other vertex arrays, which the exact
+    comparison catches."""
+    from scatter_cli import objsplit
+
+    path = tmp_path / "q.obj"
+    path.write_bytes(OBJ_CASES["all quads, v/vt/vn"].encode())
+    real = objsplit.split_group
+
+    def first_use(vertices, keys, form, vt, vn):
+        v, f, t = real(vertices, keys, form, vt, vn)
+        _, first, inverse = np.unique(f.reshape(-1), return_index=True, return_inverse=True)
+        rank = np.argsort(np.argsort(first))
+        order = np.argsort(rank)
+        return v[order], rank[inverse].reshape(-1, 3), {k: None if x is None else x[order] for k, x in t.items()}
+
+    monkeypatch.setattr(objsplit, "split_group", first_use)
+    assert_same_load(path)
+    fast, slow = load_surface(path, plain=True, uv=True), load_surface(path)
+    assert fast.geometries[0].vertices.tobytes() != slow.geometries[0].vertices.tobytes()
+    with pytest.raises(AssertionError):
+        assert_obj_as_trimesh(path)
+
+
+def test_an_obj_load_with_uvs_and_normals_takes_at_most_the_file_size_beyond_what_it_returns(tmp_path):
+    """The icosphere(7) with v/vt/vn refs that split its vertices about 3 times: the
+    split vertices, UVs, normals and faces counted as returned."""
+    mesh = trimesh.creation.icosphere(subdivisions=7)
+    path = tmp_path / "ico.obj"
+    path.write_text(obj_text(np.asarray(mesh.vertices), np.asarray(mesh.faces).tolist(), "v/vt/vn"))
+    got = load_memory(path, run_user_text, tables=True)
+    assert got["extra"] <= got["file"], got
+
+
+def command_case(name, tmp_path):
+    """A small file of each kind the attribute tables serve, and the attributes to ask."""
+    if name == "ply":
+        path = write_ply(tmp_path / "m.ply", POS + CASES["uchar rgba"] + CASES["double normals"], [[0, 1, 2, 3], *TRI])
+        return path, "face,bary,color,smooth-normal"
+    path = tmp_path / "m.obj"
+    path.write_bytes(OBJ_CASES["materials" if name == "obj" else "all quads, v/vt/vn"].encode())
+    return path, "face,bary,uv,smooth-normal,object"
+
+
+@pytest.mark.parametrize("name", ["ply", "obj", "obj quads"])
+def test_an_attribute_job_never_imports_trimesh(name, tmp_path):
+    path, attributes = command_case(name, tmp_path)
+    args = ["sample", str(path), "-n", "100", "-a", attributes, "-o", str(tmp_path / "o.ply")]
+    code = f"import sys\nfrom scatter_cli import cli\nassert cli.main({args!r}) == 0\nprint('trimesh' in sys.modules)"
+    proc = run_user([sys.executable, "-c", code], text=True)
+    assert proc.stdout.strip() == "False", proc.stderr
+
+
+@pytest.mark.parametrize("name", ["ply", "obj"])
+def test_the_command_writes_the_same_bytes_either_way(name, tmp_path):
+    """The whole command, fast and through trimesh (SCATTER_NUMPY=1: no compiled readers;
+    the PLY is ASCII, so trimesh reads it)."""
+    path, attributes = command_case(name, tmp_path)
+    outs = []
+    for env in ({}, {"SCATTER_NUMPY": "1"}):
+        out = tmp_path / f"out{len(outs)}.ply"
+        run_scatter("sample", path, "-n", "2000", "-a", attributes, "-o", out, env=env, check=True)
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1]
