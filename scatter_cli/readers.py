@@ -45,6 +45,8 @@ def read_mesh(path, file_type, smooth=False, color=False, uv=False):
     try:
         if file_type == "ply":
             return reader(data, smooth, color)
+        if file_type == "obj" and _materials_resolve(data, path):
+            return None
         if file_type == "obj" and (smooth or uv):
             return _obj(data, tables=True)
         if smooth and not _normals_from_faces(data, file_type):
@@ -56,6 +58,19 @@ def read_mesh(path, file_type, smooth=False, color=False, uv=False):
                 data.close()
             except BufferError:  # an array still views the mapping: it closes with it
                 pass
+
+
+def _materials_resolve(data, path):
+    """Whether trimesh would find the material library an OBJ names (its first
+    ``mtllib``, even in a comment): then it names the geometries by material (with more
+    than one) and gives them material visuals, which the fast reader does not."""
+    at = data.find(b"mtllib")
+    if at < 0:
+        return False
+    end = data.find(b"\n", at)
+    name = bytes(data[at + 6 : end if end >= 0 else len(data)]).decode("utf-8", "replace").strip()
+    folder = os.path.dirname(os.path.abspath(path))
+    return any(os.path.exists(os.path.join(folder, c)) for c in (name, name.lstrip("/"), os.path.split(name)[-1]) if c)
 
 
 def _normals_from_faces(data, file_type):

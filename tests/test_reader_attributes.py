@@ -333,6 +333,20 @@ def test_obj_refs_the_split_does_not_cover_go_to_trimesh(case, tmp_path):
     assert read_mesh(path, "obj", smooth=True, uv=True) is None
 
 
+@pytest.mark.parametrize("name", ["m.mtl", "/m.mtl", "lib/m.mtl"])
+def test_an_obj_whose_material_library_resolves_goes_to_trimesh(name, tmp_path):
+    """trimesh then names the geometries by material (three here, not file.obj, _1, _2):
+    handed over, for plain jobs too; with the library missing the fast reader answers."""
+    (tmp_path / "m.mtl").write_text("newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 1\nnewmtl green\nKd 0 1 0\n")
+    path = tmp_path / "m.obj"
+    path.write_text(OBJ_CASES["materials"].replace("mtllib none.mtl", f"mtllib {name}"))
+    assert read_mesh(path, "obj") is None and read_mesh(path, "obj", smooth=True, uv=True) is None
+    assert [g.name for g in load_surface(path).geometries] == ["green", "blue", "red"]
+    (tmp_path / "m.mtl").unlink()
+    assert read_mesh(path, "obj") is not None
+    assert_obj_as_trimesh(path)
+
+
 def test_the_obj_comparison_fails_a_split_in_file_order(tmp_path, monkeypatch):
     """The broken variant: a split that numbers the (v, vt, vn) triples in order of first
     use (a natural guess) instead of trimesh's hash order: the same corners and the same
