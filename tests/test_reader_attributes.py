@@ -256,16 +256,14 @@ def obj_text(vertices, faces, form, seed=0, negative=False):
         lines += [f"vt {u!r} {v!r}" for u, v in rng.random((nt, 2)).tolist()]
     if "vn" in form:
         lines += [f"vn {a!r} {b!r} {c!r}" for a, b, c in rng.normal(size=(nn, 3)).tolist()]
-    for q in faces:
-        refs = []
-        for v in q:
-            t, n = (v * 7 + rng.integers(0, 2)) % nt, (v * 5 + rng.integers(0, 2)) % nn
-            if negative:
-                v, t, n = v - len(vertices), t - nt, n - nn
-            else:
-                v, t, n = v + 1, t + 1, n + 1
-            refs.append({"v/vt/vn": f"{v}/{t}/{n}", "v/vt": f"{v}/{t}", "v//vn": f"{v}//{n}"}[form])
-        lines.append("f " + " ".join(refs))
+    flat = np.concatenate([np.asarray(q) for q in faces])
+    coin = rng.integers(0, 2, (2, len(flat)))
+    refs = np.stack([flat, (flat * 7 + coin[0]) % nt, (flat * 5 + coin[1]) % nn])
+    refs += np.array([[len(vertices)], [nt], [nn]]) * -1 if negative else 1
+    pattern = {"v/vt/vn": "{0}/{1}/{2}", "v/vt": "{0}/{1}", "v//vn": "{0}//{2}"}[form]
+    words = [pattern.format(*r) for r in refs.T.tolist()]
+    at = np.cumsum([0] + [len(q) for q in faces]).tolist()
+    lines += ["f " + " ".join(words[a:b]) for a, b in zip(at[:-1], at[1:])]
     return "\n".join(lines) + "\n"
 
 
