@@ -197,8 +197,8 @@ def _ascii_layout(head):
             continue
         if words == ["format", "ascii", "1.0"]:
             continue
-        if words[0] == "element" and len(words) == 3 and words[2].isdigit():
-            elements.append((words[1], int(words[2]), []))
+        if words[0] == "element" and len(words) == 3 and words[2].isdigit() and len(words[2]) < 19:
+            elements.append((words[1], int(words[2]), []))  # (a count past int64 cannot fit the file)
         elif words[0] == "property" and elements:
             elements[-1][2].append(words[1:])
         else:
