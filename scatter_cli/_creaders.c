@@ -375,6 +375,9 @@ typedef struct {
     size_t material_len;
     int current; /* its group, -1 until a face uses it */
     int v_cols, vt_cols;
+    int attributes;  /* keep the vt and vn refs and values (read_obj's second argument) */
+    grow trefs, nrefs; /* int32 per corner: the vt and vn refs as written, 0 when absent */
+    grow vt, vn;       /* double x2 (u, v) / x3 per line */
 } obj_state;
 
 typedef struct {
@@ -419,10 +422,10 @@ static int group_of(obj_state *s)
     return g;
 }
 
-/* One ref: v, v/t, v//n or v/t/n (form 0 to 3). */
-static int face_ref(cursor *c, int32_t *vertex, int *form_out)
+/* One ref: v, v/t, v//n or v/t/n (form 0 to 3); tn: the t and n refs (0 when absent). */
+static int face_ref(cursor *c, int32_t *vertex, int32_t *tn, int *form_out)
 {
-    int64_t v, other;
+    int64_t v, t = 0, n = 0;
     int form = 0;
     if (parse_int(c, &v, '/') < 0)
         return -1;
@@ -430,16 +433,16 @@ static int face_ref(cursor *c, int32_t *vertex, int *form_out)
         c->p++;
         if (c->p < c->end && *c->p == '/') {
             c->p++;
-            if (parse_int(c, &other, 0) < 0)
+            if (parse_int(c, &n, 0) < 0)
                 return -1;
             form = 2;
         } else {
-            if (parse_int(c, &other, '/') < 0)
+            if (parse_int(c, &t, '/') < 0)
                 return -1;
             form = 1;
             if (c->p < c->end && *c->p == '/') {
                 c->p++;
-                if (parse_int(c, &other, 0) < 0)
+                if (parse_int(c, &n, 0) < 0)
                     return -1;
                 form = 3;
             }
@@ -448,7 +451,27 @@ static int face_ref(cursor *c, int32_t *vertex, int *form_out)
     if (v == 0)
         return -1;
     *vertex = (int32_t)v;
+    tn[0] = (int32_t)t;
+    tn[1] = (int32_t)n;
     *form_out = form;
+    return 0;
+}
+
+static int push_int32(grow *g, int32_t x)
+{
+    if (grow_room(g, 4) < 0)
+        return -1;
+    memcpy(g->data + g->len, &x, 4);
+    g->len += 4;
+    return 0;
+}
+
+static int push_doubles(grow *g, const double *x, int n)
+{
+    if (grow_room(g, (size_t)n * sizeof(double)) < 0)
+        return -1;
+    memcpy(g->data + g->len, x, (size_t)n * sizeof(double));
+    g->len += (size_t)n * sizeof(double);
     return 0;
 }
 
@@ -465,10 +488,12 @@ static int face_line(cursor *c, obj_state *s, int64_t line)
             return 1;
         if (grow_room(&s->refs, 4) < 0)
             return -1;
-        int32_t v;
+        int32_t v, tn[2];
         int form;
-        if (face_ref(c, &v, &form) < 0)
+        if (face_ref(c, &v, tn, &form) < 0)
             return 1;
+        if (s->attributes && (push_int32(&s->trefs, tn[0]) < 0 || push_int32(&s->nrefs, tn[1]) < 0))
+            return -1;
         forms |= 1 << form;
         columns += NUMBERS[form];
         memcpy(s->refs.data + s->refs.len, &v, 4);
@@ -590,14 +615,20 @@ static int obj_lines(cursor *c, obj_state *s)
             s->v.len += sizeof xyz;
         } else if (starts(c, "vt ")) {
             c->p += 3;
-            int n = numbers(c, NULL);
+            double uvw[3];
+            int n = numbers(c, uvw);
             if (n < 2 || n > 3 || (s->vt_cols && n != s->vt_cols))
                 return 1;
             s->vt_cols = n;
+            if (s->attributes && push_doubles(&s->vt, uvw, 2) < 0) /* trimesh keeps u, v */
+                return -1;
         } else if (starts(c, "vn ")) {
             c->p += 3;
-            if (numbers(c, NULL) != 3)
+            double xyz[3];
+            if (numbers(c, xyz) != 3)
                 return 1;
+            if (s->attributes && push_doubles(&s->vn, xyz, 3) < 0)
+                return -1;
         } else if (starts(c, "f ")) {
             c->p += 2;
             int status = face_line(c, s, line++);
@@ -658,6 +689,31 @@ static int64_t resolve(int32_t r, int64_t nv)
     return (i >= 0 && i < nv) ? i : -1;
 }
 
+/* The key trimesh's unmerge_faces sorts a corner's (v, vt, vn) refs by (form 1: v, vt;
+ * 2: v, vn; 3: v, vt, vn), each as trimesh holds it (1-based made 0-based, negative kept):
+ * grouping.hashable_rows packs the columns into one uint64, `precision` bits each, offset
+ * by the threshold. Returns 0 where a ref is outside that packing (trimesh then hashes
+ * the rows' bytes, which sort otherwise: hand off). */
+static int corner_key(int form, int32_t v, int32_t t, int32_t n, uint64_t *key)
+{
+    int64_t cols[3], k = 0;
+    cols[k++] = v > 0 ? (int64_t)v - 1 : v;
+    if (form & 1)
+        cols[k++] = t > 0 ? (int64_t)t - 1 : t;
+    if (form & 2)
+        cols[k++] = n > 0 ? (int64_t)n - 1 : n;
+    int precision = (int)(64 / k);
+    int64_t threshold = ((int64_t)1 << (precision - 1)) - 1;
+    uint64_t h = 0;
+    for (int64_t j = 0; j < k; j++) {
+        if (!(cols[j] < threshold && cols[j] > -threshold))
+            return 0;
+        h ^= (uint64_t)(cols[j] + threshold + 1) << (j * precision);
+    }
+    *key = h;
+    return 1;
+}
+
 /* Triangles of one material group in trimesh's order, appended at out (int64 x3), or
  * NULL to hand off. When every face line of the group holds as many numbers, trimesh
  * reads them as one array (then all quads give every first triangle, then every second;
@@ -670,8 +726,13 @@ static int64_t *emit_group(obj_state *s, int g, const int32_t *refs, int64_t nv,
     const uint8_t *corners = (const uint8_t *)s->corners.data;
     int flat = s->group_cmin[g] == s->group_cmax[g];
     int forms = s->group_forms[g];
-    if (flat && (forms & (forms - 1)))
+    if ((flat || s->attributes) && (forms & (forms - 1)))
         return NULL;
+    /* attributes: a group whose refs carry vt or vn gives each corner's key instead */
+    int form = 0;
+    while (s->attributes && forms >> form > 1)
+        form++;
+    const int32_t *trefs = (const int32_t *)s->trefs.data, *nrefs = (const int32_t *)s->nrefs.data;
     int passes = (flat && s->group_max[g] == 4) ? 2 : 1; /* all quads: first halves, then second */
     for (int pass = 0; pass < passes; pass++) {
         for (size_t r = 0; r < nruns; r++) {
@@ -685,6 +746,13 @@ static int64_t *emit_group(obj_state *s, int g, const int32_t *refs, int64_t nv,
                     idx[j] = resolve(f[j], nv);
                     if (idx[j] < 0)
                         return NULL;
+                    if (form) {
+                        int64_t at = f - refs + j;
+                        uint64_t key;
+                        if (!corner_key(form, f[j], trefs[at], nrefs[at], &key))
+                            return NULL;
+                        memcpy(&idx[j], &key, 8);
+                    }
                 }
                 if (passes == 2) {
                     int a = pass ? 2 : 0, b = pass ? 3 : 1, cc = pass ? 0 : 2;
@@ -706,7 +774,8 @@ static int64_t *emit_group(obj_state *s, int g, const int32_t *refs, int64_t nv,
 static PyObject *read_obj(PyObject *self, PyObject *args)
 {
     Py_buffer buf;
-    if (!PyArg_ParseTuple(args, "y*", &buf))
+    int attributes = 0;
+    if (!PyArg_ParseTuple(args, "y*|p", &buf, &attributes))
         return NULL;
     const char *text = buf.buf;
     Py_ssize_t n = buf.len;
@@ -718,6 +787,7 @@ static PyObject *read_obj(PyObject *self, PyObject *args)
         return PyErr_NoMemory();
     }
     s->current = -1;
+    s->attributes = attributes;
     int status = 1;
     Py_BEGIN_ALLOW_THREADS
     if (plain_text(text, n)) {
@@ -754,10 +824,11 @@ static PyObject *read_obj(PyObject *self, PyObject *args)
     for (size_t i = 0; i < s->corners.len; i++)
         nf += (uint8_t)s->corners.data[i] - 2;
     int64_t *faces = malloc((size_t)nf * 3 * sizeof(int64_t) + 1);
-    PyObject *counts = PyList_New(0);
-    if (!faces || !counts) {
+    PyObject *counts = PyList_New(0), *forms = PyList_New(0);
+    if (!faces || !counts || !forms) {
         free(faces);
         Py_XDECREF(counts);
+        Py_XDECREF(forms);
         PyErr_NoMemory();
         goto done;
     }
@@ -767,32 +838,58 @@ static PyObject *read_obj(PyObject *self, PyObject *args)
         if (!next) {
             free(faces);
             Py_DECREF(counts);
+            Py_DECREF(forms);
             result = Py_None;
             Py_INCREF(result);
             goto done;
         }
         PyObject *k = PyLong_FromLongLong((next - out) / 3);
-        if (!k || PyList_Append(counts, k) < 0) {
+        PyObject *form = PyLong_FromLong(s->group_forms[g]);
+        if (!k || !form || PyList_Append(counts, k) < 0 || PyList_Append(forms, form) < 0) {
             Py_XDECREF(k);
+            Py_XDECREF(form);
             free(faces);
             Py_DECREF(counts);
+            Py_DECREF(forms);
             goto done;
         }
         Py_DECREF(k);
+        Py_DECREF(form);
         out = next;
     }
     PyObject *v = owned_array(s->v.data, nv, 3, NPY_FLOAT64);
     s->v.data = NULL;
     PyObject *f = owned_array(faces, nf, 3, NPY_INT64);
-    if (v && f)
+    if (v && f && !attributes) {
         result = Py_BuildValue("(NNN)", v, f, counts);
-    else {
+        Py_DECREF(forms);
+    } else if (v && f) {
+        PyObject *vt = owned_array(s->vt.data, (npy_intp)(s->vt.len / 16), 2, NPY_FLOAT64);
+        s->vt.data = NULL;
+        PyObject *vn = owned_array(s->vn.data, (npy_intp)(s->vn.len / 24), 3, NPY_FLOAT64);
+        s->vn.data = NULL;
+        if (vt && vn)
+            result = Py_BuildValue("(NNNNNN)", v, f, counts, forms, vt, vn);
+        else {
+            Py_XDECREF(vt);
+            Py_XDECREF(vn);
+            Py_DECREF(v);
+            Py_DECREF(f);
+            Py_DECREF(counts);
+            Py_DECREF(forms);
+        }
+    } else {
         Py_XDECREF(v);
         Py_XDECREF(f);
         Py_DECREF(counts);
+        Py_DECREF(forms);
     }
 done:
     grow_free(&s->v);
+    grow_free(&s->trefs);
+    grow_free(&s->nrefs);
+    grow_free(&s->vt);
+    grow_free(&s->vn);
     grow_free(&s->refs);
     grow_free(&s->corners);
     grow_free(&s->runs);
@@ -1004,21 +1101,28 @@ static PyObject *read_off(PyObject *self, PyObject *args)
 }
 
 /* The body of an ASCII PLY: nv vertex lines of `props` numbers (x, y, z at columns
- * xyz[0..2], rounded to float32 where single[k]), then nf lines `k i0 .. ik-1`, k 3 or 4. */
+ * xyz[0..2], rounded to float32 where single[k]), then nf lines `k i0 .. ik-1`, k 3 or 4.
+ * `extra` (bytes, optional): more columns to keep, as parsed, in an (nv, len) float64
+ * array returned third. */
 static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
 {
     Py_buffer buf;
-    Py_ssize_t offset;
+    Py_ssize_t offset, ne = 0;
     long long nv, nf;
     int props, x, y, z, sx, sy, sz;
-    if (!PyArg_ParseTuple(args, "y*nLLiiiiiii", &buf, &offset, &nv, &nf, &props, &x, &y, &z, &sx, &sy, &sz))
+    const unsigned char *extra = NULL;
+    if (!PyArg_ParseTuple(args, "y*nLLiiiiiii|y#", &buf, &offset, &nv, &nf, &props, &x, &y, &z, &sx, &sy, &sz,
+                          &extra, &ne))
         return NULL;
     const char *text = buf.buf;
     int col[3] = {x, y, z}, single[3] = {sx, sy, sz};
-    double *v = NULL;
+    double *v = NULL, *e = NULL;
     polys q = {{0}, {0}, {0}, MAX_CORNERS + 1, 0};
     int status = 1;
-    if (offset < 0 || offset > buf.len || nv <= 0 || nf <= 0 || props < 3) {
+    int bad_extra = ne > 8;
+    for (Py_ssize_t j = 0; j < ne && !bad_extra; j++)
+        bad_extra = extra[j] >= props;
+    if (offset < 0 || offset > buf.len || nv <= 0 || nf <= 0 || props < 3 || bad_extra) {
         PyBuffer_Release(&buf);
         Py_RETURN_NONE;
     }
@@ -1026,7 +1130,8 @@ static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
     Py_BEGIN_ALLOW_THREADS
     if (plain_text(c.p, c.end - c.p) && nv <= (c.end - c.p) / 6 + 1 && nf <= (c.end - c.p) / 8 + 1) {
         v = malloc((size_t)nv * 24);
-        status = v ? 0 : -1;
+        e = ne ? malloc((size_t)nv * (size_t)ne * 8) : NULL;
+        status = v && (e || !ne) ? 0 : -1;
         for (int64_t i = 0; i < nv && !status; i++) {
             for (int k = 0; k < props && !status; k++) {
                 double d;
@@ -1038,6 +1143,9 @@ static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
                 for (int a = 0; a < 3; a++)
                     if (col[a] == k)
                         v[3 * i + a] = single[a] ? (double)(float)d : d;
+                for (Py_ssize_t a = 0; a < ne; a++)
+                    if (extra[a] == k)
+                        e[ne * i + a] = d;
             }
             if (!status && end_line(&c) < 0)
                 status = 1;
@@ -1052,7 +1160,19 @@ static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
     }
     Py_END_ALLOW_THREADS
     PyBuffer_Release(&buf);
-    return polys_result(v, nv, &q, status);
+    PyObject *result = polys_result(v, nv, &q, status);
+    if (!ne || !result || result == Py_None) {
+        free(e);
+        return result;
+    }
+    PyObject *ea = owned_array(e, nv, ne, NPY_FLOAT64);
+    if (!ea) {
+        Py_DECREF(result);
+        return NULL;
+    }
+    PyObject *both = Py_BuildValue("(OON)", PyTuple_GET_ITEM(result, 0), PyTuple_GET_ITEM(result, 1), ea);
+    Py_DECREF(result);
+    return both;
 }
 
 /* ---- ASCII STL ---- */
@@ -1250,10 +1370,13 @@ static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
 }
 
 static PyMethodDef methods[] = {
-    {"read_obj", read_obj, METH_VARARGS, "read_obj(buffer) -> (vertices, faces, group face counts) or None"},
+    {"read_obj", read_obj, METH_VARARGS,
+     "read_obj(buffer, attributes=False) -> (vertices, faces, group face counts) or None; with attributes: "
+     "(vertices, faces or corner keys, group face counts, group ref forms, vt, vn)"},
     {"read_off", read_off, METH_VARARGS, "read_off(buffer) -> (vertices, faces) or None"},
     {"read_ply_ascii", read_ply_ascii, METH_VARARGS,
-     "read_ply_ascii(buffer, offset, nv, nf, props, x, y, z, x32, y32, z32) -> (vertices, faces) or None"},
+     "read_ply_ascii(buffer, offset, nv, nf, props, x, y, z, x32, y32, z32, extra=b'') -> (vertices, faces[, "
+     "extra columns]) or None"},
     {"read_stl_ascii", read_stl_ascii, METH_VARARGS, "read_stl_ascii(buffer, threads=1) -> vertices (3F, 3) or None"},
     {NULL, NULL, 0, NULL},
 };

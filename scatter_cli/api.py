@@ -136,11 +136,12 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     check_options(count, density, seed, method, precision, chunk_size, radius, poisson, weight, oversampling,
                   exterior, stable)
     shard = check_shard(shard, poisson, radius)
-    # no colours, UVs or normals to read: the fast readers may load it (smooth normals too,
-    # from files whose normals trimesh would compute from the faces)
-    plain = not weight and set(names) <= PLAIN_ATTRIBUTES | {"smooth-normal"}
+    # the fast readers may load it (smooth normals, colours and UVs too, where they read
+    # them as trimesh does; else they hand the file to trimesh)
+    plain = not weight and set(names) <= PLAIN_ATTRIBUTES | {"smooth-normal", "color", "uv"}
     surface = mesh if isinstance(mesh, Surface) else load_surface(mesh, input_format=input_format, objects=objects,
-                                                                  plain=plain, smooth="smooth-normal" in names)
+                                                                  plain=plain, smooth="smooth-normal" in names,
+                                                                  color="color" in names, uv="uv" in names)
     t1 = time.perf_counter()
     for message in surface._cache.pop("warnings", ()) if warn else ():
         warn(message)

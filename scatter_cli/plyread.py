@@ -32,8 +32,10 @@ def read_triangles(path):
     return read_triangles_from(data)
 
 
-def read_triangles_from(data):
-    """read_triangles on the bytes of a file (any buffer)."""
+def read_triangles_from(data, smooth=False, color=False):
+    """read_triangles on the bytes of a file (any buffer). ``smooth``, ``color``: also
+    the vertex normals, colours trimesh would give (:func:`vertex_tables`), as a third
+    item, a dict; None when the file has what the tables do not cover."""
     try:
         head = bytes(data[:_MAX_HEADER])
         end = head.find(b"end_header")
@@ -57,7 +59,47 @@ def read_triangles_from(data):
     vertices = np.empty((n_vertex, 3))
     for k, axis in enumerate("xyz"):
         vertices[:, k] = v[axis]
-    return vertices, t["i"].astype(np.int64)
+    if not (smooth or color):
+        return vertices, t["i"].astype(np.int64)
+    tables = vertex_tables({n: v[n] for n in v.dtype.names}, smooth, color)
+    return None if tables is None else (vertices, t["i"].astype(np.int64), tables)
+
+
+_NORMALS = ("nx", "ny", "nz")
+_COLORS = ("red", "green", "blue", "alpha")
+_TEXTURE_COORDINATES = {"texture_u", "texture_v", "u", "v", "s", "t"}
+
+
+def vertex_tables(columns, smooth, color):
+    """The keyword arguments of a :class:`~scatter_cli.visuals.VertexTables` for what a
+    PLY's vertex properties give, as trimesh's PLY loader and Trimesh give them.
+
+    columns: property name -> (V,) array of the property's own type, as trimesh holds
+    it. Gives ``normals`` (V, 3) float64 (nx, ny, nz as they are, when all three are
+    there) and ``vertex_colors`` (V, 4) float64 (trimesh's ``to_rgba`` of red, green,
+    blue and alpha: integers cast to uint8, floats times 255, clipped and rounded, alpha
+    255 when absent), each only when asked for. None (hand the file to trimesh) when the
+    vertices carry texture coordinates: trimesh then splits them by UV and keeps neither.
+    """
+    if _TEXTURE_COORDINATES & set(columns):
+        return None
+    tables = {}
+    if smooth and set(_NORMALS) <= set(columns):
+        tables["normals"] = np.column_stack([columns[n] for n in _NORMALS]).astype(np.float64)
+    if color and set(_COLORS[:3]) <= set(columns):
+        tables["vertex_colors"] = _rgba(np.column_stack([columns[n] for n in _COLORS if n in columns]))
+    return tables
+
+
+def _rgba(c):
+    """(V, 3|4) colours of any type -> (V, 4) float64 of trimesh's uint8 RGBA (to_rgba)."""
+    if c.dtype.kind == "f":
+        c[~np.isfinite(c)] = 0.0
+        with np.errstate(over="ignore"):  # float32 beyond 3.4e38 / 255: inf, clipped to 255
+            c = np.clip(c * 255, 0.0, 255).round()
+    if c.shape[1] == 3:
+        c = np.column_stack((c, 255 * np.ones(len(c))))
+    return c.astype(np.uint8).astype(np.float64)
 
 
 def _contents(f):

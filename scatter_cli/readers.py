@@ -21,15 +21,21 @@ _STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attr
 _MAX_HEADER = 1 << 16
 
 
-def read_mesh(path, file_type, smooth=False):
+def read_mesh(path, file_type, smooth=False, color=False, uv=False):
     """A list of (vertices (V, 3) float64, faces (F, 3) int64), one per geometry in
     trimesh's order; for a GLB, a scene: (geometries [(name, vertices, faces)], instances
     [(name, geometry index, (4, 4) matrix or None)]) (gltfread.py); or None (hand the
-    file to trimesh). ``smooth``: hand over files with normals or UVs of their own (the
-    caller computes smooth normals from the faces, as trimesh does for the others).
+    file to trimesh). ``smooth``: smooth normals are wanted: a PLY's own normals come as
+    a third item of its geometry, a dict (plyread.vertex_tables); other files with
+    normals or UVs of their own are handed over (the caller computes smooth normals from
+    the faces, as trimesh does for the others). ``color``: vertex colours are wanted:
+    only PLY is read (its colours in that dict), every other format handed over.
+    ``uv``: texture coordinates are wanted: only OBJ is read. An OBJ read for ``smooth``
+    or ``uv`` has the geometries trimesh makes of groups with ``vt`` or ``vn`` refs (its
+    vertex split, objsplit.py) and their UVs and normals in that dict.
     """
     reader = _READERS.get(file_type)
-    if reader is None:
+    if reader is None or (color and file_type != "ply") or (uv and file_type != "obj"):
         return None
     try:
         with open(path, "rb") as f:
@@ -37,6 +43,12 @@ def read_mesh(path, file_type, smooth=False):
     except OSError:
         return None
     try:
+        if file_type == "ply":
+            return reader(data, smooth, color)
+        if file_type == "obj" and _materials_resolve(data, path):
+            return None
+        if file_type == "obj" and (smooth or uv):
+            return _obj(data, tables=True)
         if smooth and not _normals_from_faces(data, file_type):
             return None
         return reader(data, smooth) if file_type == "glb" else reader(data)
@@ -48,40 +60,50 @@ def read_mesh(path, file_type, smooth=False):
                 pass
 
 
+def _materials_resolve(data, path):
+    """Whether trimesh would find the material library an OBJ names (its first
+    ``mtllib``, even in a comment): then it names the geometries by material (with more
+    than one) and gives them material visuals, which the fast reader does not."""
+    at = data.find(b"mtllib")
+    if at < 0:
+        return False
+    end = data.find(b"\n", at)
+    name = bytes(data[at + 6 : end if end >= 0 else len(data)]).decode("utf-8", "replace").strip()
+    folder = os.path.dirname(os.path.abspath(path))
+    return any(os.path.exists(os.path.join(folder, c)) for c in (name, name.lstrip("/"), os.path.split(name)[-1]) if c)
+
+
 def _normals_from_faces(data, file_type):
-    """Whether trimesh's mesh of this file has its vertex normals computed from the faces:
-    no normals of the file's own, and no UVs that split the vertices (OBJ ``vt``)."""
-    if file_type == "obj":  # any vt or vn, even in a name or comment: trimesh decides
-        return data.find(b"vt") < 0 and data.find(b"vn") < 0
-    if file_type == "ply":
-        names = _vertex_properties(bytes(data[:_MAX_HEADER]))
-        return names is not None and set(names) <= {"x", "y", "z", "red", "green", "blue", "alpha"}
+    """Whether trimesh's mesh of this file has its vertex normals computed from the faces
+    (no normals or UVs of the file's own); OBJ and PLY read theirs."""
     return file_type in ("stl", "off", "glb")  # GLB: the reader looks for NORMAL attributes
 
 
-def _vertex_properties(head):
-    """The names of a PLY's vertex properties (from its header), or None."""
-    end = head.find(b"end_header")
-    if end < 0:
-        return None
-    names, element = [], None
-    for line in head[:end].split(b"\n"):
-        words = line.split()
-        if words[:1] == [b"element"]:
-            element = words[1:2]
-        elif words[:1] == [b"property"] and element == [b"vertex"]:
-            names.append(words[-1].decode("ascii", "replace"))
-    return names
-
-
-def _obj(data):
+def _obj(data, tables=False):
+    """``tables``: with the UVs and normals of groups whose refs carry them (a third
+    item, a dict), their vertices split as trimesh splits them."""
     c = kernel("_creaders")
-    got = c and c.read_obj(data)
+    got = c and c.read_obj(data, tables)
     if not got:
         return None
-    vertices, faces, counts = got
+    vertices, faces, counts = got[:3]
     ends = np.cumsum(counts)
-    return [(vertices, faces[end - n : end]) for n, end in zip(counts, ends)]
+    if not tables:
+        return [(vertices, faces[end - n : end]) for n, end in zip(counts, ends)]
+    from .objsplit import split_group
+
+    forms, vt, vn = got[3:]
+    del got
+    parts = []
+    for n, end, form in zip(counts, ends, forms):
+        if form == 1:  # plain v refs: the file's vertices, normals computed from the faces
+            parts.append((vertices, faces[end - n : end], {}))
+            continue
+        part = split_group(vertices, faces[end - n : end], form.bit_length() - 1, vt, vn)
+        if part is None:
+            return None
+        parts.append(part)
+    return parts
 
 
 def _off(data):
@@ -108,24 +130,60 @@ def _stl(data):
     return [(vertices, np.arange(len(vertices), dtype=np.int64).reshape(-1, 3))]
 
 
-def _ply(data):
+def _ply(data, smooth=False, color=False):
     from .plyread import read_triangles_from
 
-    got = read_triangles_from(data)
+    got = read_triangles_from(data, smooth, color)
     if got is not None:
         return [got]
     layout = _ascii_layout(bytes(data[:_MAX_HEADER]))
     c = kernel("_creaders")
     if layout is None or not c:
         return None
-    got = c.read_ply_ascii(data, *layout)
+    if smooth or color:
+        return _ply_ascii_tables(c, data, *layout, smooth, color)
+    got = c.read_ply_ascii(data, *layout[0])
     return [got] if got else None
 
 
+def _ply_ascii_tables(c, data, args, props, smooth, color):
+    """_ply's answer for an ASCII PLY with the vertex tables asked for (the columns
+    converted to their declared types from the parsed doubles, as trimesh does), or None."""
+    from .plyread import _COLORS, _NORMALS, _TEXTURE_COORDINATES, vertex_tables
+
+    if _TEXTURE_COORDINATES & {name for name, _ in props}:
+        return None
+    names = (_NORMALS if smooth else ()) + (_COLORS if color else ())
+    wanted = [k for k, (name, _) in enumerate(props) if name in names]
+    if any(k > 255 for k in wanted):
+        return None
+    got = c.read_ply_ascii(data, *args, bytes(wanted))
+    if not got:
+        return None
+    vertices, faces, parsed = got if wanted else (*got, None)
+    columns = {props[k][0]: _declared(parsed[:, j], props[k][1]) for j, k in enumerate(wanted)}
+    del got, parsed
+    if any(column is None for column in columns.values()):
+        return None
+    tables = vertex_tables(columns, smooth, color)
+    return None if tables is None else [(vertices, faces, tables)]
+
+
+def _declared(column, kind):
+    """(V,) parsed doubles -> the declared type (trimesh's ``astype``), or None where a
+    cast to an integer type would be undefined (outside its range, not finite)."""
+    if kind[0] in "iu":
+        info = np.iinfo(kind)
+        if not ((column > info.min - 1) & (column < info.max + 1)).all():
+            return None
+    return column.astype(kind)
+
+
 def _ascii_layout(head):
-    """(body offset, vertex count, face count, vertex properties, x, y, z columns, and
-    whether each of x, y, z is float32) for an ASCII PLY of ``vertex`` (scalar properties)
-    then ``face`` (one list of int indices), or None."""
+    """((body offset, vertex count, face count, vertex properties, x, y, z columns, and
+    whether each of x, y, z is float32), [(name, NumPy type) of each vertex property])
+    for an ASCII PLY of ``vertex`` (scalar properties) then ``face`` (one list of int
+    indices), or None."""
     end = head.find(b"end_header\n")
     if not head.startswith(b"ply\n") or end < 0 or b"\r" in head[:end]:
         return None
@@ -139,8 +197,8 @@ def _ascii_layout(head):
             continue
         if words == ["format", "ascii", "1.0"]:
             continue
-        if words[0] == "element" and len(words) == 3 and words[2].isdigit():
-            elements.append((words[1], int(words[2]), []))
+        if words[0] == "element" and len(words) == 3 and words[2].isdigit() and len(words[2]) < 19:
+            elements.append((words[1], int(words[2]), []))  # (a count past int64 cannot fit the file)
         elif words[0] == "property" and elements:
             elements[-1][2].append(words[1:])
         else:
@@ -162,7 +220,8 @@ def _ascii_layout(head):
     kinds = [_TYPES[vprops[k][0]] for k in columns]
     if any(t not in ("f4", "f8") for t in kinds):
         return None
-    return (end + len(b"end_header\n"), n_vertex, n_face, len(vprops), *columns, *(int(t == "f4") for t in kinds))
+    args = (end + len(b"end_header\n"), n_vertex, n_face, len(vprops), *columns, *(int(t == "f4") for t in kinds))
+    return args, [(name, _TYPES[p[0]]) for name, p in zip(names, vprops)]
 
 
 def _glb(data, smooth=False):

@@ -83,22 +83,25 @@ class Surface:
         return v @ m[:3, :3].T + m[:3, 3]
 
 
-def load_surface(source, *, input_format: str | None = None, objects=None, plain=False, smooth=False) -> Surface:
+def load_surface(source, *, input_format: str | None = None, objects=None, plain=False, smooth=False,
+                 color=False, uv=False) -> Surface:
     """Load ``source`` (path, ``'-'`` for standard input, trimesh.Trimesh or trimesh.Scene).
 
     ``plain``: only vertices and faces are wanted (no colours, UVs or normals from the
     file), so the fast readers (readers.py) may read it without importing trimesh.
-    ``smooth``: smooth vertex normals are wanted too; the fast readers then read only
-    files without normals or UVs of their own (the normals are computed from the faces,
-    as for trimesh's mesh of such a file).
+    ``smooth``: smooth vertex normals are wanted too; the fast readers then read a
+    PLY's own normals and otherwise only files without normals or UVs of their own (the
+    normals are computed from the faces, as for trimesh's mesh of such a file).
+    ``color``: vertex colours are wanted too; the fast readers then read only PLY.
+    ``uv``: texture coordinates are wanted too; the fast readers then read only OBJ.
     """
     if isinstance(source, (str, os.PathLike)) and _suffix(source, input_format) in USD_FORMATS:
         from .usdread import load_usd
 
         # smooth normals: a stage's own (primvars:normals, normals) when it has them
-        return load_usd(os.fspath(source), input_format, objects=objects, plain=plain and not smooth)
+        return load_usd(os.fspath(source), input_format, objects=objects, plain=plain and not (smooth or color or uv))
     if plain and not objects and isinstance(source, (str, os.PathLike)) and not _is_stream(os.fspath(source)):
-        fast = _read_plain(os.fspath(source), input_format, smooth)
+        fast = _read_plain(os.fspath(source), input_format, smooth, color, uv)
         if fast is not None:
             return _with_units(fast, source, input_format)
     if import_trimesh is not None and "trimesh" not in sys.modules:
@@ -137,7 +140,7 @@ def _suffix(source, input_format):
     return (input_format or os.path.splitext(os.fspath(source))[1].lstrip(".")).lower()
 
 
-def _read_plain(path, input_format, smooth=False):
+def _read_plain(path, input_format, smooth=False, color=False, uv=False):
     """The Surface of a mesh file read by the fast readers, or None (use trimesh).
 
     One geometry makes a mesh, several a scene, as trimesh.load makes them; the names
@@ -146,15 +149,16 @@ def _read_plain(path, input_format, smooth=False):
     from .readers import read_mesh
 
     _check_readable(path)
-    parts = read_mesh(path, (input_format or os.path.splitext(path)[1].lstrip(".")).lower(), smooth)
+    parts = read_mesh(path, (input_format or os.path.splitext(path)[1].lstrip(".")).lower(), smooth, color, uv)
     if parts is None:
         return None
-    surface = _plain_surface(path, parts)
-    if smooth:
+    tables = [p[2] if len(p) > 2 else {} for p in parts] if isinstance(parts, list) else None
+    surface = _plain_surface(path, parts if tables is None else [p[:2] for p in parts])
+    if smooth or color or uv:
         from .visuals import VertexTables
 
-        for g in surface.geometries:
-            g.mesh = VertexTables(g.vertices, g.faces)  # normals computed from the faces when asked
+        for g, t in zip(surface.geometries, tables or [{}] * len(surface.geometries)):
+            g.mesh = VertexTables(g.vertices, g.faces, **t)  # normals computed from the faces unless given
     return surface
 
 

@@ -41,6 +41,16 @@ def _obj():
     return ("\n".join(lines) + "\n").encode()
 
 
+def _obj_uv():
+    """v/vt/vn refs that split vertices (a vertex with several vt), quads, negative refs
+    and two materials: the vertex split's rules."""
+    lines = [f"v {x} {y} {z}" for x, y, z in TRI_V + [(1.0, 1.0, 0.5)]]
+    lines += ["vt 0 0", "vt 1 0", "vt 0 1", "vt 0.5 0.5", "vn 0 0 1", "vn 0.5 -1 0"]
+    lines += ["usemtl a", "f 1/1/1 2/2/1 5/3/2 3/4/2", "f 2/1/2 4/2/1 5/4/1 1/3/1", "usemtl b",
+              "f -1/-1/-1 -2/2/-2 -3/-4/2", "usemtl a", "f 1/4/2 3/3/1 4/1/1 2/2/2"]
+    return ("\n".join(lines) + "\n").encode()
+
+
 def _stl_ascii():
     out = ["solid t"]
     for f in TRI_F:
@@ -77,6 +87,33 @@ def _ply_ascii_quads():
     return _ply_ascii().replace(b"element face 4", b"element face 3").replace(b"3 0 1 2\n3 0 2 3\n", b"4 0 1 2 3\n")
 
 
+TRI_N = [(0.1, -0.5, 1.0), (1.0, 0.0, 0.0), (0.0, 2.5, 0.0), (-0.3, 0.2, 0.9)]
+TRI_C = [(255, 0, 10, 128), (0, 255, 3, 255), (7, 8, 255, 0), (40, 90, 200, 17)]
+_ATTRIBUTE_PROPERTIES = ["property float nx", "property float ny", "property float nz", "property uchar red",
+                         "property uchar green", "property uchar blue", "property uchar alpha"]
+
+
+def _ply_ascii_attributes():
+    """Vertex normals and RGBA colours, quads and triangles: the attribute tables' rules."""
+    lines = ["ply", "format ascii 1.0", f"element vertex {len(TRI_V)}", "property float x", "property float y",
+             "property float z", *_ATTRIBUTE_PROPERTIES, "element face 3", "property list uchar int vertex_indices",
+             "end_header"]
+    lines += [" ".join(map(str, v + n + c)) for v, n, c in zip(TRI_V, TRI_N, TRI_C)]
+    lines += ["4 0 1 2 3", "3 0 3 1", "3 1 3 2"]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def _ply_binary_attributes():
+    """Big-endian, double normals, float colours (scaled by trimesh) without alpha."""
+    head = ["ply", "format binary_big_endian 1.0", f"element vertex {len(TRI_V)}", "property float x",
+            "property float y", "property float z", "property double nx", "property double ny", "property double nz",
+            "property float red", "property float green", "property float blue", f"element face {len(TRI_F)}",
+            "property list uchar int vertex_indices", "end_header"]
+    body = b"".join(struct.pack(">3f3d3f", *v, *n, *(x / 200 for x in c[:3])) for v, n, c in zip(TRI_V, TRI_N, TRI_C))
+    body += b"".join(struct.pack(">B3i", 3, *f) for f in TRI_F)
+    return ("\n".join(head) + "\n").encode() + body
+
+
 def _glb():
     """Nested nodes (matrix and TRS), a mesh placed twice, a mesh of two primitives,
     interleaved positions and u16 indices: the fast GLB reader's harder rules."""
@@ -102,6 +139,9 @@ SEEDS = {
     "stl-binary": ("stl", _stl_binary()),
     "off": ("off", _off()),
     "glb": ("glb", _glb()),
+    "ply-ascii-attributes": ("ply", _ply_ascii_attributes()),
+    "ply-binary-attributes": ("ply", _ply_binary_attributes()),
+    "obj-uv": ("obj", _obj_uv()),
 }
 
 # Tokens that break parsers: special floats, huge and negative counts and indices, odd bytes.
@@ -230,7 +270,32 @@ def differential(data: bytes, suffix: str, workdir) -> str:
     b = [slow.world_vertices(i)[slow.geometries[i.geometry].faces] for i in slow.instances]
     if len(a) != len(b) or any(x.shape != y.shape or x.tobytes() != y.tobytes() for x, y in zip(a, b)):
         raise AssertionError("the fast reader and trimesh give different triangles")
+    if suffix in ("ply", "obj"):
+        _same_attributes(path, suffix, slow)
     return "same"
+
+
+def _same_attributes(path, suffix, slow):
+    """Where the fast PLY or OBJ reader also answers for its attributes (PLY normals and
+    colours, OBJ UVs and normals), the sampled values are trimesh's (or both paths fail
+    alike)."""
+    import scatter_cli
+    from scatter_cli.errors import ScatterError
+    from scatter_cli.readers import read_mesh
+
+    other = "color" if suffix == "ply" else "uv"
+    if read_mesh(path, suffix, smooth=True, **{other: True}) is None:
+        return
+    for attributes in ("smooth-normal", other, f"face,bary,{other},smooth-normal"):
+        got = []
+        for source in (path, slow):
+            try:
+                s = scatter_cli.sample(source, count=200, seed=3, attributes=attributes)
+                got.append(s.points.tobytes() + b"".join(v.tobytes() for v in s.attributes.values()))
+            except ScatterError as exc:
+                got.append(str(exc))
+        if got[0] != got[1]:
+            raise AssertionError(f"the fast reader and trimesh give different '{attributes}'")
 
 
 def exercise(data: bytes, suffix: str, workdir) -> str:

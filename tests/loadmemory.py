@@ -22,18 +22,24 @@ kernel("_creaders")
 gc.collect()
 with open("/proc/self/statm") as f:
     before = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
-surface = load_surface(sys.argv[1], plain=True)
+tables = sys.argv[2] == "1"  # with the tables the file's format has, counted as returned
+ply, obj = (tables and sys.argv[1].endswith(s) for s in (".ply", ".obj"))
+surface = load_surface(sys.argv[1], plain=True, smooth=tables, color=ply, uv=obj)
 with open("/proc/self/status") as f:  # VmHWM: this process image's own high-water mark
     peak = next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmHWM:"))
 arrays = sum(g.vertices.nbytes + g.faces.nbytes for g in surface.geometries)
+arrays += sum(getattr(g.mesh, k).nbytes for g in surface.geometries for k in ("normals", "vertex_colors", "uv")
+              if getattr(g.mesh, k, None) is not None)
 print(json.dumps({"before": before, "peak": peak, "arrays": arrays, "file": os.path.getsize(sys.argv[1])}))
 """
 
 
-def load_memory(path, run, env=None):
+def load_memory(path, run, env=None, tables=False):
     """{before, peak, arrays, file, extra} in bytes for loading ``path`` in a child run by
-    ``run`` (a function like conftest.run_user: (cmd, env=...) -> CompletedProcess)."""
-    proc = run([sys.executable, "-c", CHILD, str(path)], env=env)
+    ``run`` (a function like conftest.run_user: (cmd, env=...) -> CompletedProcess).
+    ``tables``: load the file's attribute tables too: a smooth-normal job, and color for
+    a PLY, uv for an OBJ."""
+    proc = run([sys.executable, "-c", CHILD, str(path), "1" if tables else "0"], env=env)
     if proc.returncode != 0:
         raise RuntimeError(f"the load of {path} failed: {proc.stderr[-500:]}")
     got = json.loads(proc.stdout)

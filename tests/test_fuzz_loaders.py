@@ -59,6 +59,16 @@ def test_differential_findings_stay_fixed(tmp_path, name, tail):
     assert differential(seed + tail, suffix, tmp_path) == "handed"
 
 
+@pytest.mark.parametrize("count", [b"499999999999999999999", b"9223372036854775808"])
+def test_a_vertex_count_past_int64_is_handed_over(tmp_path, count):
+    """An ASCII PLY count too large for the compiled reader's int64 argument once raised
+    OverflowError (sanitizer fuzz run, seed 0): now the header parse hands it over."""
+    suffix, seed = SEEDS["ply-ascii"]
+    data = seed.replace(b"element vertex 4", b"element vertex " + count)
+    assert differential(data, suffix, tmp_path) == "handed"
+    assert exercise(data, suffix, tmp_path) == "error"
+
+
 @pytest.mark.parametrize("tail", [b" ", b"  \n \n", b"\t\r\n"])
 def test_blank_space_after_the_faces_is_read(tmp_path, tail):
     """The ASCII PLY reader's scan of what follows the faces steps over spaces (it once

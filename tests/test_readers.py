@@ -320,12 +320,16 @@ def assert_same_smooth_normals(path):
 
 
 def carries_normals_or_uv(path):
+    """Whether the fast readers hand a smooth-normal job on this file to trimesh: PLY
+    texture coordinates, GLB normals; an OBJ whose face refs mix forms (``1/2`` and
+    ``3``: the reader splits vertices by their vt and vn refs one form at a time)."""
     data = path.read_bytes()
     if path.suffix == ".obj":
-        return b"vt" in data or b"vn" in data
+        refs = [w for line in data.decode().splitlines() if line.startswith("f ") for w in line.split()[1:]]
+        return len({(w.count("/"), "//" in w) for w in refs}) > 1
     if path.suffix == ".ply":
         head = data[: data.find(b"end_header")]
-        return any(w in head.split() for w in (b"nx", b"u", b"s", b"texture_u"))
+        return any(w in head.split() for w in (b"u", b"s", b"texture_u"))
     return path.suffix == ".glb" and b'"NORMAL"' in data
 
 
