@@ -101,6 +101,18 @@ def raw_bytes(size, out, block=1 << 20):
             write_all(f, fd, data[: min(block, size - start)])
 
 
+def settle(size, folder):
+    """Write and delete ``size`` bytes, untimed, just before each timed write, so that every
+    format finds the same state: memory the page cache has just given back. This machine
+    is a VM whose idle memory goes back to the host (DAMON pageout of pages unused for a
+    minute, virtio-balloon free page reporting): a write whose page-cache pages come from
+    that memory pays a host fault per page, and which writes do depended on what ran
+    before them (a 300 MB write took 0.05 s or 0.16 s)."""
+    path = os.path.join(folder, "settle.bin")
+    raw_bytes(size, path)
+    os.unlink(path)
+
+
 class _InTurn:
     """An executor that runs what it is given at once, on the calling thread."""
 
@@ -173,6 +185,7 @@ def time_formats(count, runs, folder):
         wall, cpu = ({k: [] for k, _ in order} for _ in range(2))
         for _ in range(runs):
             for key, write in order:
+                settle(sizes["las"], folder)
                 out = os.path.join(folder, f"bench.{suffix.get(key, 'laz')}")
                 w, c = timed(lambda: write(out))
                 wall[key].append(w), cpu[key].append(c)

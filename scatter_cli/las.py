@@ -98,7 +98,7 @@ def _no_extra_statistics(header):
             struct.options &= ~(struct.MIN_BIT_MASK | struct.MAX_BIT_MASK)
 
 
-BLOCK = 1 << 15  # points per record block: a block's records and scratch stay in the core's L2 cache
+BLOCK = 1 << 15  # points per record block: its records and scratch stay in the cache (1 to 2.5 MB)
 EXTREMES_ROW = 256  # points per row of the wide reductions in column_extremes
 
 
