@@ -107,7 +107,8 @@ def settle(size, folder):
     is a VM whose idle memory goes back to the host (DAMON pageout of pages unused for a
     minute, virtio-balloon free page reporting): a write whose page-cache pages come from
     that memory pays a host fault per page, and which writes do depended on what ran
-    before them (a 300 MB write took 0.05 s or 0.16 s)."""
+    before them (300 MB: 0.06 s of CPU just after a settle, 0.6 to 1.1 s after a pause of
+    10 to 30 s; docs/outputs.md)."""
     path = os.path.join(folder, "settle.bin")
     raw_bytes(size, path)
     os.unlink(path)
