@@ -20,8 +20,12 @@ and peak memory against the count: every figure of issue 16's benchmark in one r
      backend ours uses) in the same chunks: the compressor's own speed. ``laz`` rows give
      their ratio to it;
    - ``lazrs alone, 1 thread``: the same with LazBackend.Lazrs;
-   - ``las bytes``: as many bytes as the LAS file has, written in 4 MiB blocks from one
-     buffer: the part of a LAS write that is the file system's, whatever the format code does.
+   - ``ply bytes`` and ``las bytes``: as many bytes as the PLY (LAS) file has, written with
+     os.write in 1 MiB blocks from one buffer that stays in the cache, the same way for
+     both: the part of a write that is the file system's, whatever the format code does.
+     Their ratio is the floor of LAS's ratio to PLY for a writer on one core;
+   - ``las, 1 thread``: our LAS writer with its blocks written in turn on the main thread
+     instead of on its writer thread (what the writer costs without the second core).
 """
 
 from __future__ import annotations
@@ -86,13 +90,59 @@ def lazrs_alone(records, header, out, backend_name):
             f.point_writer.write_points(laspy.PackedPointRecord(r, header.point_format))
 
 
-def raw_bytes(size, out, block=1 << 22):
+def raw_bytes(size, out, block=1 << 20):
+    from scatter_cli.las import file_descriptor, write_all
     from scatter_cli.writers import open_output
 
-    data = np.ones(block, np.uint8).data  # written pages: a bytes(block) of zeros wrote 4-6x slower here
+    data = np.ones(block, np.uint8)  # written pages: a bytes(block) of zeros wrote 4-6x slower here
     with open_output(out) as f:
+        fd = file_descriptor(f)
         for start in range(0, size, block):
-            f.write(data[: min(block, size - start)])
+            write_all(f, fd, data[: min(block, size - start)])
+
+
+def settle(size, folder):
+    """Write and delete ``size`` bytes, untimed, just before each timed write, so that every
+    format finds the same state: memory the page cache has just given back. This machine
+    is a VM whose idle memory goes back to the host (DAMON pageout of pages unused for a
+    minute, virtio-balloon free page reporting): a write whose page-cache pages come from
+    that memory pays a host fault per page, and which writes do depended on what ran
+    before them (300 MB: 0.06 s of CPU just after a settle, 0.6 to 1.1 s after a pause of
+    10 to 30 s; docs/outputs.md)."""
+    path = os.path.join(folder, "settle.bin")
+    raw_bytes(size, path)
+    os.unlink(path)
+
+
+class _InTurn:
+    """An executor that runs what it is given at once, on the calling thread."""
+
+    def submit(self, fn, *args):
+        from concurrent.futures import Future
+
+        fn(*args)
+        done = Future()
+        done.set_result(None)
+        return done
+
+    def shutdown(self, wait=True):
+        pass
+
+
+def las_in_turn(chunks, out, layout, count, bounds):
+    """Our LAS writer with each block written on the main thread, in turn."""
+    from scatter_cli.las import LasWriter
+    from scatter_cli.writers import open_output
+
+    with open_output(out) as stream:
+        writer = LasWriter(stream, layout, count, bounds)
+        writer.header()
+        writer._thread.shutdown()
+        writer._thread = _InTurn()
+        for chunk in chunks:
+            writer.write(chunk)
+        writer.finish()
+        writer.close()
 
 
 def timed(fn):
@@ -110,9 +160,12 @@ def entries(count, data, records, header, sizes):
         chunks, layout, bounds = data["float64" if fmt in ("las", "laz") else "float32"]
         return lambda out: write_samples(chunks, out, fmt, layout, count, bounds=bounds)
 
+    chunks, layout, bounds = data["float64"]
     out = [(fmt, fmt_writer(fmt)) for fmt, _ in FORMATS]
-    out.insert(2, ("las bytes", lambda path: raw_bytes(sizes["las"], path)))
-    out[5:5] = [("lazrs alone", lambda path: lazrs_alone(records, header, path, "LazrsParallel")),
+    out.insert(0, ("ply bytes", lambda path: raw_bytes(sizes["ply"], path)))
+    out.insert(3, ("las bytes", lambda path: raw_bytes(sizes["las"], path)))
+    out.insert(5, ("las, 1 thread", lambda path: las_in_turn(chunks, path, layout, count, bounds)))
+    out[7:7] = [("lazrs alone", lambda path: lazrs_alone(records, header, path, "LazrsParallel")),
                 ("lazrs alone, 1 thread", lambda path: lazrs_alone(records, header, path, "Lazrs"))]
     return out
 
@@ -125,13 +178,15 @@ def time_formats(count, runs, folder):
         records, header = held_records(*data["float64"][:2], count, data["float64"][2])
         sizes = {}
         order = entries(count, data, records, header, sizes)
-        out = os.path.join(folder, "bench.las")
-        dict(order)["las"](out)  # untimed: the size the raw reference writes
-        sizes["las"] = os.path.getsize(out)
-        os.unlink(out)
+        for fmt in ("ply", "las"):  # untimed: the sizes the raw references write
+            out = os.path.join(folder, f"bench.{fmt}")
+            dict(order)[fmt](out)
+            sizes[fmt] = os.path.getsize(out)
+            os.unlink(out)
         wall, cpu = ({k: [] for k, _ in order} for _ in range(2))
         for _ in range(runs):
             for key, write in order:
+                settle(sizes["las"], folder)
                 out = os.path.join(folder, f"bench.{suffix.get(key, 'laz')}")
                 w, c = timed(lambda: write(out))
                 wall[key].append(w), cpu[key].append(c)

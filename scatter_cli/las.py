@@ -12,6 +12,7 @@ colour's alpha as uint8.
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -97,6 +98,10 @@ def _no_extra_statistics(header):
             struct.options &= ~(struct.MIN_BIT_MASK | struct.MAX_BIT_MASK)
 
 
+BLOCK = 1 << 15  # points per record block: its records and scratch stay in the cache (1 to 2.5 MB)
+EXTREMES_ROW = 256  # points per row of the wide reductions in column_extremes
+
+
 class LasWriter(_Writer):
     def __init__(self, stream, layout, count, bounds=None, compress=False):
         super().__init__(stream, layout, count)
@@ -106,8 +111,16 @@ class LasWriter(_Writer):
         self.header_, self.step, self.offset, self.extras = make_header(layout, bounds)
         self.report = {"las": quantisation_report(self.step, self.offset, bounds)}
         self._las = None
+        self._fd = None
+        self._pending = None  # LAS: the block being written on the writer thread
+        self._thread = None
+        self._half = 0
         self._records = None  # reused from chunk to chunk: the fields never written stay zero
-        self._scratch = None
+        self._views = None
+        self._real = np.empty(3 * BLOCK)  # scratch of one block: coordinates being quantised
+        self._ints = np.empty(3 * BLOCK, np.int32)
+        self._words = np.empty((2, BLOCK), np.uint32)  # scratch of one block: colour words
+        self._tiled_offset = np.tile(self.offset, BLOCK)
         self._lo = np.full(3, np.iinfo(np.int64).max)
         self._hi = np.full(3, np.iinfo(np.int64).min)
 
@@ -122,47 +135,81 @@ class LasWriter(_Writer):
         backend = laspy.LazBackend.LazrsParallel if self.compress else None
         self._las = laspy.open(self.stream, mode="w", header=self.header_, do_compress=self.compress,
                                laz_backend=backend, closefd=False)
+        if not self.compress:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._fd = file_descriptor(self.stream)
+            self._thread = ThreadPoolExecutor(1, thread_name_prefix="las-write")
 
     def write(self, samples):
-        # laspy's point writer takes the records; the header's extents and counts are kept
-        # here (LasWriter.write_points would sort every chunk's return numbers, and each of
-        # our points is return 1 of 1).
-        if not len(samples):
+        # LAZ: laspy's point writer takes a chunk's records. LAS: blocks of records go
+        # straight to the file from a thread, which writes one half of the record buffer
+        # while the other is filled. The header's extents and counts are kept here
+        # (LasWriter.write_points would sort every chunk's return numbers, and each of our
+        # points is return 1 of 1).
+        n = len(samples)
+        if not n:
             return
-        records = self.records(samples)
-        self._las.point_writer.write_points(_laspy().PackedPointRecord(records, self.header_.point_format))
-        self.written += len(samples)
+        if self.compress:
+            records = _laspy().PackedPointRecord(self.records(samples), self.header_.point_format)
+            self._las.point_writer.write_points(records)
+        else:
+            self._record_buffer(2 * BLOCK)
+            for a in range(0, n, BLOCK):
+                block = self._fill(self._half * BLOCK, samples, a, min(n, a + BLOCK))
+                self._wait()
+                self._pending = self._thread.submit(write_all, self.stream, self._fd, block)
+                self._half ^= 1
+        self.written += n
 
-    def _buffers(self, n):
-        """The record array (n,) and a float64 scratch column (n,), grown when a chunk is larger."""
-        if self._records is None or len(self._records) < n:
-            self._records = np.zeros(n, self.header_.point_format.dtype())
-            self._records["bit_fields"] = RETURN_1_OF_1
-            self._scratch = np.empty(n)
-        return self._records[:n], self._scratch[:n]
+    def close(self):
+        """Stop the writer thread once its block is written: the stream is closed next."""
+        if self._thread is not None:
+            self._thread.shutdown(wait=True)
+            self._thread = None
+
+    def _wait(self):
+        """Wait for the block being written (raising its error)."""
+        if self._pending is not None:
+            pending, self._pending = self._pending, None
+            pending.result()
 
     def records(self, samples):
         """The chunk's point records (n,), in laspy's dtype of the point format; updates the
         extents. The array is reused by the next chunk."""
         n = len(samples)
-        rec, scratch = self._buffers(n)
-        for c, name in enumerate("XYZ"):
-            q = quantise(samples.points[:, c], self.offset[c], self.step, scratch)
-            self._lo[c] = min(self._lo[c], int(q.min()))
-            self._hi[c] = max(self._hi[c], int(q.max()))
-            rec[name] = q
-        if "color" in samples.attributes:
-            # 257 c has both bytes equal to c: byte copies, no arithmetic
-            color = samples.attributes["color"]
-            octets = rec.view(np.uint8).reshape(n, -1)
-            start = rec.dtype.fields["red"][1]  # red, green, blue: adjacent uint16
-            for c in range(6):
-                octets[:, start + c] = color[:, c // 2]
-        for key, j, name, dt in self.extras:
-            rec[name] = samples.attributes[key].reshape(n, -1)[:, j]
+        rec = self._record_buffer(n)
+        for a in range(0, n, BLOCK):
+            self._fill(a, samples, a, min(n, a + BLOCK))
         return rec
 
+    def _record_buffer(self, n):
+        """The record array (n,), grown when a chunk needs more."""
+        if self._records is None or len(self._records) < n:
+            self._records = np.zeros(n, self.header_.point_format.dtype())
+            self._records["bit_fields"] = RETURN_1_OF_1
+            self._views = record_views(self._records, self.extras)
+        return self._records[:n]
+
+    def _fill(self, at, samples, start, stop):
+        """Records ``at ..`` of the buffer from the points ``start .. stop - 1`` of ``samples``
+        (at most BLOCK); updates the extents. Returns those records."""
+        m = stop - start
+        view = {k: v[at : at + m] for k, v in self._views.items()}
+        points = np.ascontiguousarray(samples.points[start:stop]).reshape(-1)
+        q = quantise(points, self._tiled_offset[: 3 * m], self.step, self._real[: 3 * m], self._ints[: 3 * m])
+        lo, hi = column_extremes(q)
+        np.minimum(self._lo, lo, out=self._lo)
+        np.maximum(self._hi, hi, out=self._hi)
+        view["xyz"][...] = q.view("V12")
+        if "color" in samples.attributes:
+            rgb_257(samples.attributes["color"][start:stop], view["rg"], view["bb"], self._words[:, :m])
+        for key, j, name, _ in self.extras:
+            view[name][...] = samples.attributes[key].reshape(len(samples), -1)[start:stop, j]
+        return self._records[at : at + m]
+
     def finish(self):
+        self._wait()
         super().finish()
         h = self._las.header
         h.point_count = self.written
@@ -175,11 +222,80 @@ class LasWriter(_Writer):
         clear_creation_date(self.stream)
 
 
-def quantise(values, offset, step, out):
-    """rint((values - offset) / step) (n,) into the float64 array ``out`` (n,), returned."""
-    np.subtract(values, offset, out=out)
-    np.divide(out, step, out=out)
-    return np.rint(out, out=out)
+def record_views(records, extras):
+    """{name: strided view (n,)} of the fields of ``records`` (n,) filled per block:
+    ``xyz`` (V12: X Y Z), ``rg`` (uint32: red and green), ``bb`` (uint16: blue), each extra."""
+    def field(name, dtype):
+        return np.ndarray(records.shape, dtype, records, records.dtype.fields[name][1], records.strides)
+
+    views = {"xyz": field("X", "V12")}
+    if "red" in records.dtype.names:
+        views["rg"], views["bb"] = field("red", np.uint32), field("blue", np.uint16)
+    for _, _, name, dt in extras:
+        views[name] = field(name, dt)
+    return views
+
+
+def quantise(values, offset, step, real, out):
+    """rint((values - offset) / step) of ``values`` (k,) as int32 into ``out`` (k,), through
+    the float64 scratch ``real`` (k,); ``offset`` (k,). Returns ``out``."""
+    np.subtract(values, offset, out=real)
+    np.divide(real, step, out=real)
+    np.rint(real, out=real)
+    np.copyto(out, real, casting="unsafe")
+    return out
+
+
+def column_extremes(q):
+    """(min (3,), max (3,)) of the columns of ``q`` (3m,): x y z x y z ...
+
+    Reduced in rows of EXTREMES_ROW points, which vectorises: down the first axis of an
+    (m, 3) array NumPy reduces three values at a time."""
+    m = len(q) // 3
+    head = m - m % EXTREMES_ROW
+    parts = [q[3 * head :].reshape(-1, 3)]
+    if head:
+        rows = q[: 3 * head].reshape(-1, 3 * EXTREMES_ROW)
+        parts += [np.minimum.reduce(rows, axis=0).reshape(-1, 3), np.maximum.reduce(rows, axis=0).reshape(-1, 3)]
+    both = np.concatenate(parts)
+    return both.min(axis=0), both.max(axis=0)
+
+
+def rgb_257(color, rg, bb, words):
+    """257 c of the 8-bit ``color`` (m, 4) into the record fields red and green (``rg``,
+    uint32 (m,)) and blue (``bb``, uint16 (m,)). 257 c has both bytes equal to c, so
+    (red | green << 16) * 257 is the two channels' four bytes. ``words`` (2, m) scratch."""
+    rgba = np.ascontiguousarray(color).view(np.uint32).reshape(-1)  # r | g << 8 | b << 16 | a << 24
+    low, high = words
+    np.bitwise_and(rgba, 0xFF, out=low)
+    np.bitwise_and(rgba, 0xFF00, out=high)
+    np.left_shift(high, 8, out=high)
+    np.bitwise_or(low, high, out=low)
+    np.multiply(low, 257, out=rg)
+    np.right_shift(rgba, 16, out=high)
+    np.bitwise_and(high, 0xFF, out=high)
+    np.multiply(high, 257, out=bb, casting="unsafe")
+
+
+def file_descriptor(stream):
+    """The file descriptor behind ``stream``, its buffer flushed, or None (an in-memory stream)."""
+    try:
+        fd = stream.fileno()
+    except (AttributeError, OSError):
+        return None
+    stream.flush()
+    return fd
+
+
+def write_all(stream, fd, data):
+    """Write the array ``data`` to the file descriptor ``fd`` (the stream's: no copy into its
+    buffer) or, without one, to ``stream``."""
+    view = memoryview(data.view(np.uint8))
+    if fd is None:
+        stream.write(view)
+        return
+    while view:
+        view = view[os.write(fd, view):]
 
 
 CREATION_DATE_AT = 90  # header bytes 90-93: creation day of year and year (uint16 each)

@@ -63,6 +63,9 @@ class _Writer:
         if self.count is not None and self.written != self.count:
             raise ScatterError(f"internal error: wrote {self.written} points, announced {self.count}")
 
+    def close(self):
+        """Release what the writer holds before its stream is closed, finished or not."""
+
 
 class _BinaryWriter(_Writer):
     def encode(self, samples):
@@ -173,10 +176,13 @@ def write_samples(chunks, path, fmt, layout, count, ascii=False, bounds=None, **
         if fmt == "usd":
             options["path"] = path
         writer = make_writer(stream, fmt, layout, count, ascii, bounds, **options)
-        writer.header()
-        for chunk in chunks:
-            writer.write(chunk)
-        writer.finish()
+        try:
+            writer.header()
+            for chunk in chunks:
+                writer.write(chunk)
+            writer.finish()
+        finally:
+            writer.close()
     return writer.report
 
 

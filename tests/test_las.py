@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import scatter_cli.api as api
+import scatter_cli.las as las_module
 from scatter_cli.api import sampled_bounds
 from scatter_cli.errors import ScatterError
 from scatter_cli.sampling import chunk_ranges
@@ -41,13 +42,19 @@ def terrain():
     return trimesh.Trimesh(v, faces, process=False)
 
 
+@pytest.mark.parametrize("block", [None, 700])
 @pytest.mark.parametrize("suffix", ["las", "laz"])
-def test_laspy_reads_coordinates_colours_and_extra_bytes(tmp_path, suffix):
+def test_laspy_reads_coordinates_colours_and_extra_bytes(tmp_path, monkeypatch, suffix, block):
+    # block 700: chunks of 1000 points cut into blocks of 700 and 300 (records, extremes)
+    if block:
+        monkeypatch.setattr(las_module, "BLOCK", block)
     s, report = write(tmp_path / f"t.{suffix}")
     las = laspy.read(tmp_path / f"t.{suffix}")
     q = report["las"]
     xyz = np.stack([las.x, las.y, las.z], axis=1)
     assert np.abs(xyz - s.points).max() <= q["scale"][0] / 2 * (1 + 1e-9)
+    stored = np.stack([las.X, las.Y, las.Z], axis=1)
+    np.testing.assert_array_equal(stored, np.rint((s.points - q["offset"]) / q["scale"][0]))
     assert q["max_error_of_diagonal"] <= 1e-6 and q["scale"][0] <= 1e-4
     assert las.header.point_format.id == 7 and las.header.point_count == len(s)
     np.testing.assert_array_equal(np.stack([las.red, las.green, las.blue], 1), s.color[:, :3].astype(np.uint16) * 257)
@@ -80,10 +87,13 @@ def test_terrain_coordinates_within_a_tenth_of_a_millimetre(tmp_path):
     assert np.abs(s.points.astype(np.float32) - s.points).max() > 1e-4
 
 
+@pytest.mark.parametrize("block", [None, 256])
 @pytest.mark.parametrize("suffix", ["las", "laz"])
-def test_same_bytes_for_any_chunk_size(tmp_path, suffix):
+def test_same_bytes_for_any_chunk_size(tmp_path, monkeypatch, suffix, block):
     # the writer reuses its record array: chunks that shrink and grow must not leave
-    # anything of the one before
+    # anything of the one before; block 256: chunks cut into several blocks and a tail
+    if block:
+        monkeypatch.setattr(las_module, "BLOCK", block)
     run = api.prepare(SAMPLES / "boxvertexcolors.glb", 2000, attributes="color,normal,face", seed=1,
                       precision="float64")
     for k, cuts in enumerate(([0, 2000], [0, 333, 340, 1100, 1101, 2000])):
@@ -102,6 +112,40 @@ def test_shards_merge_to_the_run(tmp_path, suffix):
     write(tmp_path / f"b.{suffix}", span=(1234, 3000))
     merge_las([tmp_path / f"a.{suffix}", tmp_path / f"b.{suffix}"], tmp_path / f"m.{suffix}")
     assert (tmp_path / f"m.{suffix}").read_bytes() == (tmp_path / f"whole.{suffix}").read_bytes()
+
+
+@pytest.mark.parametrize("m", [1, 255, 256, 257, 1000, 2048])
+def test_column_extremes(m):
+    q = np.random.default_rng(m).integers(-2**31 + 2, 2**31 - 2, 3 * m).astype(np.int32)
+    lo, hi = las_module.column_extremes(q)
+    np.testing.assert_array_equal(lo, q.reshape(-1, 3).min(axis=0))
+    np.testing.assert_array_equal(hi, q.reshape(-1, 3).max(axis=0))
+
+
+def failing_write(path):
+    """Write a LAS file whose third chunk fails to be made; returns the writer threads left running."""
+    import threading
+
+    run = api.prepare(SAMPLES / "boxvertexcolors.glb", 3000, seed=1, precision="float64")
+
+    def chunks():
+        yield run._job(0, 1000)
+        yield run._job(1000, 2000)
+        raise RuntimeError("sampling failed")
+
+    with pytest.raises(RuntimeError, match="sampling failed"):
+        write_samples(chunks(), path, "las", run.layout, run.count, bounds=sampled_bounds(run.plan))
+    return [t for t in threading.enumerate() if t.name.startswith("las-write")]
+
+
+def test_a_failed_write_stops_the_writer_thread_and_leaves_no_file(tmp_path, monkeypatch):
+    assert failing_write(tmp_path / "t.las") == []
+    assert not list(tmp_path.iterdir())
+    # the check can tell: a writer that does not stop its thread leaves it running
+    from scatter_cli.las import LasWriter
+
+    monkeypatch.setattr(LasWriter, "close", lambda self: None)
+    assert failing_write(tmp_path / "u.las")
 
 
 def test_standard_output_is_refused():
