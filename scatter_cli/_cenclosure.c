@@ -16,23 +16,13 @@
 #include <Python.h>
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
 #include <numpy/arrayobject.h>
+#include "_ckernel.h"
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #include <pthread.h>
 
-static int get(PyObject *obj, int type, npy_intp size, PyArrayObject **out, const char *name)
-{
-    if (!PyArray_Check(obj) || PyArray_TYPE((PyArrayObject *)obj) != type ||
-        !PyArray_IS_C_CONTIGUOUS((PyArrayObject *)obj) ||
-        (size >= 0 && PyArray_SIZE((PyArrayObject *)obj) != size)) {
-        PyErr_Format(PyExc_TypeError, "%s: wrong dtype, order or size", name);
-        return 0;
-    }
-    *out = (PyArrayObject *)obj;
-    return 1;
-}
 
 /* get() for an (n, 3) array */
 static int get3(PyObject *obj, int type, PyArrayObject **out, const char *name)

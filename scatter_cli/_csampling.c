@@ -9,22 +9,11 @@
 #include <Python.h>
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
 #include <numpy/arrayobject.h>
+#include "_ckernel.h"
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
 
-/* An array argument checked for dtype, C order and size. */
-static int get(PyObject *obj, int type, npy_intp size, PyArrayObject **out, const char *name)
-{
-    if (!PyArray_Check(obj) || PyArray_TYPE((PyArrayObject *)obj) != type ||
-        !PyArray_IS_C_CONTIGUOUS((PyArrayObject *)obj) ||
-        (size >= 0 && PyArray_SIZE((PyArrayObject *)obj) != size)) {
-        PyErr_Format(PyExc_TypeError, "%s: wrong dtype, order or size", name);
-        return 0;
-    }
-    *out = (PyArrayObject *)obj;
-    return 1;
-}
 
 /* The guide entry as int64 whatever the table's integer width. */
 static inline int64_t guide_at(const void *guide, int wide, int64_t k)
