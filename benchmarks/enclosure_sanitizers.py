@@ -12,18 +12,14 @@ then the certificate on the benchmark's 1.64M-face hidden20 scene. Any report ab
 Results are in docs/exterior.md ("Enclosed faces").
 """
 
-import glob
 import os
-import shutil
 import subprocess
 import sys
-import sysconfig
 import tempfile
 from pathlib import Path
 
-import numpy
-
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from sanitized import ROOT, sanitized_copy  # noqa: E402
 
 BIG = r'''
 import numpy as np, sys, trimesh
@@ -40,22 +36,10 @@ print("enclosure kernel: hidden20 certified under the sanitizers:", int(out.sum(
 
 
 def main():
-    runtimes = [glob.glob(f"/usr/lib/gcc/x86_64-linux-gnu/*/lib{n}.so")[:1] for n in ("asan", "ubsan")]
-    if not all(runtimes):
-        sys.exit("needs gcc's libasan and libubsan")
     with tempfile.TemporaryDirectory() as tmp:
-        pkg = Path(tmp) / "scatter_cli"
-        shutil.copytree(ROOT / "scatter_cli", pkg, ignore=shutil.ignore_patterns("_cenclosure*.so", "__pycache__"))
-        shutil.copytree(ROOT / "tests", Path(tmp) / "tests", ignore=shutil.ignore_patterns("__pycache__"))
-        shutil.copytree(ROOT / "benchmarks", Path(tmp) / "benchmarks", ignore=shutil.ignore_patterns("__pycache__"))
+        env = sanitized_copy(tmp, "_cenclosure", also=("tests", "benchmarks"))
+        env["SCATTER_REQUIRE_KERNELS"] = "1"
         os.symlink(ROOT / "samples", Path(tmp) / "samples")
-        out = pkg / ("_cenclosure" + sysconfig.get_config_var("EXT_SUFFIX"))
-        subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-g", "-fsanitize=address,undefined",
-                        "-fno-sanitize-recover=undefined", "-ffp-contract=off", "-I" + sysconfig.get_paths()["include"],
-                        "-I" + numpy.get_include(), str(ROOT / "scatter_cli" / "_cenclosure.c"), "-o", str(out)], check=True)
-        env = dict(os.environ, PYTHONPATH=tmp, LD_PRELOAD=":".join(r[0] for r in runtimes), ASAN_OPTIONS="detect_leaks=0",
-                   SCATTER_REQUIRE_KERNELS="1")
-        env.pop("SCATTER_NUMPY", None)
         # run from tmp: the copied tests import the copied package, which holds the sanitized kernel
         tests = ["tests/test_enclosure_native.py", "tests/test_enclosure.py"]
         # the tests must see the sanitized kernel: a conftest appended to the copy checks it

@@ -12,18 +12,13 @@ with arrivals written straight into time buckets and the corner rows (2026-12-02
 no report; the bad calls refused.
 """
 
-import glob
-import os
-import shutil
 import subprocess
 import sys
-import sysconfig
 import tempfile
 from pathlib import Path
 
-import numpy
-
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from sanitized import ROOT, sanitized_copy  # noqa: E402
 
 CHECK = r'''
 import numpy as np, os, sys, trimesh
@@ -75,18 +70,8 @@ print("stable kernel: no sanitizer report, bad calls refused")
 
 
 def main():
-    runtimes = [glob.glob(f"/usr/lib/gcc/x86_64-linux-gnu/*/lib{n}.so")[:1] for n in ("asan", "ubsan")]
-    if not all(runtimes):
-        sys.exit("needs gcc's libasan and libubsan")
     with tempfile.TemporaryDirectory() as tmp:
-        pkg = Path(tmp) / "scatter_cli"
-        shutil.copytree(ROOT / "scatter_cli", pkg, ignore=shutil.ignore_patterns("_cstable*.so", "__pycache__"))
-        out = pkg / ("_cstable" + sysconfig.get_config_var("EXT_SUFFIX"))
-        subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-g", "-fsanitize=address,undefined",
-                        "-fno-sanitize-recover=undefined", "-ffp-contract=off", "-I" + sysconfig.get_paths()["include"],
-                        "-I" + numpy.get_include(), str(ROOT / "scatter_cli" / "_cstable.c"), "-o", str(out)], check=True)
-        env = dict(os.environ, PYTHONPATH=tmp, LD_PRELOAD=":".join(r[0] for r in runtimes), ASAN_OPTIONS="detect_leaks=0")
-        env.pop("SCATTER_NUMPY", None)
+        env = sanitized_copy(tmp, "_cstable")
         # run from tmp: python -c puts the working directory first on the path
         subprocess.run([sys.executable, "-c", CHECK, tmp, str(ROOT / "samples")], env=env, check=True, cwd=tmp)
 

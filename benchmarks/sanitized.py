@@ -1,0 +1,34 @@
+"""One compiled kernel built with AddressSanitizer and UndefinedBehaviorSanitizer into a
+copy of the package, for the sanitizer scripts (stable_sanitizers.py, enclosure_sanitizers.py)."""
+
+import glob
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+from pathlib import Path
+
+import numpy
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def sanitized_copy(tmp, kernel, also=()):
+    """Copy scatter_cli (and the folders ``also``, such as "tests") into ``tmp``, build
+    scatter_cli/KERNEL.c there with the sanitizers, and return the environment that runs
+    Python on the copy with the sanitizer runtimes preloaded."""
+    runtimes = [glob.glob(f"/usr/lib/gcc/x86_64-linux-gnu/*/lib{n}.so")[:1] for n in ("asan", "ubsan")]
+    if not all(runtimes):
+        sys.exit("needs gcc's libasan and libubsan")
+    pkg = Path(tmp) / "scatter_cli"
+    shutil.copytree(ROOT / "scatter_cli", pkg, ignore=shutil.ignore_patterns(f"{kernel}*.so", "__pycache__"))
+    for name in also:
+        shutil.copytree(ROOT / name, Path(tmp) / name, ignore=shutil.ignore_patterns("__pycache__"))
+    out = pkg / (kernel + sysconfig.get_config_var("EXT_SUFFIX"))
+    subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-g", "-fsanitize=address,undefined",
+                    "-fno-sanitize-recover=undefined", "-ffp-contract=off", "-I" + sysconfig.get_paths()["include"],
+                    "-I" + numpy.get_include(), str(ROOT / "scatter_cli" / f"{kernel}.c"), "-o", str(out)], check=True)
+    env = dict(os.environ, PYTHONPATH=str(tmp), LD_PRELOAD=":".join(r[0] for r in runtimes), ASAN_OPTIONS="detect_leaks=0")
+    env.pop("SCATTER_NUMPY", None)
+    return env
