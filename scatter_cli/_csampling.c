@@ -147,6 +147,53 @@ static PyObject *areas(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+PyDoc_STRVAR(unit_normals_doc,
+"unit_normals(vertices, faces, out)\n\n"
+"The unit normal of each face (F, 3) int64 of vertices (V, 3) float64 into out (F, 3)\n"
+"float64, zero where it is not finite: visibility.face_normals, operation for operation.\n"
+"Raises ValueError for a vertex index out of range.");
+
+static PyObject *unit_normals(PyObject *self, PyObject *args)
+{
+    PyObject *overts, *ofaces, *oout;
+    PyArrayObject *verts_a, *faces_a, *out_a;
+    if (!PyArg_ParseTuple(args, "OOO", &overts, &ofaces, &oout) ||
+        !get(overts, NPY_FLOAT64, -1, &verts_a, "vertices") || !get(oout, NPY_FLOAT64, -1, &out_a, "out"))
+        return NULL;
+    npy_intp n = PyArray_SIZE(out_a) / 3;
+    if (!get(ofaces, NPY_INT64, 3 * n, &faces_a, "faces"))
+        return NULL;
+    Corners c = {PyArray_DATA(verts_a), PyArray_DATA(faces_a), NULL};
+    double *out = PyArray_DATA(out_a);
+    uint64_t nv = (uint64_t)(PyArray_SIZE(verts_a) / 3), bad = 0;
+    for (npy_intp k = 0; k < 3 * n; k++)
+        bad |= (uint64_t)c.faces[k] >= nv;
+    if (bad)
+        return PyErr_Format(PyExc_ValueError, "face indices out of range");
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp f = 0; f < n; f++) {
+        double t[9], e1[3], e2[3], x[3];
+        corners_of(&c, f, t);
+        for (int k = 0; k < 3; k++) {
+            e1[k] = t[3 + k] - t[k];
+            e2[k] = t[6 + k] - t[k];
+        }
+        for (int k = 0; k < 3; k++) {
+            int a = (k + 1) % 3, b = (k + 2) % 3;
+            x[k] = e1[a] * e2[b] - e1[b] * e2[a];
+        }
+        double s = x[0] * x[0] + x[1] * x[1];
+        s += x[2] * x[2];
+        s = sqrt(s);
+        for (int k = 0; k < 3; k++) {
+            double q = x[k] / s;
+            out[3 * f + k] = isfinite(q) ? q : 0.0;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
 PyDoc_STRVAR(guide_doc,
 "guide(cdf, out, start, stop)\n\n"
 "Fill entries start .. stop - 1 of the guide table out (m,) int32 or int64 for cdf (F,)\n"
@@ -422,6 +469,7 @@ static PyObject *draw(PyObject *self, PyObject *args)
 
 static PyMethodDef methods[] = {
     {"areas", areas, METH_VARARGS, areas_doc},
+    {"unit_normals", unit_normals, METH_VARARGS, unit_normals_doc},
     {"guide", guide, METH_VARARGS, guide_doc},
     {"select", select_faces, METH_VARARGS, select_doc},
     {"place", place, METH_VARARGS, place_doc},

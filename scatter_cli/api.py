@@ -18,7 +18,7 @@ from .methods import SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
 from .sampling import SamplePlan, chunk_ranges, run_chunks
 from .sources import Source, StratifiedSource, ThinnedSource, make_source, thinned
-from .surface import Surface, load_surface, transformed_columns
+from .surface import Surface, column_bounds, load_surface, transformed_columns
 
 METHODS = ("random", "stratified", "sobol")
 PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object", "orient"}
@@ -428,7 +428,7 @@ def _box(v, matrices):
     None for identity), as :func:`surface.apply_matrix` places them, bit for bit."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     if any(m is None for m in matrices):
-        lo, hi = _column_bounds(v)
+        lo, hi = column_bounds(v)
     moved = [m[:3] for m in matrices if m is not None]
     step = max(1, (1 << 20) // max(len(v), 1))
     for s in range(0, len(moved), step):
@@ -436,20 +436,6 @@ def _box(v, matrices):
         lo = np.minimum(lo, [c.min() for c in cols])
         hi = np.maximum(hi, [c.max() for c in cols])
     return lo, hi
-
-
-def _column_bounds(v, rows=1 << 16):
-    """(lo, hi): the (3,) minimum and maximum of each column of ``v`` (n, 3), n > 0.
-
-    Column by column over blocks of ``rows`` that stay in cache: ``v.min(axis=0)`` runs
-    its inner loop over the 3 columns, 10 times slower on a large (n, 3) array
-    (docs/loading.md: binary STL)."""
-    blocks = np.empty((2, -(-len(v) // rows), 3))
-    for k, s in enumerate(range(0, len(v), rows)):
-        b = v[s : s + rows]
-        for c in range(3):
-            blocks[0, k, c], blocks[1, k, c] = b[:, c].min(), b[:, c].max()
-    return blocks[0].min(axis=0), blocks[1].max(axis=0)
 
 
 def float32_error_bound(bounds) -> float:

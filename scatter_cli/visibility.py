@@ -15,13 +15,17 @@ import time
 
 import numpy as np
 
-from .errors import ScatterError
+from . import native
+from .sampling import in_blocks
+from .surface import column_bounds
+
+_kernel = native.kernel("_csampling")
+
 
 # Design directions after the two normal rays (docs/exterior.md: false drops against K).
 DESIGN_SIZE = 64
 # Ray origins sit this many float32 roundings (at the scene's radius) off the face.
 OFFSET_ROUNDINGS = 16
-INSTALL_HINT = "--exterior needs Embree: pip install 'scatter-cli[exterior]'"
 
 
 def fibonacci_sphere(k: int) -> np.ndarray:
@@ -47,13 +51,40 @@ def rotate(q, v) -> np.ndarray:
     return v + w * t + np.cross(xyz, t)
 
 
-def _embree():
-    try:
-        from embreex import rtcore_scene
-        from embreex.mesh_construction import TriangleMesh
-    except ImportError:
-        raise ScatterError(INSTALL_HINT) from None
-    return rtcore_scene, TriangleMesh
+def face_normals(vertices, faces) -> np.ndarray:
+    """(m, 3) float64 unit normals of ``faces`` (m, 3) int64 of ``vertices`` (n, 3) float64,
+    zero where undefined: the values ``np.cross`` and ``np.linalg.norm`` give (the kernel
+    ``_csampling.unit_normals`` gives the same, on the worker threads)."""
+    if _kernel is not None:
+        out = np.empty((len(faces), 3))
+        faces = np.ascontiguousarray(faces, dtype=np.int64)
+        in_blocks(lambda i, j: _kernel.unit_normals(vertices, faces[i:j], out[i:j]), len(faces))
+        return out
+    return _numpy_face_normals(vertices, faces)
+
+
+def _numpy_face_normals(vertices, faces):
+    columns = np.ascontiguousarray(vertices.T)
+    a, b, c = (columns[:, faces[:, k]] for k in range(3))
+    e1, e2 = b - a, c - a
+    n = np.stack([e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n /= np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+    return np.where(np.isfinite(n), n, 0.0).T
+
+
+def finite_bounds(v):
+    """(lo (3,), hi (3,), finite): the bounds of the finite rows of ``v`` (n, 3) (inf and
+    -inf when there are none) and their (n,) bool mask, or None when every row is finite."""
+    if len(v):
+        lo, hi = column_bounds(v)
+        if np.isfinite(lo).all() and np.isfinite(hi).all():
+            return lo, hi, None
+    finite = np.isfinite(v).all(axis=1)
+    ok = v[finite]
+    if not len(ok):
+        return np.full(3, np.inf), np.full(3, -np.inf), finite
+    return ok.min(axis=0), ok.max(axis=0), finite
 
 
 class Occluder:
@@ -64,41 +95,38 @@ class Occluder:
 
     def __init__(self, surface, design_size: int | None = None, normal_rays: bool = True,
                  offset_roundings: float | None = None):
-        rtcore_scene, TriangleMesh = _embree()
+        from .rayscene import RayScene
+
         self.design = fibonacci_sphere(DESIGN_SIZE if design_size is None else design_size)
         self.normal_rays = normal_rays
         world = [surface.world_vertices(inst) for inst in surface.instances]
         faces = [surface.geometries[inst.geometry].faces for inst in surface.instances]
-        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-        for v in world:
-            ok = v[np.isfinite(v).all(axis=1)]
-            if len(ok):
-                lo, hi = np.minimum(lo, ok.min(axis=0)), np.maximum(hi, ok.max(axis=0))
+        boxes = [finite_bounds(v) for v in world]
+        lo = np.min([b[0] for b in boxes], axis=0) if boxes else np.full(3, np.inf)
+        hi = np.max([b[1] for b in boxes], axis=0) if boxes else np.full(3, -np.inf)
         self.center = (lo + hi) / 2 if np.isfinite(lo).all() else np.zeros(3)
-        self.scene = rtcore_scene.EmbreeScene(robust=True)  # watertight: no ray slips between two faces
+        self.scene = RayScene()
         self.offsets = np.cumsum([0] + [len(f) for f in faces])
         self.normals = np.zeros((int(self.offsets[-1]), 3))
         radius = 0.0
-        for k, (v, f) in enumerate(zip(world, faces)):
+        for k, (v, f, (vlo, vhi, finite)) in enumerate(zip(world, faces, boxes)):
             local = v - self.center
-            finite = np.isfinite(local).all(axis=1)
+            self.normals[self.offsets[k]:self.offsets[k + 1]] = face_normals(local, f)
+            if finite is None:  # every vertex finite: the box's corners bound |local| (rounding is monotonic)
+                if len(f):
+                    radius = max(radius, float(np.abs([vlo - self.center, vhi - self.center]).max()))
+                    self.scene.add(local, f)
+                continue
             good = finite[f].all(axis=1)
-            tri = local[f]
-            n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-            with np.errstate(invalid="ignore", divide="ignore"):
-                n /= np.linalg.norm(n, axis=1, keepdims=True)
-            self.normals[self.offsets[k]:self.offsets[k + 1]] = np.where(np.isfinite(n), n, 0.0)
             if good.any():
                 radius = max(radius, float(np.abs(local[finite]).max()))
-                TriangleMesh(self.scene, np.where(finite[:, None], local, 0.0).astype(np.float32),
-                             f[good].astype(np.int32))
+                self.scene.add(np.where(finite[:, None], local, 0.0), f[good])
         self.radius = radius
         self._world = [(v, f, inst.geometry, surface.geometries[inst.geometry].vertices)
                        for v, f, inst in zip(world, faces, surface.instances)]
         self.enclosed = None
-        # Embree builds its tree at the first query: build it now (one ray)
         t = time.perf_counter()
-        self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED")
+        self.scene.commit()
         self.build_seconds = time.perf_counter() - t
         # float32 spacing at the largest coordinate, times the roundings
         roundings = OFFSET_ROUNDINGS if offset_roundings is None else offset_roundings
@@ -197,7 +225,6 @@ class Occluder:
         n = normals[todo]
         side = np.where(np.einsum("ij,ij->i", d, n) < 0, -self.offset, self.offset)
         start = origin[todo] + side[:, None] * n
-        hit = self.scene.run(start.astype(np.float32), np.ascontiguousarray(d, dtype=np.float32), query="OCCLUDED")
-        free = hit == -1
+        free = ~self.scene.occluded(start, d)
         out[todo[free]] = True
         return todo[~free]

@@ -272,24 +272,24 @@ def signed_zero_vertices(n, seed):
 def test_column_bounds_are_numpys_bit_for_bit(n, rows):
     """The blocked bounds (precision, LAS offsets) are v.min/max(axis=0)'s, signed zeros
     and infinities included, whatever the block size; NaN wins as in NumPy."""
-    from scatter_cli.api import _column_bounds
+    from scatter_cli.surface import column_bounds
 
     for seed in range(4):
         v = signed_zero_vertices(n, seed)
         if seed == 3:
             v[n // 2, 1] = np.nan
-        lo, hi = _column_bounds(v, rows)
+        lo, hi = column_bounds(v, rows)
         assert lo.tobytes() == v.min(axis=0).tobytes() and hi.tobytes() == v.max(axis=0).tobytes()
 
 
 def test_column_bounds_without_the_last_block_fail_the_same_check():
     """The paired failure: bounds that skip the last partial block (a loop over whole
     blocks only) miss the extremes in it."""
-    from scatter_cli.api import _column_bounds
+    from scatter_cli.surface import column_bounds
 
     v = np.random.default_rng(0).standard_normal((65, 3))
     v[64] = [-9.0, 9.0, -9.0]
-    lo, hi = _column_bounds(v[:64], 8)  # what such a loop sees of v with blocks of 8
+    lo, hi = column_bounds(v[:64], 8)  # what such a loop sees of v with blocks of 8
     assert lo.tobytes() != v.min(axis=0).tobytes() and hi.tobytes() != v.max(axis=0).tobytes()
 
 

@@ -1,0 +1,95 @@
+"""Triangles in one Embree scene, for occlusion rays (the optional extra ``exterior``).
+
+Two ways to the same scene and the same verdicts: the compiled ``_cembree`` calls the
+Embree library that the embreex wheel ships, sharing the caller's arrays; without it
+(or with SCATTER_NUMPY=1), embreex's own API, which copies them element by element.
+"""
+
+from __future__ import annotations
+
+import glob
+import importlib.util
+import os
+
+import numpy as np
+
+from .errors import ScatterError
+from .native import kernel
+
+INSTALL_HINT = "--exterior needs Embree: pip install 'scatter-cli[exterior]'"
+# Where the embreex wheels keep their Embree library: Linux (auditwheel), macOS (delocate), Windows.
+LIBRARY_GLOBS = ("../embreex.libs/libembree4*.so*", ".dylibs/libembree4*.dylib", "embree4*.dll",
+                 "../embreex.libs/embree4*.dll")
+
+
+def embree_library() -> str | None:
+    """The path of the Embree 4 library in the installed embreex, or None."""
+    spec = importlib.util.find_spec("embreex")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    root = list(spec.submodule_search_locations)[0]
+    for pattern in LIBRARY_GLOBS:
+        found = sorted(glob.glob(os.path.join(root, pattern)))
+        if found:
+            return found[0]
+    return None
+
+
+def _compiled():
+    """``_cembree`` with the library loaded, or None (not built, turned off, not found)."""
+    module = kernel("_cembree")
+    path = embree_library() if module is not None else None
+    if path is None:
+        return None
+    try:
+        module.load(path)
+    except OSError:
+        return None
+    return module
+
+
+class RayScene:
+    """Triangle meshes in float32 in one robust Embree scene; occlusion queries once built."""
+
+    def __init__(self):
+        self._c = _compiled()
+        self._keep = []  # the arrays the compiled scene shares
+        if self._c is not None:
+            self._scene = self._c.new_scene()
+            return
+        try:
+            from embreex import rtcore_scene
+        except ImportError:
+            raise ScatterError(INSTALL_HINT) from None
+        self._scene = rtcore_scene.EmbreeScene(robust=True)  # watertight: no ray slips between two faces
+
+    def add(self, vertices, faces):
+        """Add the triangles ``faces`` (m, 3) int of ``vertices`` (n, 3) (cast to float32)."""
+        if self._c is not None:
+            v = np.zeros((len(vertices), 4), np.float32)  # Embree reads 16 bytes a vertex
+            v[:, :3] = vertices
+            f = np.ascontiguousarray(faces, dtype=np.int32)
+            self._keep += [v, f]
+            self._c.add(self._scene, v, f)
+        else:
+            from embreex.mesh_construction import TriangleMesh
+
+            TriangleMesh(self._scene, np.asarray(vertices, np.float32), np.asarray(faces, np.int32))
+
+    def commit(self):
+        """Build the tree (Embree's threads)."""
+        if self._c is not None:
+            self._c.commit(self._scene)
+        else:  # embreex builds at its first query
+            self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED")
+
+    def occluded(self, origins, directions) -> np.ndarray:
+        """(m,) bool: the ray from each of ``origins`` (m, 3) float32 along ``directions``
+        (m, 3) float32 hits a triangle."""
+        origins = np.ascontiguousarray(origins, dtype=np.float32)
+        directions = np.ascontiguousarray(directions, dtype=np.float32)
+        if self._c is not None:
+            out = np.empty(len(origins), bool)
+            self._c.occluded(self._scene, origins, directions, out)
+            return out
+        return self._scene.run(origins, directions, query="OCCLUDED") != -1
