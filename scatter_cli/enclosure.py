@@ -103,8 +103,9 @@ def closed_parts(vertices, faces):
     part, closed = _parts(np.arange(len(vertices)) if shared else weld(vertices), faces)
     if shared and not closed.all():
         part, closed = _parts(weld(vertices), faces)
-    finite = np.isfinite(vertices).all(axis=1)[faces].all(axis=1)
-    closed[part[~finite]] = False
+    finite = np.isfinite(vertices).all(axis=1)
+    if not finite.all():
+        closed[part[~finite[faces].all(axis=1)]] = False
     return part, closed
 
 
