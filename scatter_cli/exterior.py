@@ -30,6 +30,9 @@ GIVE_UP = 1 << 20
 # the hidden candidates the first block predicts for the run number at least the faces
 # over this: finding them costs about as much, a face, as 66 rays over this (measured).
 ENCLOSE_FACES_PER_HIDDEN = 80
+# The pass keeps the exterior candidates it finds, for the output, while they number at
+# most this many (64 MB of chunks); past it the output draws them again (flat memory).
+KEEP_POINTS = 1 << 20
 
 
 class ShortStream(ScatterError):
@@ -69,6 +72,7 @@ class ExteriorSource:
         t = time.perf_counter()
         self.enclosure_seconds = 0.0
         self._bits, self._sizes, kept, rays = [], [], [0], 0
+        self._found = []  # the exterior candidates of each block, while they fit KEEP_POINTS
         limit = math.inf if candidates is None else candidates
         threads = threads or native.worker_count()
         faces_total = len(occluder.normals)
@@ -81,12 +85,16 @@ class ExteriorSource:
             while (count is None or kept[-1] < count) and block * BLOCK < limit:
                 group = [b for b in range(block, block + self._blocks_to_go(count, kept[-1], block, threads))
                          if b * BLOCK < limit]
-                for mask, chunk_rays, faces in self._classify_round(pool, group, limit, threads):
+                for mask, chunk_rays, faces, chunk in self._classify_round(pool, group, limit, threads):
                     if count is not None and kept[-1] >= count:
                         break  # blocks past the N-th exterior candidate: the thread count's, not the run's
                     self._bits.append(np.packbits(mask))
                     self._sizes.append(len(mask))
                     kept.append(kept[-1] + int(np.count_nonzero(mask)))
+                    if self._found is not None and kept[-1] > KEEP_POINTS:
+                        self._found = None
+                    elif self._found is not None:
+                        self._found.append(chunk.take(np.flatnonzero(mask)))
                     rays += chunk_rays
                     tried_faces[faces] = True
                     hit_faces[faces[mask]] = True
@@ -176,7 +184,7 @@ class ExteriorSource:
 
     def _finish_block(self, chunk, u, faces, escaped=None):
         mask, rays = classify(self.occluder, chunk, self.seed, u, escaped)
-        return mask, rays, faces
+        return mask, rays, faces, chunk
 
     def draw(self, start: int, stop: int) -> RawChunk:
         """Exterior points ``start .. stop - 1`` (the ``j``-th exterior candidate is point j)."""
@@ -184,10 +192,14 @@ class ExteriorSource:
         last = max(first, int(np.searchsorted(self._kept, stop - 1, side="right")) - 1)
         parts = []
         for b in range(first, min(last, len(self._bits) - 1) + 1):
+            rows = slice(max(start - self._kept[b], 0), stop - self._kept[b])
+            if self._found is not None:
+                found = self._found[b]
+                parts.append(found.take(np.arange(len(found.face))[rows]))
+                continue
             mask = np.unpackbits(self._bits[b], count=self._sizes[b]).view(bool)
-            index = np.flatnonzero(mask)[max(start - self._kept[b], 0) : stop - self._kept[b]]
             chunk = self.base.draw(b * BLOCK, b * BLOCK + self._sizes[b])
-            parts.append(chunk.take(index))
+            parts.append(chunk.take(np.flatnonzero(mask)[rows]))
         out = RawChunk.join(parts) if parts else self.base.draw(0, 0)
         return RawChunk(start, out.points, out.face, out.instance, out.bary)
 

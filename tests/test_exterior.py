@@ -330,3 +330,20 @@ def test_bounded_source_short_of_exterior_points_says_so():
     assert ExteriorSource(run.source.base, occluder, 0, 60.0, count=15000, candidates=20000).count == 15000
     with pytest.raises(ShortStream):  # 90 % of 20,000 candidates are exterior
         ExteriorSource(run.source.base, occluder, 0, 60.0, count=20000, candidates=20000)
+
+
+@pytest.mark.parametrize("keep", [0, 5000])
+def test_kept_candidates_give_the_points_drawn_again(box_file, keep, monkeypatch):
+    """The pass keeps the exterior candidates it found for the output while they fit
+    KEEP_POINTS; past it (or with none kept) the output draws them again: same points."""
+    from scatter_cli import exterior
+
+    def run(limit):
+        monkeypatch.setattr(exterior, "KEEP_POINTS", limit)
+        s = scatter_cli.sample(box_file, 20000, seed=4, exterior=True, attributes=["face", "object", "bary"])
+        return s.points, s.attributes
+
+    kept, again = run(1 << 30), run(keep)
+    np.testing.assert_array_equal(kept[0], again[0])
+    for key in kept[1]:
+        np.testing.assert_array_equal(kept[1][key], again[1][key])
