@@ -16,19 +16,23 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def sanitized_copy(tmp, kernel, also=()):
     """Copy scatter_cli (and the folders ``also``, such as "tests") into ``tmp``, build
-    scatter_cli/KERNEL.c there with the sanitizers, and return the environment that runs
-    Python on the copy with the sanitizer runtimes preloaded."""
+    scatter_cli/KERNEL.c there with the sanitizers (``kernel``: a name or a tuple of
+    names), and return the environment that runs Python on the copy with the sanitizer
+    runtimes preloaded."""
     runtimes = [glob.glob(f"/usr/lib/gcc/x86_64-linux-gnu/*/lib{n}.so")[:1] for n in ("asan", "ubsan")]
     if not all(runtimes):
         sys.exit("needs gcc's libasan and libubsan")
+    kernels = (kernel,) if isinstance(kernel, str) else tuple(kernel)
     pkg = Path(tmp) / "scatter_cli"
-    shutil.copytree(ROOT / "scatter_cli", pkg, ignore=shutil.ignore_patterns(f"{kernel}*.so", "__pycache__"))
+    shutil.copytree(ROOT / "scatter_cli", pkg,
+                    ignore=shutil.ignore_patterns(*(f"{k}*.so" for k in kernels), "__pycache__"))
     for name in also:
         shutil.copytree(ROOT / name, Path(tmp) / name, ignore=shutil.ignore_patterns("__pycache__"))
-    out = pkg / (kernel + sysconfig.get_config_var("EXT_SUFFIX"))
-    subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-g", "-fsanitize=address,undefined",
-                    "-fno-sanitize-recover=undefined", "-ffp-contract=off", "-I" + sysconfig.get_paths()["include"],
-                    "-I" + numpy.get_include(), str(ROOT / "scatter_cli" / f"{kernel}.c"), "-o", str(out)], check=True)
+    for k in kernels:
+        out = pkg / (k + sysconfig.get_config_var("EXT_SUFFIX"))
+        subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-g", "-fsanitize=address,undefined",
+                        "-fno-sanitize-recover=undefined", "-ffp-contract=off", "-I" + sysconfig.get_paths()["include"],
+                        "-I" + numpy.get_include(), str(ROOT / "scatter_cli" / f"{k}.c"), "-o", str(out)], check=True)
     env = dict(os.environ, PYTHONPATH=str(tmp), LD_PRELOAD=":".join(r[0] for r in runtimes), ASAN_OPTIONS="detect_leaks=0")
     env.pop("SCATTER_NUMPY", None)
     return env
