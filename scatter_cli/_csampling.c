@@ -98,37 +98,53 @@ PyDoc_STRVAR(areas_doc,
 "of the corners, operation for operation. Raises ValueError for a vertex index out of\n"
 "range (the other kernels trust the faces this one has read).");
 
+/* (t1 - t0) x (t2 - t0) of face f: surface.face_cross. */
+static inline void face_cross(const Corners *c, npy_intp f, double x[3])
+{
+    double t[9], e1[3], e2[3];
+    corners_of(c, f, t);
+    for (int k = 0; k < 3; k++) {
+        e1[k] = t[3 + k] - t[k];
+        e2[k] = t[6 + k] - t[k];
+    }
+    for (int k = 0; k < 3; k++) {
+        int a = (k + 1) % 3, b = (k + 2) % 3;
+        x[k] = e1[a] * e2[b] - e1[b] * e2[a];
+    }
+}
+
+/* Parse vertices (V, 3) float64 and n faces (n, 3) int64 into c, every index checked
+ * (ValueError when out of range). */
+static int get_faces(PyObject *overts, PyObject *ofaces, npy_intp n, Corners *c)
+{
+    PyArrayObject *verts_a, *faces_a;
+    if (!get(overts, NPY_FLOAT64, -1, &verts_a, "vertices") || !get(ofaces, NPY_INT64, 3 * n, &faces_a, "faces"))
+        return 0;
+    *c = (Corners){PyArray_DATA(verts_a), PyArray_DATA(faces_a), NULL};
+    uint64_t nv = (uint64_t)(PyArray_SIZE(verts_a) / 3), bad = 0;
+    for (npy_intp k = 0; k < 3 * n; k++)
+        bad |= (uint64_t)c->faces[k] >= nv;
+    if (bad)
+        PyErr_SetString(PyExc_ValueError, "face indices out of range");
+    return !bad;
+}
+
 static PyObject *areas(PyObject *self, PyObject *args)
 {
     PyObject *overts, *ofaces, *ocof, *oout;
-    PyArrayObject *verts_a, *faces_a, *cof_a = NULL, *out_a;
-    if (!PyArg_ParseTuple(args, "OOOO", &overts, &ofaces, &ocof, &oout) ||
-        !get(overts, NPY_FLOAT64, -1, &verts_a, "vertices") || !get(oout, NPY_FLOAT64, -1, &out_a, "out") ||
-        (ocof != Py_None && !get(ocof, NPY_FLOAT64, 9, &cof_a, "cof")))
+    PyArrayObject *cof_a = NULL, *out_a;
+    Corners c;
+    if (!PyArg_ParseTuple(args, "OOOO", &overts, &ofaces, &ocof, &oout) || !get(oout, NPY_FLOAT64, -1, &out_a, "out") ||
+        (ocof != Py_None && !get(ocof, NPY_FLOAT64, 9, &cof_a, "cof")) ||
+        !get_faces(overts, ofaces, PyArray_SIZE(out_a), &c))
         return NULL;
     npy_intp n = PyArray_SIZE(out_a);
-    if (!get(ofaces, NPY_INT64, 3 * n, &faces_a, "faces"))
-        return NULL;
-    Corners c = {PyArray_DATA(verts_a), PyArray_DATA(faces_a), NULL};
     const double *m = cof_a ? PyArray_DATA(cof_a) : NULL;
     double *out = PyArray_DATA(out_a);
-    uint64_t nv = (uint64_t)(PyArray_SIZE(verts_a) / 3), bad = 0;
-    for (npy_intp k = 0; k < 3 * n; k++)
-        bad |= (uint64_t)c.faces[k] >= nv;
-    if (bad)
-        return PyErr_Format(PyExc_ValueError, "face indices out of range");
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp f = 0; f < n; f++) {
-        double t[9], e1[3], e2[3], x[3];
-        corners_of(&c, f, t);
-        for (int k = 0; k < 3; k++) {
-            e1[k] = t[3 + k] - t[k];
-            e2[k] = t[6 + k] - t[k];
-        }
-        for (int k = 0; k < 3; k++) { /* surface.face_cross */
-            int a = (k + 1) % 3, b = (k + 2) % 3;
-            x[k] = e1[a] * e2[b] - e1[b] * e2[a];
-        }
+        double x[3];
+        face_cross(&c, f, x);
         if (m) { /* surface.apply_matrix */
             double y[3];
             for (int k = 0; k < 3; k++) {
@@ -156,32 +172,17 @@ PyDoc_STRVAR(unit_normals_doc,
 static PyObject *unit_normals(PyObject *self, PyObject *args)
 {
     PyObject *overts, *ofaces, *oout;
-    PyArrayObject *verts_a, *faces_a, *out_a;
-    if (!PyArg_ParseTuple(args, "OOO", &overts, &ofaces, &oout) ||
-        !get(overts, NPY_FLOAT64, -1, &verts_a, "vertices") || !get(oout, NPY_FLOAT64, -1, &out_a, "out"))
+    PyArrayObject *out_a;
+    Corners c;
+    if (!PyArg_ParseTuple(args, "OOO", &overts, &ofaces, &oout) || !get(oout, NPY_FLOAT64, -1, &out_a, "out") ||
+        !get_faces(overts, ofaces, PyArray_SIZE(out_a) / 3, &c))
         return NULL;
     npy_intp n = PyArray_SIZE(out_a) / 3;
-    if (!get(ofaces, NPY_INT64, 3 * n, &faces_a, "faces"))
-        return NULL;
-    Corners c = {PyArray_DATA(verts_a), PyArray_DATA(faces_a), NULL};
     double *out = PyArray_DATA(out_a);
-    uint64_t nv = (uint64_t)(PyArray_SIZE(verts_a) / 3), bad = 0;
-    for (npy_intp k = 0; k < 3 * n; k++)
-        bad |= (uint64_t)c.faces[k] >= nv;
-    if (bad)
-        return PyErr_Format(PyExc_ValueError, "face indices out of range");
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp f = 0; f < n; f++) {
-        double t[9], e1[3], e2[3], x[3];
-        corners_of(&c, f, t);
-        for (int k = 0; k < 3; k++) {
-            e1[k] = t[3 + k] - t[k];
-            e2[k] = t[6 + k] - t[k];
-        }
-        for (int k = 0; k < 3; k++) {
-            int a = (k + 1) % 3, b = (k + 2) % 3;
-            x[k] = e1[a] * e2[b] - e1[b] * e2[a];
-        }
+        double x[3];
+        face_cross(&c, f, x);
         double s = x[0] * x[0] + x[1] * x[1];
         s += x[2] * x[2];
         s = sqrt(s);
