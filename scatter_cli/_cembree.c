@@ -2,7 +2,7 @@
  * embreex wheel ships), called directly.
  *
  * embreex builds a triangle geometry by copying the vertex and index arrays into Embree
- * one element at a time through Python indexing (0.6 s for a 1.3M-face mesh); here the
+ * one element at a time through Python indexing (docs/exterior.md, "Speed"); here the
  * geometry shares the caller's arrays (no copy at all), and occlusion queries run with
  * the GIL released, so that the caller's threads cast at once. The scene is built as
  * embreex builds it (robust flag, default build quality, one triangle geometry per

@@ -57,6 +57,7 @@ def face_normals(vertices, faces) -> np.ndarray:
     ``_csampling.unit_normals`` gives the same, on the worker threads)."""
     if _kernel is not None:
         out = np.empty((len(faces), 3))
+        vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         faces = np.ascontiguousarray(faces, dtype=np.int64)
         in_blocks(lambda i, j: _kernel.unit_normals(vertices, faces[i:j], out[i:j]), len(faces))
         return out
@@ -64,6 +65,7 @@ def face_normals(vertices, faces) -> np.ndarray:
 
 
 def _numpy_face_normals(vertices, faces):
+    """face_normals in NumPy, on contiguous coordinate rows (np.cross on (m, 3) rows is slower)."""
     columns = np.ascontiguousarray(vertices.T)
     a, b, c = (columns[:, faces[:, k]] for k in range(3))
     e1, e2 = b - a, c - a
