@@ -34,7 +34,8 @@ struct __attribute__((aligned(16))) RTCRay {
 };
 
 enum { RTC_GEOMETRY_TYPE_TRIANGLE = 0, RTC_BUFFER_TYPE_INDEX = 0, RTC_BUFFER_TYPE_VERTEX = 1,
-       RTC_FORMAT_UINT3 = 0x5003, RTC_FORMAT_FLOAT3 = 0x9003, RTC_SCENE_FLAG_ROBUST = 1 << 2 };
+       RTC_FORMAT_UINT3 = 0x5003, RTC_FORMAT_FLOAT3 = 0x9003, RTC_SCENE_FLAG_ROBUST = 1 << 2,
+       RTC_ERROR_OUT_OF_MEMORY = 4 };
 
 static struct {
     RTCDevice (*newDevice)(const char *);
@@ -95,7 +96,7 @@ static int check_device(void)
 {
     int code = rtc.getDeviceError(device);
     if (code) {
-        PyErr_Format(code == 4 ? PyExc_MemoryError : PyExc_RuntimeError, "Embree error %d", code);
+        PyErr_Format(code == RTC_ERROR_OUT_OF_MEMORY ? PyExc_MemoryError : PyExc_RuntimeError, "Embree error %d", code);
         return 0;
     }
     return 1;

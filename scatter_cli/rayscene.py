@@ -17,9 +17,9 @@ from .errors import ScatterError
 from .native import kernel
 
 INSTALL_HINT = "--exterior needs Embree: pip install 'scatter-cli[exterior]'"
-# Where the embreex wheels keep their Embree library: Linux (auditwheel), macOS (delocate), Windows.
-LIBRARY_GLOBS = ("../embreex.libs/libembree4*.so*", ".dylibs/libembree4*.dylib", "embree4*.dll",
-                 "../embreex.libs/embree4*.dll")
+# Where the embreex wheels keep their Embree library: Linux (auditwheel), macOS (delocate).
+# (_cembree opens it with dlopen: elsewhere the embreex path runs.)
+LIBRARY_GLOBS = ("../embreex.libs/libembree4*.so*", ".dylibs/libembree4*.dylib")
 
 
 def embree_library() -> str | None:
