@@ -24,6 +24,7 @@
 #include <pthread.h>
 
 
+
 /* get() for an (n, 3) array */
 static int get3(PyObject *obj, int type, PyArrayObject **out, const char *name)
 {
@@ -42,6 +43,25 @@ static inline int64_t to_i64(double x)
     if (!(x >= -9223372036854775808.0 && x < 9223372036854775808.0))
         return INT64_MIN;
     return (int64_t)x;
+}
+
+/* to_i64(floor(x)) and to_i64(ceil(x)), by truncation (the same values for every x:
+ * x is in range exactly when its floor and its ceiling are; without SSE4.1, floor and
+ * ceil cost several times more) */
+static inline int64_t floor_i64(double x)
+{
+    if (!(x >= -9223372036854775808.0 && x < 9223372036854775808.0))
+        return INT64_MIN;
+    int64_t t = (int64_t)x;
+    return t - ((double)t > x);
+}
+
+static inline int64_t ceil_i64(double x)
+{
+    if (!(x >= -9223372036854775808.0 && x < 9223372036854775808.0))
+        return INT64_MIN;
+    int64_t t = (int64_t)x;
+    return t + ((double)t < x);
 }
 
 static inline int64_t clip(int64_t v, int64_t lo, int64_t hi) { return v < lo ? lo : v > hi ? hi : v; }
@@ -192,8 +212,8 @@ typedef struct {
 static void ranges(const Grid *g, const double *lo, const double *hi, double grow, int64_t *first, int64_t *last)
 {
     for (int k = 0; k < 3; k++) {
-        first[k] = clip(to_i64(floor((lo[k] - grow - g->origin[k]) / g->step)), 0, g->shape[k] - 1);
-        last[k] = clip(to_i64(floor((hi[k] + grow - g->origin[k]) / g->step)), 0, g->shape[k] - 1);
+        first[k] = clip(floor_i64((lo[k] - grow - g->origin[k]) / g->step), 0, g->shape[k] - 1);
+        last[k] = clip(floor_i64((hi[k] + grow - g->origin[k]) / g->step), 0, g->shape[k] - 1);
     }
 }
 
@@ -206,6 +226,46 @@ typedef struct {
     Crossing *at;
     size_t n, room;
 } Crossings;
+
+/* One bit a shell for each cell: where the shell's faces may touch. Cells are 1, 2, 4
+ * or 8 bytes wide, as few as the shells need (fresh memory is dear here). */
+typedef struct {
+    void *at;
+    int width;
+} Cover;
+
+static inline uint64_t cover_get(Cover c, int64_t i)
+{
+    switch (c.width) {
+    case 1:
+        return ((const uint8_t *)c.at)[i];
+    case 2:
+        return ((const uint16_t *)c.at)[i];
+    case 4:
+        return ((const uint32_t *)c.at)[i];
+    default:
+        return ((const uint64_t *)c.at)[i];
+    }
+}
+
+/* OR ``bit`` into cells i .. i + n - 1 where touch (n,) is set */
+static void cover_or(Cover c, int64_t i, const uint8_t *touch, int64_t n, uint64_t bit)
+{
+#define COVER_OR(type)                                                                                                 \
+    for (int64_t z = 0; z < n; z++)                                                                                    \
+        ((type *)c.at)[i + z] |= (type)(bit & (0 - (uint64_t)(touch[z] != 0)));
+    switch (c.width) {
+    case 1:
+        COVER_OR(uint8_t) break;
+    case 2:
+        COVER_OR(uint16_t) break;
+    case 4:
+        COVER_OR(uint32_t) break;
+    default:
+        COVER_OR(uint64_t) break;
+    }
+#undef COVER_OR
+}
 
 static int push(Crossings *c, double key, uint64_t bit)
 {
@@ -254,21 +314,37 @@ static inline void corners(const Scene *sc, int64_t s, double c[3][3], double lo
     }
 }
 
+/* corners c[3][3] in grid units, (c - origin) / step: q[3][3], and their box qlo..qhi.
+ * Rounding is monotonic, so this box is the face's box in grid units, the values
+ * enclosure.py computes from the face's box. */
+static inline void scaled(const Grid *g, double c[3][3], double q[3][3], double qlo[3], double qhi[3])
+{
+    for (int k = 0; k < 3; k++)
+        for (int a = 0; a < 3; a++)
+            q[k][a] = (c[k][a] - g->origin[a]) / g->step;
+    for (int a = 0; a < 3; a++) {
+        double l = q[0][a], h = q[0][a];
+        l = q[1][a] < l ? q[1][a] : l, h = q[1][a] > h ? q[1][a] : h;
+        l = q[2][a] < l ? q[2][a] : l, h = q[2][a] > h ? q[2][a] : h;
+        qlo[a] = l, qhi[a] = h;
+    }
+}
+
 static inline double orient(const double *p, const double *q, double y, double z)
 {
     return (q[1] - p[1]) * (z - p[2]) - (q[2] - p[2]) * (y - p[1]);
 }
 
-/* enclosure.crossings for one face (corners c, box lo..hi): push its crossings' keys
+/* enclosure.crossings for one face (corners c, box qlo..qhi in grid units: scaled()): push its crossings' keys
  * (line + x / step / width) with ``bit``, flag unsure lines; 0 when out of memory */
-static int cross_face(const Scene *sc, double c[3][3], const double *lo, const double *hi, uint64_t bit,
+static int cross_face(const Scene *sc, double c[3][3], const double qlo[3], const double qhi[3], uint64_t bit,
                       Crossings *out, uint8_t *unsure)
 {
     const Grid *g = sc->g;
     const double s = g->step, *o = g->origin, *P = sc->probe, width = (double)g->shape[0] + 2.0;
     const int64_t nz = g->shape[2];
-    int64_t j0 = to_i64(ceil((lo[1] - o[1]) / s - P[1])), j1 = to_i64(floor((hi[1] - o[1]) / s - P[1]));
-    int64_t k0 = to_i64(ceil((lo[2] - o[2]) / s - P[2])), k1 = to_i64(floor((hi[2] - o[2]) / s - P[2]));
+    int64_t j0 = ceil_i64(qlo[1] - P[1]), j1 = floor_i64(qhi[1] - P[1]);
+    int64_t k0 = ceil_i64(qlo[2] - P[2]), k1 = floor_i64(qhi[2] - P[2]);
     /* (the shell lies inside the grid: these clamps change nothing but keep every line in it) */
     j0 = j0 < 0 ? 0 : j0, k0 = k0 < 0 ? 0 : k0;
     j1 = j1 >= g->shape[1] ? g->shape[1] - 1 : j1, k1 = k1 >= nz ? nz - 1 : k1;
@@ -308,6 +384,46 @@ static int cross_face(const Scene *sc, double c[3][3], const double *lo, const d
 /* below this many faces a shell is done on one thread */
 #define THREAD_FACES 65536
 
+typedef struct {
+    void (*fn)(void *ctx, int k, int count);
+    void *ctx;
+    int k, count;
+} Job;
+
+static void *run_job(void *arg)
+{
+    Job *j = arg;
+    j->fn(j->ctx, j->k, j->count);
+    return NULL;
+}
+
+/* fn(ctx, k, count) for k = 0 .. count - 1, on count threads (at most MAX_THREADS; k = 0
+ * on the caller; a share whose thread does not start runs on the caller) */
+static void in_parallel(int count, void (*fn)(void *, int, int), void *ctx)
+{
+    count = count < 1 ? 1 : count > MAX_THREADS ? MAX_THREADS : count;
+    Job job[MAX_THREADS];
+    pthread_t id[MAX_THREADS];
+    int started[MAX_THREADS] = {0};
+    for (int k = 0; k < count; k++)
+        job[k] = (Job){fn, ctx, k, count};
+    for (int k = 1; k < count; k++)
+        started[k] = pthread_create(&id[k], NULL, run_job, &job[k]) == 0;
+    fn(ctx, 0, count);
+    for (int k = 1; k < count; k++)
+        if (started[k])
+            pthread_join(id[k], NULL);
+        else
+            fn(ctx, k, count);
+}
+
+/* share k of count of 0 .. n - 1: [*i0, *i1) */
+static inline void share(int64_t n, int k, int count, int64_t *i0, int64_t *i1)
+{
+    *i0 = n * k / count, *i1 = n * (k + 1) / count;
+}
+
+
 /* One thread's share of a shell's faces s0..s1-1, in its box of cells base + (n): the
  * cells of the corners of faces no wider than a cell less grow (``point``), the boxes of
  * the others (``diff``, a difference array, made at the first), the crossings and the
@@ -328,8 +444,9 @@ static void *mark_share(void *arg)
     const Grid *g = w->sc->g;
     const int64_t *n = w->n, *base = w->base, e1 = n[1] + 1, e2 = n[2] + 1;
     for (int64_t t = w->s0; t < w->s1 && w->ok; t++) {
-        double c[3][3], lo[3], hi[3];
+        double c[3][3], lo[3], hi[3], qc[3][3], qlo[3], qhi[3];
         corners(w->sc, t, c, lo, hi);
+        scaled(g, c, qc, qlo, qhi);
         double span = hi[0] - lo[0];
         span = hi[1] - lo[1] > span ? hi[1] - lo[1] : span;
         span = hi[2] - lo[2] > span ? hi[2] - lo[2] : span;
@@ -337,7 +454,7 @@ static void *mark_share(void *arg)
             for (int v = 0; v < 3; v++) {
                 int64_t at[3];
                 for (int k = 0; k < 3; k++)
-                    at[k] = clip(to_i64(floor((c[v][k] - g->origin[k]) / g->step)) - base[k], 0, n[k] - 1);
+                    at[k] = clip(floor_i64(qc[v][k]) - base[k], 0, n[k] - 1);
                 w->point[(at[0] * n[1] + at[1]) * n[2] + at[2]] = 1;
             }
         } else {
@@ -357,7 +474,7 @@ static void *mark_share(void *arg)
                 w->diff[(x * e1 + y) * e2 + z] += picked % 2 ? -1 : 1;
             }
         }
-        w->ok = cross_face(w->sc, c, lo, hi, w->bit, w->cross, w->unsure);
+        w->ok = cross_face(w->sc, c, qlo, qhi, w->bit, w->cross, w->unsure);
     }
     return NULL;
 }
@@ -383,24 +500,40 @@ static void summed(int32_t *d, int64_t e0, int64_t e1, int64_t e2)
  * neighbours; ``spare`` of the same size. Returns the grown mask (mask or spare). */
 static uint8_t *grow_cells(uint8_t *mask, uint8_t *spare, const int64_t *n)
 {
-    const int64_t stride[3] = {n[1] * n[2], n[2], 1};
-    for (int k = 0; k < 3; k++) {
-        memcpy(spare, mask, (size_t)(n[0] * n[1] * n[2]));
-        for (int64_t x = 0; x < n[0]; x++)
-            for (int64_t y = 0; y < n[1]; y++)
-                for (int64_t z = 0; z < n[2]; z++) {
-                    int64_t c = (x * n[1] + y) * n[2] + z, at = k == 0 ? x : k == 1 ? y : z;
-                    if (mask[c]) {
-                        if (at > 0)
-                            spare[c - stride[k]] = 1;
-                        if (at + 1 < n[k])
-                            spare[c + stride[k]] = 1;
-                    }
-                }
-        uint8_t *swap = mask;
-        mask = spare, spare = swap;
+    const int64_t row = n[2], slab = n[1] * n[2], rows = n[0] * n[1];
+    for (int64_t r = 0; r < rows; r++) { /* along z */
+        const uint8_t *m = mask + r * row;
+        uint8_t *o = spare + r * row;
+        memcpy(o, m, (size_t)row);
+        for (int64_t z = 1; z < row; z++)
+            o[z] |= m[z - 1];
+        for (int64_t z = 0; z + 1 < row; z++)
+            o[z] |= m[z + 1];
     }
-    return mask;
+    for (int64_t x = 0; x < n[0]; x++) /* along y */
+        for (int64_t y = 0; y < n[1]; y++) {
+            const uint8_t *m = spare + x * slab + y * row;
+            uint8_t *o = mask + x * slab + y * row;
+            memcpy(o, m, (size_t)row);
+            if (y > 0)
+                for (int64_t z = 0; z < row; z++)
+                    o[z] |= m[z - row];
+            if (y + 1 < n[1])
+                for (int64_t z = 0; z < row; z++)
+                    o[z] |= m[z + row];
+        }
+    for (int64_t x = 0; x < n[0]; x++) { /* along x */
+        const uint8_t *m = mask + x * slab;
+        uint8_t *o = spare + x * slab;
+        memcpy(o, m, (size_t)slab);
+        if (x > 0)
+            for (int64_t c = 0; c < slab; c++)
+                o[c] |= m[c - slab];
+        if (x + 1 < n[0])
+            for (int64_t c = 0; c < slab; c++)
+                o[c] |= m[c + slab];
+    }
+    return spare;
 }
 
 /* One shell, faces s0..s1-1 of box slo..shi, on up to ``threads`` threads: OR ``bit``
@@ -408,7 +541,7 @@ static uint8_t *grow_cells(uint8_t *mask, uint8_t *spare, const int64_t *n)
  * (the order the threads find them in changes nothing: crossings are sorted by key,
  * and equal keys all fall on one side of a probe). 0 when out of memory. */
 static int shell_pass(const Scene *sc, int64_t s0, int64_t s1, const double *slo, const double *shi, uint64_t bit,
-                      int threads, uint64_t *cover, Crossings *cross, uint8_t *unsure)
+                      int threads, Cover cover, Crossings *cross, uint8_t *unsure)
 {
     const Grid *g = sc->g;
     const int64_t ny = g->shape[1], nz = g->shape[2], lines = ny * nz;
@@ -460,11 +593,17 @@ static int shell_pass(const Scene *sc, int64_t s0, int64_t s1, const double *slo
         if (w[0].diff)
             summed(w[0].diff, e0, e1, e2);
         uint8_t *point = grow_cells(w[0].point, spare, n);
+        const int32_t *diff = w[0].diff;
         for (int64_t x = 0; x < n[0]; x++)
-            for (int64_t y = 0; y < n[1]; y++)
-                for (int64_t z = 0; z < n[2]; z++)
-                    if (point[(x * n[1] + y) * n[2] + z] || (w[0].diff && w[0].diff[(x * e1 + y) * e2 + z] > 0))
-                        cover[((x + base[0]) * ny + y + base[1]) * nz + z + base[2]] |= bit;
+            for (int64_t y = 0; y < n[1]; y++) {
+                uint8_t *p = point + (x * n[1] + y) * n[2];
+                if (diff) {
+                    const int32_t *d = diff + (x * e1 + y) * e2;
+                    for (int64_t z = 0; z < n[2]; z++)
+                        p[z] |= d[z] > 0;
+                }
+                cover_or(cover, ((x + base[0]) * ny + y + base[1]) * nz + base[2], p, n[2], bit);
+            }
     }
     free(spare);
     for (int k = 0; k < count; k++) {
@@ -512,34 +651,108 @@ static int64_t *part_order(const int64_t *part, npy_intp nf, int64_t np_, int *f
     return sorted;
 }
 
+/* One thread's share of the faces (in part order) for find_shells: the box and
+ * finiteness of each run it holds whole, written in place, and of the (at most two) runs
+ * it shares with its neighbours, kept apart to be merged. */
+typedef struct {
+    int64_t run;
+    double lo[3], hi[3];
+    uint8_t fin;
+} RunBox;
+
+typedef struct {
+    const Scene *sc;
+    const uint8_t *fin;
+    const int64_t *starts;
+    int64_t runs, nf;
+    double *slo, *shi;
+    uint8_t *runfin;
+    RunBox edge[MAX_THREADS][2];
+    int edges[MAX_THREADS];
+} Boxes;
+
+static void box_share(void *arg, int k, int count)
+{
+    Boxes *w = arg;
+    int64_t i0, i1;
+    share(w->nf, k, count, &i0, &i1);
+    w->edges[k] = 0;
+    if (i0 >= i1)
+        return;
+    int64_t lo_r = 0, hi_r = w->runs; /* the run holding face i0: starts[r] <= i0 < starts[r + 1] */
+    while (hi_r - lo_r > 1) {
+        int64_t mid = (lo_r + hi_r) / 2;
+        if (w->starts[mid] <= i0)
+            lo_r = mid;
+        else
+            hi_r = mid;
+    }
+    for (int64_t r = lo_r; r < w->runs && w->starts[r] < i1; r++) {
+        int64_t s0 = w->starts[r] > i0 ? w->starts[r] : i0, s1 = w->starts[r + 1] < i1 ? w->starts[r + 1] : i1;
+        double a[3], b[3], c[3][3], lo[3], hi[3];
+        uint8_t fin = 1;
+        for (int64_t s = s0; s < s1; s++) {
+            corners(w->sc, s, c, lo, hi);
+            fin &= w->fin[s];
+            for (int d = 0; d < 3; d++) {
+                a[d] = s == s0 || lo[d] < a[d] ? lo[d] : a[d];
+                b[d] = s == s0 || hi[d] > b[d] ? hi[d] : b[d];
+            }
+        }
+        if (s0 == w->starts[r] && s1 == w->starts[r + 1]) {
+            memcpy(w->slo + 3 * r, a, sizeof a), memcpy(w->shi + 3 * r, b, sizeof b);
+            w->runfin[r] = fin;
+        } else {
+            RunBox *e = &w->edge[k][w->edges[k]++];
+            e->run = r, e->fin = fin;
+            memcpy(e->lo, a, sizeof a), memcpy(e->hi, b, sizeof b);
+        }
+    }
+}
+
 /* the shells: runs of faces in part order (starts (runs + 1,)) of a closed part whose faces
  * are all usable, with their boxes slo, shi (3 runs,), largest volume first,
  * with the boxes of every shell kept for the grid: returns how many */
 static int64_t find_shells(const Scene *sc, const int64_t *part, const uint8_t *closed, const uint8_t *fin,
-                           const int64_t *starts, int64_t runs, double *slo, double *shi, uint8_t *isshell,
-                           Shell *shells)
+                           const int64_t *starts, int64_t runs, int64_t nf, int threads, double *slo, double *shi,
+                           uint8_t *isshell, Shell *shells)
 {
-    int64_t count = 0;
-    for (int64_t r = 0; r < runs; r++) {
-        int good = closed[part[face_at(sc, starts[r])]];
-        for (int64_t s = starts[r]; good && s < starts[r + 1]; s++)
-            good &= fin[s];
-        isshell[r] = (uint8_t)good;
-        if (!good)
-            continue;
-        double *a = slo + 3 * r, *b = shi + 3 * r, c[3][3], lo[3], hi[3];
-        for (int64_t s = starts[r]; s < starts[r + 1]; s++) {
-            corners(sc, s, c, lo, hi);
-            for (int k = 0; k < 3; k++) {
-                a[k] = s == starts[r] || lo[k] < a[k] ? lo[k] : a[k];
-                b[k] = s == starts[r] || hi[k] > b[k] ? hi[k] : b[k];
+    Boxes *w = malloc(sizeof *w);
+    if (!w)
+        return -1;
+    *w = (Boxes){.sc = sc, .fin = fin, .starts = starts, .runs = runs, .nf = nf, .slo = slo, .shi = shi,
+                 .runfin = isshell};
+    int count = nf < THREAD_FACES ? 1 : threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
+    in_parallel(count, box_share, w);
+    int64_t last = -1; /* runs split between threads: their shares' boxes merged */
+    for (int k = 0; k < count; k++)
+        for (int e = 0; e < w->edges[k]; e++) {
+            const RunBox *p = &w->edge[k][e];
+            double *a = slo + 3 * p->run, *b = shi + 3 * p->run;
+            if (p->run != last) {
+                memcpy(a, p->lo, sizeof p->lo), memcpy(b, p->hi, sizeof p->hi);
+                isshell[p->run] = p->fin;
+                last = p->run;
+                continue;
             }
+            for (int d = 0; d < 3; d++) {
+                a[d] = p->lo[d] < a[d] ? p->lo[d] : a[d];
+                b[d] = p->hi[d] > b[d] ? p->hi[d] : b[d];
+            }
+            isshell[p->run] &= p->fin;
         }
-        shells[count].run = r;
-        shells[count++].volume = (b[0] - a[0]) * (b[1] - a[1]) * (b[2] - a[2]);
+    free(w);
+    int64_t n = 0;
+    for (int64_t r = 0; r < runs; r++) {
+        isshell[r] = (uint8_t)(isshell[r] && closed[part[face_at(sc, starts[r])]]);
+        if (!isshell[r])
+            continue;
+        const double *a = slo + 3 * r, *b = shi + 3 * r;
+        shells[n].run = r;
+        shells[n++].volume = (b[0] - a[0]) * (b[1] - a[1]) * (b[2] - a[2]);
     }
-    qsort(shells, (size_t)count, sizeof *shells, cmp_shell);
-    return count;
+    qsort(shells, (size_t)n, sizeof *shells, cmp_shell);
+    return n;
 }
 
 /* the grid over every shell's box (enclosure.Grid) */
@@ -567,35 +780,189 @@ static void make_grid(Grid *g, const double *slo, const double *shi, const uint8
 /* table (nx + 1, ny + 1, nz + 1): the summed-area table of the hidden cells, those of
  * odd parity for a shell not marked in ``cover`` on a line not ``unsure``. A cell's
  * parity is the XOR of the bits of the crossings (sorted by key) whose key lies in
- * [its line, its probe point) (enclosure.line_parity) */
-static void hidden_table(const Grid *g, const Crossings *cross, const uint64_t *prefix, const uint64_t *cover,
-                         const uint8_t *unsure, double probe, int32_t *table)
+ * [its line, its probe point) (enclosure.line_parity). Each thread takes a range of
+ * lines (the cells first), then of x slabs (their sums along z and y), then of lines
+ * again (the sums along x): integers, so the order of the sums changes nothing. */
+typedef struct {
+    const Grid *g;
+    const Crossings *cross;
+    const uint64_t *prefix;
+    Cover cover;
+    const uint8_t *unsure;
+    double probe;
+    int32_t *table;
+    size_t *at, *before;
+} Table;
+
+static void hidden_cells(void *arg, int k, int count)
 {
-    const int64_t nx = g->shape[0], ny = g->shape[1], nz = g->shape[2], lines = ny * nz;
-    const int64_t sy = (ny + 1) * (nz + 1), sz = nz + 1;
+    const Table *w = arg;
+    const Grid *g = w->g;
+    const Crossings *cross = w->cross;
+    const int64_t nx = g->shape[0], nz = g->shape[2], lines = g->shape[1] * nz;
+    const int64_t sy = (g->shape[1] + 1) * (nz + 1), sz = nz + 1;
     const double width = (double)nx + 2.0;
-    size_t at = 0;
-    for (int64_t l = 0; l < lines; l++) {
-        while (at < cross->n && cross->at[at].key < (double)l)
-            at++;
-        size_t before = at;
-        int64_t y = l / nz, z = l % nz;
-        for (int64_t x = 0; x < nx; x++) {
-            double cell = (double)l + ((double)x + probe) / width;
+    int64_t l0, l1;
+    share(lines, k, count, &l0, &l1);
+    if (l0 >= l1)
+        return;
+    size_t lo = 0, hi = cross->n; /* the first crossing of line l0: key >= l0 */
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (cross->at[mid].key < (double)l0)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    for (int64_t l = l0; l < l1; l++) {
+        while (lo < cross->n && cross->at[lo].key < (double)l)
+            lo++;
+        w->at[l] = w->before[l] = lo;
+    }
+    for (int64_t x = 0; x < nx; x++) {
+        int32_t *slab = w->table + (x + 1) * sy;
+        for (int64_t l = l0; l < l1; l++) {
+            double cell = (double)l + ((double)x + w->probe) / width;
+            size_t before = w->before[l];
             while (before < cross->n && cross->at[before].key < cell)
                 before++;
-            int64_t c = x * lines + l;
-            int hidden = ((prefix[before] ^ prefix[at]) & ~cover[c]) != 0 && !unsure[l];
-            int32_t *t = table + (x + 1) * sy + (y + 1) * sz + z + 1;
-            t[0] = hidden; /* summed below */
+            w->before[l] = before;
+            slab[(l / nz + 1) * sz + l % nz + 1] =
+                ((w->prefix[before] ^ w->prefix[w->at[l]]) & ~cover_get(w->cover, x * lines + l)) != 0 &&
+                !w->unsure[l];
         }
     }
-    for (int64_t x = 1; x <= nx; x++)
+}
+
+static void sum_slabs(void *arg, int k, int count)
+{
+    const Table *w = arg;
+    const int64_t ny = w->g->shape[1], nz = w->g->shape[2], sy = (ny + 1) * (nz + 1), sz = nz + 1;
+    int64_t x0, x1;
+    share(w->g->shape[0], k, count, &x0, &x1);
+    for (int64_t x = x0 + 1; x < x1 + 1; x++) {
+        int32_t *slab = w->table + x * sy;
         for (int64_t y = 1; y <= ny; y++)
-            for (int64_t z = 1; z <= nz; z++) {
-                int32_t *t = table + x * sy + y * sz + z;
-                t[0] += t[-sy] + t[-sz] + t[-1] - t[-sy - sz] - t[-sy - 1] - t[-sz - 1] + t[-sy - sz - 1];
+            for (int64_t z = 2; z <= nz; z++)
+                slab[y * sz + z] += slab[y * sz + z - 1];
+        for (int64_t y = 2; y <= ny; y++)
+            for (int64_t z = 1; z <= nz; z++)
+                slab[y * sz + z] += slab[(y - 1) * sz + z];
+    }
+}
+
+static void sum_across(void *arg, int k, int count)
+{
+    const Table *w = arg;
+    const int64_t nx = w->g->shape[0], sy = (w->g->shape[1] + 1) * (w->g->shape[2] + 1);
+    int64_t c0, c1;
+    share(sy, k, count, &c0, &c1);
+    for (int64_t x = 2; x <= nx; x++)
+        for (int64_t c = c0; c < c1; c++)
+            w->table[x * sy + c] += w->table[(x - 1) * sy + c];
+}
+
+static int hidden_table(const Grid *g, const Crossings *cross, const uint64_t *prefix, Cover cover,
+                        const uint8_t *unsure, double probe, int threads, int32_t *table)
+{
+    const int64_t lines = g->shape[1] * g->shape[2];
+    Table w = {g, cross, prefix, cover, unsure, probe, table, malloc(sizeof(size_t) * (size_t)lines),
+               malloc(sizeof(size_t) * (size_t)lines)};
+    if (!w.at || !w.before) {
+        free(w.at), free(w.before);
+        return 0;
+    }
+    int count = g->shape[0] * lines < 4 * THREAD_FACES ? 1 : threads;
+    in_parallel(count, hidden_cells, &w);
+    in_parallel(count, sum_slabs, &w);
+    in_parallel(count, sum_across, &w);
+    free(w.at), free(w.before);
+    return 1;
+}
+
+/* What certify's per-face steps share, each split between the threads */
+typedef struct {
+    const Scene *sc;
+    int64_t nv, nf;
+    double limit;
+    uint8_t *usable, *fin, *maybe, *out;
+    const int64_t *starts;
+    const double *slo, *shi;
+    const Shell *shells;
+    int used;
+    const int32_t *table;
+    int64_t candidates[MAX_THREADS];
+} Faces;
+
+static void usable_share(void *arg, int k, int count)
+{
+    Faces *w = arg;
+    int64_t i0, i1;
+    share(w->nv, k, count, &i0, &i1);
+    for (int64_t i = i0; i < i1; i++) {
+        const double *p = w->sc->v + 3 * i;
+        w->usable[i] = fabs(p[0]) <= w->limit && fabs(p[1]) <= w->limit && fabs(p[2]) <= w->limit;
+    }
+}
+
+static void fin_share(void *arg, int k, int count)
+{
+    Faces *w = arg;
+    int64_t s0, s1;
+    share(w->nf, k, count, &s0, &s1);
+    for (int64_t s = s0; s < s1; s++) {
+        const int64_t *f = w->sc->f + 3 * face_at(w->sc, s);
+        w->fin[s] = w->usable[f[0]] && w->usable[f[1]] && w->usable[f[2]];
+    }
+}
+
+/* a face can be enclosed only by a shell other than its own whose box holds its box */
+static void maybe_share(void *arg, int k, int count)
+{
+    Faces *w = arg;
+    int64_t s0, s1, n = 0;
+    share(w->nf, k, count, &s0, &s1);
+    for (int64_t s = s0; s < s1; s++) {
+        if (!w->fin[s])
+            continue;
+        double c[3][3], l[3], h[3];
+        corners(w->sc, s, c, l, h);
+        for (int i = 0; i < w->used && !w->maybe[s]; i++) {
+            int64_t r = w->shells[i].run;
+            const double *a = w->slo + 3 * r, *b = w->shi + 3 * r;
+            w->maybe[s] = (s >= w->starts[r + 1] || s < w->starts[r]) && l[0] > a[0] && l[1] > a[1] &&
+                          l[2] > a[2] && h[0] < b[0] && h[1] < b[1] && h[2] < b[2];
+        }
+        n += w->maybe[s];
+    }
+    w->candidates[k] = n;
+}
+
+/* the faces whose grown box's cells are all hidden (summed-area table); in blocks dealt
+ * round the threads, since the candidates may be all in one place (an inner shell) */
+#define FINAL_BLOCK 4096
+
+static void final_share(void *arg, int k, int count)
+{
+    Faces *w = arg;
+    const Grid *g = w->sc->g;
+    const int64_t sy = (g->shape[1] + 1) * (g->shape[2] + 1), sz = g->shape[2] + 1;
+    for (int64_t b0 = (int64_t)k * FINAL_BLOCK; b0 < w->nf; b0 += (int64_t)count * FINAL_BLOCK)
+        for (int64_t s = b0; s < w->nf && s < b0 + FINAL_BLOCK; s++) {
+            if (!w->maybe[s])
+                continue;
+            double c[3][3], lo[3], hi[3];
+            int64_t a[3], b[3], total = 0;
+            corners(w->sc, s, c, lo, hi);
+            ranges(g, lo, hi, g->grow, a, b);
+            for (int corner = 0; corner < 8; corner++) {
+                int64_t x = corner & 1 ? b[0] + 1 : a[0], y = corner & 2 ? b[1] + 1 : a[1],
+                        z = corner & 4 ? b[2] + 1 : a[2];
+                int picked = (corner & 1) + ((corner >> 1) & 1) + ((corner >> 2) & 1);
+                total += (3 - picked) % 2 ? -w->table[x * sy + y * sz + z] : w->table[x * sy + y * sz + z];
             }
+            w->out[face_at(w->sc, s)] = total == (b[0] - a[0] + 1) * (b[1] - a[1] + 1) * (b[2] - a[2] + 1);
+        }
 }
 
 /* enclosure.enclosed_faces into out (F,); 0 when out of memory */
@@ -607,11 +974,14 @@ static int certify(const double *v, npy_intp nv, const int64_t *faces, const int
     int64_t *sorted = NULL, *starts = NULL;
     double *slo = NULL, *shi = NULL;
     uint8_t *usable = NULL, *fin = NULL, *maybe = NULL, *unsure = NULL, *isshell = NULL;
-    uint64_t *cover = NULL, *prefix = NULL;
+    uint64_t *prefix = NULL;
+    Cover cover = {NULL, 8};
     int32_t *table = NULL;
     Shell *shells = NULL;
     Crossings cross = {NULL, 0, 0};
     int64_t np_ = 0, runs = 0;
+    threads = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
+    const int many = nf < THREAD_FACES ? 1 : threads;
     for (npy_intp i = 0; i < nf; i++)
         np_ = part[i] + 1 > np_ ? part[i] + 1 : np_;
     sorted = part_order(part, nf, np_, &fail);
@@ -622,15 +992,11 @@ static int certify(const double *v, npy_intp nv, const int64_t *faces, const int
         goto done;
     Grid g;
     Scene sc = {v, faces, sorted, probe, &g};
-    for (npy_intp i = 0; i < nv; i++) {
-        const double *p = v + 3 * i;
-        usable[i] = fabs(p[0]) <= limit && fabs(p[1]) <= limit && fabs(p[2]) <= limit;
-    }
-    for (npy_intp s = 0; s < nf; s++) {
-        const int64_t *f = faces + 3 * face_at(&sc, s);
-        fin[s] = usable[f[0]] && usable[f[1]] && usable[f[2]];
+    Faces w = {.sc = &sc, .nv = nv, .nf = nf, .limit = limit, .usable = usable, .fin = fin, .maybe = maybe, .out = out};
+    in_parallel(nv < THREAD_FACES ? 1 : threads, usable_share, &w);
+    in_parallel(many, fin_share, &w);
+    for (npy_intp s = 0; s < nf; s++)
         runs += s == 0 || part[face_at(&sc, s)] != part[face_at(&sc, s - 1)];
-    }
     starts = malloc(sizeof(int64_t) * ((size_t)runs + 1));
     slo = malloc(sizeof(double) * 3 * (size_t)runs);
     shi = malloc(sizeof(double) * 3 * (size_t)runs);
@@ -642,22 +1008,16 @@ static int certify(const double *v, npy_intp nv, const int64_t *faces, const int
         if (s == 0 || part[face_at(&sc, s)] != part[face_at(&sc, s - 1)])
             starts[r++] = s;
     starts[runs] = nf;
-    int64_t nshell = find_shells(&sc, part, closed, fin, starts, runs, slo, shi, isshell, shells);
-    int used = nshell < max_shells ? (int)nshell : max_shells;
+    int64_t nshell = find_shells(&sc, part, closed, fin, starts, runs, nf, threads, slo, shi, isshell, shells);
+    if (nshell < 0)
+        goto done;
+    w.used = nshell < max_shells ? (int)nshell : max_shells;
+    w.starts = starts, w.slo = slo, w.shi = shi, w.shells = shells;
     int64_t candidates = 0;
-    /* a face can be enclosed only by a shell other than its own whose box holds its box */
-    for (npy_intp s = 0; s < nf; s++) {
-        if (!fin[s] || !used)
-            continue;
-        double c[3][3], l[3], h[3];
-        corners(&sc, s, c, l, h);
-        for (int i = 0; i < used && !maybe[s]; i++) {
-            int64_t r = shells[i].run;
-            const double *a = slo + 3 * r, *b = shi + 3 * r;
-            maybe[s] = (s >= starts[r + 1] || s < starts[r]) && l[0] > a[0] && l[1] > a[1] && l[2] > a[2] &&
-                       h[0] < b[0] && h[1] < b[1] && h[2] < b[2];
-        }
-        candidates += maybe[s];
+    if (w.used) {
+        in_parallel(many, maybe_share, &w);
+        for (int k = 0; k < many; k++)
+            candidates += w.candidates[k];
     }
     if (!candidates) {
         ok = 1;
@@ -669,12 +1029,13 @@ static int certify(const double *v, npy_intp nv, const int64_t *faces, const int
         goto done;
     }
     const int64_t nx = g.shape[0], ny = g.shape[1], nz = g.shape[2], lines = ny * nz;
-    cover = calloc((size_t)(nx * lines), sizeof(uint64_t));
+    cover.width = w.used <= 8 ? 1 : w.used <= 16 ? 2 : w.used <= 32 ? 4 : 8;
+    cover.at = calloc((size_t)(nx * lines), (size_t)cover.width);
     unsure = calloc((size_t)lines, 1);
     table = calloc((size_t)((nx + 1) * (ny + 1) * (nz + 1)), sizeof(int32_t));
-    if (!cover || !unsure || !table)
+    if (!cover.at || !unsure || !table)
         goto done;
-    for (int i = 0; i < used; i++) {
+    for (int i = 0; i < w.used; i++) {
         int64_t r = shells[i].run;
         uint64_t bit = (uint64_t)1 << i;
         if (!shell_pass(&sc, starts[r], starts[r + 1], slo + 3 * r, shi + 3 * r, bit, threads, cover, &cross, unsure))
@@ -687,26 +1048,14 @@ static int certify(const double *v, npy_intp nv, const int64_t *faces, const int
     prefix[0] = 0;
     for (size_t c = 0; c < cross.n; c++)
         prefix[c + 1] = prefix[c] ^ cross.at[c].bit;
-    hidden_table(&g, &cross, prefix, cover, unsure, probe[0], table);
-    const int64_t sy = (ny + 1) * (nz + 1), sz = nz + 1;
-    for (npy_intp s = 0; s < nf; s++) {
-        if (!maybe[s])
-            continue;
-        double c[3][3], lo[3], hi[3];
-        int64_t a[3], b[3], total = 0;
-        corners(&sc, s, c, lo, hi);
-        ranges(&g, lo, hi, g.grow, a, b);
-        for (int corner = 0; corner < 8; corner++) {
-            int64_t x = corner & 1 ? b[0] + 1 : a[0], y = corner & 2 ? b[1] + 1 : a[1], z = corner & 4 ? b[2] + 1 : a[2];
-            int picked = (corner & 1) + ((corner >> 1) & 1) + ((corner >> 2) & 1);
-            total += (3 - picked) % 2 ? -table[x * sy + y * sz + z] : table[x * sy + y * sz + z];
-        }
-        out[face_at(&sc, s)] = total == (b[0] - a[0] + 1) * (b[1] - a[1] + 1) * (b[2] - a[2] + 1);
-    }
+    if (!hidden_table(&g, &cross, prefix, cover, unsure, probe[0], threads, table))
+        goto done;
+    w.table = table;
+    in_parallel(many, final_share, &w);
     ok = 1;
 done:
     free(sorted), free(starts), free(slo), free(shi), free(usable), free(fin), free(maybe), free(unsure);
-    free(isshell), free(cover), free(prefix), free(table), free(shells), free(cross.at);
+    free(isshell), free(cover.at), free(prefix), free(table), free(shells), free(cross.at);
     return ok;
 }
 

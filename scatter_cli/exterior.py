@@ -85,19 +85,19 @@ class ExteriorSource:
             while (count is None or kept[-1] < count) and block * BLOCK < limit:
                 group = [b for b in range(block, block + self._blocks_to_go(count, kept[-1], block, threads))
                          if b * BLOCK < limit]
-                for mask, chunk_rays, faces, chunk in self._classify_round(pool, group, limit, threads):
+                for bits, size, found, chunk_rays, faces, hit in self._classify_round(pool, group, limit, threads):
                     if count is not None and kept[-1] >= count:
                         break  # blocks past the N-th exterior candidate: the thread count's, not the run's
-                    self._bits.append(np.packbits(mask))
-                    self._sizes.append(len(mask))
-                    kept.append(kept[-1] + int(np.count_nonzero(mask)))
+                    self._bits.append(bits)
+                    self._sizes.append(size)
+                    kept.append(kept[-1] + len(found.face))
                     if self._found is not None and kept[-1] > KEEP_POINTS:
                         self._found = None
                     elif self._found is not None:
-                        self._found.append(chunk.take(np.flatnonzero(mask)))
+                        self._found.append(found)
                     rays += chunk_rays
                     tried_faces[faces] = True
-                    hit_faces[faces[mask]] = True
+                    hit_faces[hit] = True
                 block += len(group)
                 if kept[-1] == 0 and block * BLOCK >= GIVE_UP:
                     raise ScatterError(f"no exterior surface found: the first {block * BLOCK:,} candidates are all hidden")
@@ -151,7 +151,7 @@ class ExteriorSource:
         return threads * max(1, min(16, math.ceil(need / threads)))
 
     def _classify_round(self, pool, group, limit, threads):
-        """(mask, rays, faces) of each block of ``group``, classified on the pool. The
+        """What :meth:`_finish_block` gives for each block of ``group``, classified on the pool. The
         normal rays of all the round's candidates go first, together and in face order:
         nearby rays then share Embree's caches (docs/exterior.md, "Speed"); the order
         changes no verdict."""
@@ -161,7 +161,7 @@ class ExteriorSource:
             return pool.map(lambda d: self._finish_block(*d), drawn)
         faces = np.concatenate([d[2] for d in drawn])
         todo = np.arange(len(faces)) if occluder.enclosed is None else np.flatnonzero(~occluder.enclosed[faces])
-        order = todo[np.argsort(faces[todo])]
+        order = todo[np.argsort(_face_buckets(faces[todo], len(occluder.normals)), kind="stable")]
         points = np.concatenate([d[0].points for d in drawn])
         escaped = np.zeros(len(faces), dtype=bool)
 
@@ -183,8 +183,11 @@ class ExteriorSource:
         return chunk, u, self.occluder.offsets[chunk.instance] + chunk.face
 
     def _finish_block(self, chunk, u, faces, escaped=None):
+        """(packed verdicts, candidates, the exterior ones (a chunk), rays cast, (n,)
+        faces' rows, the exterior ones' rows) of one block."""
         mask, rays = classify(self.occluder, chunk, self.seed, u, escaped)
-        return mask, rays, faces, chunk
+        found = np.flatnonzero(mask)
+        return np.packbits(mask), len(mask), chunk.take(found), rays, faces, faces[found]
 
     def draw(self, start: int, stop: int) -> RawChunk:
         """Exterior points ``start .. stop - 1`` (the ``j``-th exterior candidate is point j)."""
@@ -194,14 +197,21 @@ class ExteriorSource:
         for b in range(first, min(last, len(self._bits) - 1) + 1):
             rows = slice(max(start - self._kept[b], 0), stop - self._kept[b])
             if self._found is not None:
-                found = self._found[b]
-                parts.append(found.take(np.arange(len(found.face))[rows]))
+                parts.append(self._found[b].slice(rows.start, rows.stop))
                 continue
             mask = np.unpackbits(self._bits[b], count=self._sizes[b]).view(bool)
             chunk = self.base.draw(b * BLOCK, b * BLOCK + self._sizes[b])
             parts.append(chunk.take(np.flatnonzero(mask)[rows]))
         out = RawChunk.join(parts) if parts else self.base.draw(0, 0)
         return RawChunk(start, out.points, out.face, out.instance, out.bary)
+
+
+def _face_buckets(faces, count):
+    """(n,) uint16 keys of faces (n,) int64 in 0 .. count - 1: the face over 2**k, the
+    smallest k that fits 16 bits (NumPy sorts them stably by radix: neighbouring rays
+    stay together, which is all the sort is for)."""
+    shift = max(0, int(count - 1).bit_length() - 16)
+    return (faces >> shift).astype(np.uint16)
 
 
 _SUBSET_TAG = 0x4558_5355  # key of the subset choice: independent of the other streams

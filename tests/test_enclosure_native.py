@@ -214,3 +214,33 @@ def test_bad_calls_are_refused():
     for call in calls:
         with pytest.raises((ValueError, TypeError)):
             call()
+
+
+@pytest.mark.parametrize("others", [8, 16, 32])
+def test_same_faces_with_many_shells(others, monkeypatch):
+    """Shell bits past the 8th, 16th and 32nd (the kernel's cells carry 1, 2, 4 or 8 bytes
+    of them, as few as the shells need). ``others`` boxes of the largest volume take the
+    first bits; a box of the next bit holds seven small boxes, one at its centre (enclosed)
+    and one 1e-6 from each of its walls: that one's side along the wall is not enclosed
+    (its cells are touched by the wall); a kernel that lost the box's bit would certify it
+    where the wall's cell has its probe point inside. The same parts and faces as NumPy,
+    on one thread and two."""
+    parts = [np.array([1.0, -1.6, -1.6]) + 0.8 * np.array(at) + es.cuboid([0, 0, 0], [1, 1, 1]) * 0.7
+             for at in list(np.ndindex(2, 4, 4))[:others]]
+    parts.append(-0.3 + es.cuboid([0, 0, 0], [1, 1, 1], step=0.1) * 0.6)
+    centre, wall_side = [np.zeros(len(p), bool) for p in parts], [np.zeros(len(p), bool) for p in parts]
+    for axis, sign in [(0, 0)] + [(a, s) for a in range(3) for s in (-1, 1)]:
+        at = np.zeros(3)
+        at[axis] = sign * (0.25 - 1e-6)
+        small = at - 0.05 + es.cuboid([0, 0, 0], [1, 1, 1]) * 0.1
+        parts.append(small)
+        centre.append(np.full(len(small), sign == 0))
+        wall_side.append(sign * small[:, :, axis].mean(axis=1) > 0.29)
+    centre, wall_side = np.concatenate(centre), np.concatenate(wall_side)
+    v, f = soup(np.concatenate(parts))
+    for threads in ("1", "2"):
+        monkeypatch.setenv("SCATTER_THREADS", threads)
+        kernel, numpy_out = both_paths(v, f, monkeypatch)
+        assert same(kernel, numpy_out)
+        enclosed = kernel[2]
+        assert enclosed[centre].all() and wall_side.sum() == 12 and not enclosed[wall_side].any()
