@@ -66,6 +66,49 @@ static inline int64_t ceil_i64(double x)
 
 static inline int64_t clip(int64_t v, int64_t lo, int64_t hi) { return v < lo ? lo : v > hi ? hi : v; }
 
+#define MAX_THREADS 8
+/* below this many faces a shell is done on one thread */
+#define THREAD_FACES 65536
+
+typedef struct {
+    void (*fn)(void *ctx, int k, int count);
+    void *ctx;
+    int k, count;
+} Job;
+
+static void *run_job(void *arg)
+{
+    Job *j = arg;
+    j->fn(j->ctx, j->k, j->count);
+    return NULL;
+}
+
+/* fn(ctx, k, count) for k = 0 .. count - 1, on count threads (at most MAX_THREADS; k = 0
+ * on the caller; a share whose thread does not start runs on the caller) */
+static void in_parallel(int count, void (*fn)(void *, int, int), void *ctx)
+{
+    count = count < 1 ? 1 : count > MAX_THREADS ? MAX_THREADS : count;
+    Job job[MAX_THREADS];
+    pthread_t id[MAX_THREADS];
+    int started[MAX_THREADS] = {0};
+    for (int k = 0; k < count; k++)
+        job[k] = (Job){fn, ctx, k, count};
+    for (int k = 1; k < count; k++)
+        started[k] = pthread_create(&id[k], NULL, run_job, &job[k]) == 0;
+    fn(ctx, 0, count);
+    for (int k = 1; k < count; k++)
+        if (started[k])
+            pthread_join(id[k], NULL);
+        else
+            fn(ctx, k, count);
+}
+
+/* share k of count of 0 .. n - 1: [*i0, *i1) */
+static inline void share(int64_t n, int k, int count, int64_t *i0, int64_t *i1)
+{
+    *i0 = n * k / count, *i1 = n * (k + 1) / count;
+}
+
 /* ---- parts ---- */
 
 static int64_t find(int64_t *root, int64_t x)
@@ -87,20 +130,80 @@ static void unite(int64_t *root, int64_t a, int64_t b)
         root[a] = b;
 }
 
-static int cmp_i64(const void *p, const void *q)
+/* What parts() shares between its two jobs: the unions (and then the roots, their
+ * numbers and each face's part) on one thread, the edges bucketed by their smaller
+ * vertex (and then each vertex's odd edges) on the other. */
+typedef struct {
+    const int64_t *ids, *f; /* ids NULL: each vertex its own id */
+    int64_t nf, size, count;
+    int64_t *root, *start, *rank, *part;
+    uint32_t *other;
+    uint8_t *odd;
+} Parts;
+
+static inline int64_t vid(const Parts *w, int64_t i) { return w->ids ? w->ids[w->f[i]] : w->f[i]; }
+
+static void union_job(Parts *w)
 {
-    int64_t a = *(const int64_t *)p, b = *(const int64_t *)q;
+    for (int64_t i = 0; i < w->size; i++)
+        w->root[i] = i;
+    for (int64_t i = 0; i < w->nf; i++) { /* two edges join a face's corners */
+        int64_t a = vid(w, 3 * i), b = vid(w, 3 * i + 1), c = vid(w, 3 * i + 2);
+        unite(w->root, a, b);
+        unite(w->root, b, c);
+    }
+    /* a root is the smallest vertex of its part, so one pass in order flattens them */
+    int64_t count = 0;
+    for (int64_t i = 0; i < w->size; i++) {
+        w->root[i] = w->root[w->root[i]];
+        if (w->root[i] == i)
+            w->rank[i] = count++;
+    }
+    w->count = count;
+}
+
+static void bucket_job(Parts *w)
+{
+    int64_t *start = w->start;
+    for (int64_t i = 0; i < 3 * w->nf; i++) {
+        int64_t a = vid(w, i), b = vid(w, i % 3 == 2 ? i - 2 : i + 1);
+        start[(a < b ? a : b) + 1]++;
+    }
+    for (int64_t i = 0; i < w->size; i++)
+        start[i + 1] += start[i];
+    for (int64_t i = 0; i < 3 * w->nf; i++) {
+        int64_t a = vid(w, i), b = vid(w, i % 3 == 2 ? i - 2 : i + 1);
+        w->other[start[a < b ? a : b]++] = (uint32_t)(a < b ? b : a);
+    }
+    for (int64_t i = w->size; i > 0; i--)
+        start[i] = start[i - 1];
+    start[0] = 0;
+}
+
+static void parts_first(void *arg, int k, int count)
+{
+    (void)count;
+    if (k == 0)
+        union_job(arg);
+    else
+        bucket_job(arg);
+}
+
+static int cmp_u32(const void *p, const void *q)
+{
+    uint32_t a = *(const uint32_t *)p, b = *(const uint32_t *)q;
     return (a > b) - (a < b);
 }
 
-static void sort_small(int64_t *x, int64_t n)
+static void sort_small(uint32_t *x, int64_t n)
 {
     if (n > 32) {
-        qsort(x, (size_t)n, sizeof *x, cmp_i64);
+        qsort(x, (size_t)n, sizeof *x, cmp_u32);
         return;
     }
     for (int64_t i = 1; i < n; i++) {
-        int64_t v = x[i], j = i;
+        uint32_t v = x[i];
+        int64_t j = i;
         while (j > 0 && x[j - 1] > v) {
             x[j] = x[j - 1];
             j--;
@@ -109,94 +212,114 @@ static void sort_small(int64_t *x, int64_t n)
     }
 }
 
-PyDoc_STRVAR(parts_doc, "parts(ids (V,) i8, faces (F,3) i8) -> (part (F,) i8, closed (P,) bool): enclosure._parts.");
+/* odd[a]: an edge (a, b > a) is used an odd number of times; each face's part */
+static void parts_second(void *arg, int k, int count)
+{
+    Parts *w = arg;
+    int64_t a0, a1, i0, i1;
+    share(w->size, k, count, &a0, &a1);
+    for (int64_t a = a0; a < a1; a++) {
+        uint32_t *b = w->other + w->start[a];
+        int64_t n = w->start[a + 1] - w->start[a];
+        sort_small(b, n);
+        uint8_t odd = 0;
+        for (int64_t j = 0; j < n;) {
+            int64_t run = j;
+            while (run < n && b[run] == b[j])
+                run++;
+            odd |= (run - j) % 2;
+            j = run;
+        }
+        w->odd[a] = odd;
+    }
+    share(w->nf, k, count, &i0, &i1);
+    for (int64_t i = i0; i < i1; i++)
+        w->part[i] = w->rank[w->root[vid(w, 3 * i)]];
+}
+
+PyDoc_STRVAR(parts_doc, "parts(ids (V,) i8, or V (each vertex its own id), faces (F,3) i8, threads) -> "
+                        "(part (F,) i8, closed (P,) bool): enclosure._parts.");
 
 static PyObject *parts(PyObject *self, PyObject *args)
 {
     PyObject *oids, *ofaces;
-    PyArrayObject *ids_a, *fa;
-    if (!PyArg_ParseTuple(args, "OO", &oids, &ofaces) || !get(oids, NPY_INT64, -1, &ids_a, "ids") ||
-        !get3(ofaces, NPY_INT64, &fa, "faces"))
+    PyArrayObject *ids_a = NULL, *fa;
+    int threads;
+    long long count = -1;
+    if (!PyArg_ParseTuple(args, "OOi", &oids, &ofaces, &threads) || !get3(ofaces, NPY_INT64, &fa, "faces"))
         return NULL;
-    npy_intp nv = PyArray_SIZE(ids_a), nf = PyArray_SIZE(fa) / 3;
+    if (PyLong_Check(oids)) {
+        if ((count = PyLong_AsLongLong(oids)) < 0 && !PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "parts: negative vertex count");
+        if (PyErr_Occurred())
+            return NULL;
+    } else if (!get(oids, NPY_INT64, -1, &ids_a, "ids"))
+        return NULL;
+    npy_intp nf = PyArray_SIZE(fa) / 3;
     if (nf == 0) {
         PyErr_SetString(PyExc_ValueError, "parts: no faces");
         return NULL;
     }
-    const int64_t *ids = PyArray_DATA(ids_a), *f = PyArray_DATA(fa);
-    for (npy_intp i = 0; i < 3 * nf; i++)
-        if (f[i] < 0 || f[i] >= nv || ids[f[i]] < 0 || ids[f[i]] >= nv) {
-            PyErr_SetString(PyExc_ValueError, "parts: index out of range");
+    const int64_t *ids = ids_a ? PyArray_DATA(ids_a) : NULL, *f = PyArray_DATA(fa);
+    int64_t size = 0;
+    if (ids) {
+        npy_intp nv = PyArray_SIZE(ids_a);
+        for (npy_intp i = 0; i < 3 * nf; i++)
+            if (f[i] < 0 || f[i] >= nv || ids[f[i]] < 0 || ids[f[i]] >= nv) {
+                PyErr_SetString(PyExc_ValueError, "parts: index out of range");
+                return NULL;
+            }
+        for (npy_intp i = 0; i < nv; i++)
+            size = ids[i] + 1 > size ? ids[i] + 1 : size;
+        if (size > nv || size < 1) {
+            PyErr_SetString(PyExc_ValueError, "parts: ids out of range");
             return NULL;
         }
-    int64_t size = 0;
-    for (npy_intp i = 0; i < nv; i++)
-        if (ids[i] + 1 > size)
-            size = ids[i] + 1;
-    if (size > nv || size < 1) {
-        PyErr_SetString(PyExc_ValueError, "parts: ids out of range");
+    } else {
+        for (npy_intp i = 0; i < 3 * nf; i++)
+            if (f[i] < 0 || f[i] >= count) {
+                PyErr_SetString(PyExc_ValueError, "parts: index out of range");
+                return NULL;
+            }
+        size = count;
+    }
+    if (size > (int64_t)UINT32_MAX) {
+        PyErr_SetString(PyExc_ValueError, "parts: more than 2**32 - 1 vertices");
         return NULL;
     }
-    int64_t *root = malloc(sizeof(int64_t) * (size_t)size), *start = calloc((size_t)size + 1, sizeof(int64_t)),
-            *other = malloc(sizeof(int64_t) * 3 * (size_t)nf), *rank = malloc(sizeof(int64_t) * (size_t)size);
-    uint8_t *closed = malloc((size_t)size);
+    Parts w = {ids, f, nf, size, 0, malloc(sizeof(int64_t) * (size_t)size), calloc((size_t)size + 1, sizeof(int64_t)),
+               malloc(sizeof(int64_t) * (size_t)size), NULL, malloc(sizeof(uint32_t) * 3 * (size_t)nf),
+               malloc((size_t)size)};
+    uint8_t *closed = NULL;
     PyArrayObject *part_a = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){nf}, NPY_INT64);
-    if (!root || !start || !other || !rank || !closed || !part_a) {
-        free(root), free(start), free(other), free(rank), free(closed);
+    if (!w.root || !w.start || !w.rank || !w.other || !w.odd || !part_a) {
+        free(w.root), free(w.start), free(w.rank), free(w.other), free(w.odd);
         Py_XDECREF(part_a);
         return PyErr_NoMemory();
     }
-    int64_t *part = PyArray_DATA(part_a);
-    int64_t count = 0;
+    w.part = PyArray_DATA(part_a);
+    int jobs = nf < THREAD_FACES ? 1 : threads < 1 ? 1 : threads;
     Py_BEGIN_ALLOW_THREADS
-    for (int64_t i = 0; i < size; i++)
-        root[i] = i;
-    /* the edges (min, max) of every face, in buckets by min */
-    for (npy_intp i = 0; i < nf; i++)
-        for (int e = 0; e < 3; e++) {
-            int64_t a = ids[f[3 * i + e]], b = ids[f[3 * i + (e + 1) % 3]];
-            start[(a < b ? a : b) + 1]++;
-            unite(root, a, b);
-        }
-    for (int64_t i = 0; i < size; i++)
-        start[i + 1] += start[i];
-    for (npy_intp i = 0; i < nf; i++)
-        for (int e = 0; e < 3; e++) {
-            int64_t a = ids[f[3 * i + e]], b = ids[f[3 * i + (e + 1) % 3]];
-            int64_t lo = a < b ? a : b, hi = a < b ? b : a;
-            other[start[lo]++] = hi;
-        }
-    for (int64_t i = size; i > 0; i--)
-        start[i] = start[i - 1];
-    start[0] = 0;
-    for (int64_t i = 0; i < size; i++) {
-        if (find(root, i) == i)
-            rank[i] = count++;
-        closed[i] = 1;
+    if (jobs > 1)
+        in_parallel(2, parts_first, &w);
+    else
+        union_job(&w), bucket_job(&w);
+    in_parallel(jobs, parts_second, &w);
+    if ((closed = malloc((size_t)w.count ? (size_t)w.count : 1))) {
+        memset(closed, 1, (size_t)w.count);
+        for (int64_t a = 0; a < size; a++)
+            if (w.odd[a])
+                closed[w.rank[w.root[a]]] = 0;
     }
-    for (int64_t a = 0; a < size; a++) {
-        int64_t *b = other + start[a], n = start[a + 1] - start[a];
-        sort_small(b, n);
-        for (int64_t k = 0; k < n;) {
-            int64_t run = k;
-            while (run < n && b[run] == b[k])
-                run++;
-            if ((run - k) % 2)
-                closed[rank[find(root, a)]] = 0;
-            k = run;
-        }
-    }
-    for (npy_intp i = 0; i < nf; i++)
-        part[i] = rank[find(root, ids[f[3 * i]])];
     Py_END_ALLOW_THREADS
-    free(root), free(start), free(other), free(rank);
-    PyArrayObject *closed_a = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){count}, NPY_BOOL);
+    free(w.root), free(w.start), free(w.rank), free(w.other), free(w.odd);
+    PyArrayObject *closed_a = closed ? (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){w.count}, NPY_BOOL) : NULL;
     if (!closed_a) {
         free(closed);
         Py_DECREF(part_a);
-        return NULL;
+        return closed ? NULL : PyErr_NoMemory();
     }
-    memcpy(PyArray_DATA(closed_a), closed, (size_t)count);
+    memcpy(PyArray_DATA(closed_a), closed, (size_t)w.count);
     free(closed);
     return Py_BuildValue("NN", part_a, closed_a);
 }
@@ -380,48 +503,6 @@ static int cross_face(const Scene *sc, double c[3][3], const double qlo[3], cons
     return 1;
 }
 
-#define MAX_THREADS 8
-/* below this many faces a shell is done on one thread */
-#define THREAD_FACES 65536
-
-typedef struct {
-    void (*fn)(void *ctx, int k, int count);
-    void *ctx;
-    int k, count;
-} Job;
-
-static void *run_job(void *arg)
-{
-    Job *j = arg;
-    j->fn(j->ctx, j->k, j->count);
-    return NULL;
-}
-
-/* fn(ctx, k, count) for k = 0 .. count - 1, on count threads (at most MAX_THREADS; k = 0
- * on the caller; a share whose thread does not start runs on the caller) */
-static void in_parallel(int count, void (*fn)(void *, int, int), void *ctx)
-{
-    count = count < 1 ? 1 : count > MAX_THREADS ? MAX_THREADS : count;
-    Job job[MAX_THREADS];
-    pthread_t id[MAX_THREADS];
-    int started[MAX_THREADS] = {0};
-    for (int k = 0; k < count; k++)
-        job[k] = (Job){fn, ctx, k, count};
-    for (int k = 1; k < count; k++)
-        started[k] = pthread_create(&id[k], NULL, run_job, &job[k]) == 0;
-    fn(ctx, 0, count);
-    for (int k = 1; k < count; k++)
-        if (started[k])
-            pthread_join(id[k], NULL);
-        else
-            fn(ctx, k, count);
-}
-
-/* share k of count of 0 .. n - 1: [*i0, *i1) */
-static inline void share(int64_t n, int k, int count, int64_t *i0, int64_t *i1)
-{
-    *i0 = n * k / count, *i1 = n * (k + 1) / count;
-}
 
 
 /* One thread's share of a shell's faces s0..s1-1, in its box of cells base + (n): the

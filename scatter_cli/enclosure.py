@@ -100,7 +100,7 @@ def closed_parts(vertices, faces):
     if not len(faces):
         return np.zeros(0, np.int64), np.zeros(0, bool)
     shared = len(vertices) < 2 * len(faces)  # an indexed mesh, not a triangle soup
-    part, closed = _parts(np.arange(len(vertices)) if shared else weld(vertices), faces)
+    part, closed = _parts(len(vertices) if shared else weld(vertices), faces)
     if shared and not closed.all():
         part, closed = _parts(weld(vertices), faces)
     finite = np.isfinite(vertices).all(axis=1)
@@ -110,9 +110,15 @@ def closed_parts(vertices, faces):
 
 
 def _parts(ids, faces):
-    """closed_parts for vertex ids ``ids`` (V,) int64 (equal ids: one vertex)."""
-    if _kernel is not None:
-        return _kernel.parts(np.ascontiguousarray(ids, np.int64), np.ascontiguousarray(faces, np.int64))
+    """closed_parts for vertex ids ``ids`` (V,) int64 (equal ids: one vertex), or for
+    ``ids`` V vertices, each its own."""
+    faces = np.ascontiguousarray(faces, np.int64)
+    count = ids if isinstance(ids, int) else len(ids)
+    if _kernel is not None and count < 2**32:  # (the kernel numbers vertices in 32 bits)
+        return _kernel.parts(ids if isinstance(ids, int) else np.ascontiguousarray(ids, np.int64), faces,
+                             native.worker_count())
+    if isinstance(ids, int):
+        ids = np.arange(ids)
     w = ids[faces]
     size = int(ids.max()) + 1
     key = np.concatenate([np.minimum(w[:, i], w[:, j]) * size + np.maximum(w[:, i], w[:, j])

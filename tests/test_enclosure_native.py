@@ -202,9 +202,16 @@ def test_bad_calls_are_refused():
     bad_face, bad_part = f.copy(), part.copy()
     bad_face[3, 1] = len(v)
     bad_part[7] = len(closed)
-    calls = [lambda: KERNEL.parts(np.arange(len(v), dtype=np.int64), bad_face),
-             lambda: KERNEL.parts(np.full(len(v), -1, np.int64), f),
-             lambda: KERNEL.parts(np.arange(len(v), dtype=np.int64), f[:, :2].copy()),
+    # the calls below differ from these, which work: welded ids, and the soup's own vertices (a part a triangle)
+    assert np.array_equal(KERNEL.parts(enclosure.weld(v), f, 2)[1], closed) and closed.any()
+    assert np.array_equal(KERNEL.parts(len(v), f, 2)[0], np.arange(len(f)))
+    calls = [lambda: KERNEL.parts(np.arange(len(v), dtype=np.int64), bad_face, 2),
+             lambda: KERNEL.parts(np.full(len(v), -1, np.int64), f, 2),
+             lambda: KERNEL.parts(np.arange(len(v), dtype=np.int64), f[:, :2].copy(), 2),
+             lambda: KERNEL.parts(len(v), bad_face, 2),
+             lambda: KERNEL.parts(len(v) - 1, f, 2),
+             lambda: KERNEL.parts(-1, f, 2),
+             lambda: KERNEL.parts(2**32, f, 2),
              lambda: KERNEL.enclosed(v, bad_face, part, c8, OFFSET, 16, *args, out),
              lambda: KERNEL.enclosed(v, f, bad_part, c8, OFFSET, 16, *args, out),
              lambda: KERNEL.enclosed(v, f, part, c8, OFFSET, 16, *args, out[:-1]),
