@@ -47,14 +47,27 @@ def rotation_uniforms(seed: int, start: int, stop: int):
     return np.random.Generator(bits).random((stop - start, 3))
 
 
-def classify(occluder, chunk: RawChunk, seed: int, u=None, escaped=None):
+def classify(occluder, chunk: RawChunk, seed: int, u=None, escaped=None, rows=None):
     """((n,) bool exterior, rays cast) for the candidates of ``chunk``; ``u`` (n, 3): their
     ray rotations' uniforms, when the source draws them (else from the candidate's index);
-    ``escaped``: their normal rays' verdicts, when already cast."""
-    normals = occluder.face_normals(chunk.face, chunk.instance)
+    ``escaped``: their normal rays' verdicts, when already cast (for every candidate not
+    enclosed); ``rows`` (n,): their faces' rows in the occluder, when known."""
+    rows = occluder.rows(chunk.face, chunk.instance) if rows is None else rows
+    enclosed = None if occluder.enclosed is None else occluder.enclosed[rows]
     if u is None:
         u = lambda: rotation_uniforms(seed, chunk.start, chunk.start + len(chunk.points))  # noqa: E731
-    return occluder.exterior(chunk.points, normals, u, occluder.is_enclosed(chunk.face, chunk.instance), escaped)
+    if escaped is None or not occluder.normal_rays:
+        return occluder.exterior(chunk.points, np.take(occluder.normals, rows, axis=0), u, enclosed)
+    cast = np.ones(len(rows), bool) if enclosed is None else ~enclosed
+    out = escaped & cast
+    rays = int(np.count_nonzero(cast))
+    rest = np.flatnonzero(cast & ~escaped)  # only these go on, from the opposite normal
+    if len(rest):
+        points, normals = np.take(chunk.points, rest, axis=0), np.take(occluder.normals, rows[rest], axis=0)
+        more, extra = occluder.exterior(points, normals, lambda: (u() if callable(u) else u)[rest], normal_blocked=True)
+        out[rest] = more
+        rays += extra
+    return out, rays
 
 
 class ExteriorSource:
@@ -131,8 +144,7 @@ class ExteriorSource:
         if stop <= 0:
             return 0
         chunk = self.base.draw(0, stop)
-        normals = self.occluder.face_normals(chunk.face, chunk.instance)
-        blocked, rays = self.occluder.normals_blocked(chunk.points, normals)
+        blocked, rays = self.occluder.normals_blocked(chunk.points, self.occluder.face_normals(chunk.face, chunk.instance))
         hidden = int(np.count_nonzero(blocked))
         total = limit if count is None else min(limit, count * stop / max(stop - hidden, 1))
         if hidden and hidden / stop * total * ENCLOSE_FACES_PER_HIDDEN >= len(self.occluder.normals):
@@ -168,7 +180,8 @@ class ExteriorSource:
         def cast(idx):  # in batches of one block: small temporaries, reused
             for k in range(0, len(idx), BLOCK):
                 i = idx[k:k + BLOCK]
-                escaped[i] = occluder.normal_escapes(points[i], occluder.normals[faces[i]])
+                escaped[i] = occluder.normal_escapes(np.take(points, i, axis=0),
+                                                     np.take(occluder.normals, faces[i], axis=0))
 
         list(pool.map(cast, np.array_split(order, threads)))
         cuts = np.cumsum([0] + [len(d[2]) for d in drawn])
@@ -180,12 +193,12 @@ class ExteriorSource:
         chunk = self.base.draw(start, stop)
         # a source whose candidates carry their own streams (--stable) draws their rotations
         u = self.base.ray_uniforms(start, stop) if hasattr(self.base, "ray_uniforms") else None
-        return chunk, u, self.occluder.offsets[chunk.instance] + chunk.face
+        return chunk, u, self.occluder.rows(chunk.face, chunk.instance)
 
     def _finish_block(self, chunk, u, faces, escaped=None):
         """(packed verdicts, candidates, the exterior ones (a chunk), rays cast, (n,)
         faces' rows, the exterior ones' rows) of one block."""
-        mask, rays = classify(self.occluder, chunk, self.seed, u, escaped)
+        mask, rays = classify(self.occluder, chunk, self.seed, u, escaped, faces)
         found = np.flatnonzero(mask)
         return np.packbits(mask), len(mask), chunk.take(found), rays, faces, faces[found]
 

@@ -62,9 +62,10 @@ class RawChunk:
     bary: np.ndarray
 
     def take(self, index):
-        """The rows ``index`` (k,) as a new chunk starting at 0."""
-        bary = None if self.bary is None else self.bary[index]
-        return RawChunk(0, self.points[index], self.face[index], self.instance[index], bary)
+        """The rows ``index`` (k,) int as a new chunk starting at 0."""
+        rows = (lambda a: np.take(a, index, axis=0))  # noqa: E731 (take copies rows of 3 faster than a[index])
+        return RawChunk(0, rows(self.points), self.face[index], self.instance[index],
+                        None if self.bary is None else rows(self.bary))
 
     @staticmethod
     def join(chunks):

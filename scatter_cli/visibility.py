@@ -153,37 +153,27 @@ class Occluder:
                                              for x in (vertices, faces, part, closed)), self.offset)
         return int(np.count_nonzero(self.enclosed))
 
-    def is_enclosed(self, face, instance):
-        """(n,) bool: faces ``face`` (n,) of instances ``instance`` (n,) are certainly hidden."""
-        if self.enclosed is None:
-            return np.zeros(len(face), bool)
-        return self.enclosed[self.offsets[instance] + face]
+    def rows(self, face, instance):
+        """(n,) int64: the rows of faces ``face`` (n,) of instances ``instance`` (n,)."""
+        return self.offsets[instance] + face
 
     def face_normals(self, face, instance):
         """(n, 3) unit normals of faces ``face`` (n,) of instances ``instance`` (n,)."""
-        return self.normals[self.offsets[instance] + face]
+        return np.take(self.normals, self.rows(face, instance), axis=0)
 
-    def exterior(self, points, normals, u, enclosed=None, escaped=None):
+    def exterior(self, points, normals, u, enclosed=None, normal_blocked=False):
         """Whether each point (n, 3) on a face of unit normal ``normals`` (n, 3) sees out:
         ((n,) bool, rays cast). ``u`` (n, 3) uniforms in [0, 1) (or a function that
         draws them, called only when a point needs the design) choose each point's
         rotation of the design; points where ``enclosed`` (n,) bool is set are hidden
-        without a ray. ``escaped`` (n,) bool: the verdicts of the points' normal rays,
-        already cast by :meth:`normal_escapes` (for every point not enclosed); they are
-        counted, not cast again."""
+        without a ray. ``normal_blocked``: every point's normal ray has been cast (by
+        :meth:`normal_escapes`) and is blocked: the rays go on from the opposite normal."""
         out = np.zeros(len(points), dtype=bool)
         todo = np.arange(len(points)) if enclosed is None else np.flatnonzero(~enclosed)
         rays = 0
-        if escaped is not None and self.normal_rays:
-            rays = len(todo)
-            out[todo] = escaped[todo]
-            todo = todo[~escaped[todo]]
-            if not len(todo):
-                return out, rays
         origin = points - self.center
         if self.normal_rays:
-            todo, more = self._normal_rays(origin, normals, todo, out, signs=(1.0, -1.0) if escaped is None else (-1.0,))
-            rays += more
+            todo, rays = self._normal_rays(origin, normals, todo, out, signs=(-1.0,) if normal_blocked else (1.0, -1.0))
         if not len(todo) or not len(self.design):
             return out, rays
         u = u() if callable(u) else u
@@ -205,10 +195,11 @@ class Occluder:
 
     def normal_escapes(self, points, normals):
         """(m,) bool: the normal ray of each point (m, 3) on a face of unit normal
-        ``normals`` (m, 3) gets out."""
-        out = np.zeros(len(points), dtype=bool)
-        self._cast(points - self.center, normals, normals, np.arange(len(points)), out)
-        return out
+        ``normals`` (m, 3) gets out (the origin and direction :meth:`_cast` gives it: the
+        normal's side of the face, as n . n is never negative)."""
+        start = points - self.center
+        start += self.offset * normals
+        return ~self.scene.occluded(start, normals)
 
     def _normal_rays(self, origin, normals, todo, out, signs=(1.0, -1.0)):
         """Cast the normal, then the opposite direction (``signs``), from points
@@ -224,9 +215,9 @@ class Occluder:
         ``out``, return the others."""
         if not len(todo):
             return todo
-        n = normals[todo]
+        n = np.take(normals, todo, axis=0)
         side = np.where(np.einsum("ij,ij->i", d, n) < 0, -self.offset, self.offset)
-        start = origin[todo] + side[:, None] * n
+        start = np.take(origin, todo, axis=0) + side[:, None] * n
         free = ~self.scene.occluded(start, d)
         out[todo[free]] = True
         return todo[~free]
