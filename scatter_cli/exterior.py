@@ -86,6 +86,7 @@ class ExteriorSource:
         self.enclosure_seconds = 0.0
         self._bits, self._sizes, kept, rays = [], [], [0], 0
         self._found = []  # the exterior candidates of each block, while they fit KEEP_POINTS
+        self._round = None  # (faces, points, escaped) of a round's candidates
         limit = math.inf if candidates is None else candidates
         threads = threads or native.worker_count()
         faces_total = len(occluder.normals)
@@ -115,6 +116,7 @@ class ExteriorSource:
                 if kept[-1] == 0 and block * BLOCK >= GIVE_UP:
                     raise ScatterError(f"no exterior surface found: the first {block * BLOCK:,} candidates are all hidden")
         self._kept = np.asarray(kept, dtype=np.int64)
+        self._round = None
         if count is not None and kept[-1] < count:
             raise ShortStream(f"{kept[-1]:,} exterior points among {limit:,} candidates, not {count:,}")
         tried = sum(self._sizes)
@@ -171,11 +173,15 @@ class ExteriorSource:
         occluder = self.occluder
         if not occluder.normal_rays or not drawn:
             return pool.map(lambda d: self._finish_block(*d), drawn)
-        faces = np.concatenate([d[2] for d in drawn])
-        todo = np.arange(len(faces)) if occluder.enclosed is None else np.flatnonzero(~occluder.enclosed[faces])
+        count = sum(len(d[2]) for d in drawn)
+        if self._round is None or len(self._round[0]) < count:  # kept for the next rounds: fresh memory is dear
+            self._round = np.empty(count, np.int64), np.empty((count, 3)), np.empty(count, bool)
+        faces, points, escaped = (a[:count] for a in self._round)
+        np.concatenate([d[2] for d in drawn], out=faces)
+        np.concatenate([d[0].points for d in drawn], out=points)
+        todo = np.arange(count) if occluder.enclosed is None else np.flatnonzero(~occluder.enclosed[faces])
         order = todo[np.argsort(_face_buckets(faces[todo], len(occluder.normals)), kind="stable")]
-        points = np.concatenate([d[0].points for d in drawn])
-        escaped = np.zeros(len(faces), dtype=bool)
+        escaped[:] = False
 
         def cast(idx):  # in batches of one block: small temporaries, reused
             for k in range(0, len(idx), BLOCK):
