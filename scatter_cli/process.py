@@ -74,9 +74,36 @@ def lean_trimesh():
     surface.import_trimesh = import_trimesh_lean
 
 
+# glibc's mallopt parameters, and what scatter sets them to: blocks under 32 MB come from
+# the heap, and freed memory stays there until the process ends, so the arrays a run
+# allocates again and again (a block of candidates, a chunk of points) reuse pages that
+# are already mapped. Fresh pages cost a fault each, and more on a virtual machine whose
+# host has taken idle memory back (docs/speed.md, "Memory").
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_MALLOPT = ((_M_MMAP_THRESHOLD, 32 << 20), (_M_TRIM_THRESHOLD, 1 << 30))
+
+
+def keep_freed_memory():
+    """Tell glibc's allocator to keep freed memory for reuse (nothing elsewhere, or when
+    the user has set MALLOC_MMAP_THRESHOLD_ or MALLOC_TRIM_THRESHOLD_)."""
+    if not sys.platform.startswith("linux") or any(k in os.environ for k in ("MALLOC_MMAP_THRESHOLD_",
+                                                                             "MALLOC_TRIM_THRESHOLD_")):
+        return
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None)
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):  # not glibc (musl has no mallopt)
+        return
+    for param, value in _MALLOPT:
+        mallopt(param, value)
+
+
 def run_command(command, argv):
     """Run the click ``command`` on ``argv``; returns the exit code (never raises)."""
     install_signal_handlers()
+    keep_freed_memory()
     usage_error, click_error = _click_error_types()
     options = Options()
     try:
