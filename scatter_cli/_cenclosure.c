@@ -466,13 +466,18 @@ static int cross_face(const Scene *sc, double c[3][3], const double qlo[3], cons
     const Grid *g = sc->g;
     const double s = g->step, *o = g->origin, *P = sc->probe, width = (double)g->shape[0] + 2.0;
     const int64_t nz = g->shape[2];
-    int64_t j0 = ceil_i64(qlo[1] - P[1]), j1 = floor_i64(qhi[1] - P[1]);
-    int64_t k0 = ceil_i64(qlo[2] - P[2]), k1 = floor_i64(qhi[2] - P[2]);
-    /* (the shell lies inside the grid: these clamps change nothing but keep every line in it) */
-    j0 = j0 < 0 ? 0 : j0, k0 = k0 < 0 ? 0 : k0;
-    j1 = j1 >= g->shape[1] ? g->shape[1] - 1 : j1, k1 = k1 >= nz ? nz - 1 : k1;
-    if (j1 < j0 || k1 < k0)
+    /* (the shell lies inside the grid: the clamps change nothing but keep every line in it;
+     * most faces meet no line, and ceil(x) <= j, for an integer j, is x <= j) */
+    int64_t j1 = floor_i64(qhi[1] - P[1]);
+    j1 = j1 >= g->shape[1] ? g->shape[1] - 1 : j1;
+    if (j1 < 0 || (double)j1 < qlo[1] - P[1])
         return 1;
+    int64_t k1 = floor_i64(qhi[2] - P[2]);
+    k1 = k1 >= nz ? nz - 1 : k1;
+    if (k1 < 0 || (double)k1 < qlo[2] - P[2])
+        return 1;
+    int64_t j0 = ceil_i64(qlo[1] - P[1]), k0 = ceil_i64(qlo[2] - P[2]);
+    j0 = j0 < 0 ? 0 : j0, k0 = k0 < 0 ? 0 : k0;
     double near[3][3];
     for (int v = 0; v < 3; v++)
         for (int k = 0; k < 3; k++)
