@@ -131,6 +131,57 @@ static PyObject *new_scene(PyObject *self, PyObject *args)
     return capsule;
 }
 
+/* buffers(vertices (n, 3) float64, center (3,) float64, faces (m, 3) int64) -> (v (n, 4)
+ * float32, f (m, 3) int32): the arrays add() shares with Embree, made in one pass each
+ * with the GIL released: v - center rounded to float32 (as NumPy's astype rounds it;
+ * the fourth column 0: Embree reads 16 bytes a vertex), the indices checked. */
+static PyObject *buffers(PyObject *self, PyObject *args)
+{
+    PyObject *vo, *co, *fo;
+    PyArrayObject *v, *c, *f;
+    if (!PyArg_ParseTuple(args, "OOO", &vo, &co, &fo) || !get(vo, NPY_FLOAT64, -1, &v, "vertices") ||
+        !get(co, NPY_FLOAT64, 3, &c, "center") || !get(fo, NPY_INT64, -1, &f, "faces"))
+        return NULL;
+    if (PyArray_NDIM(v) != 2 || PyArray_DIM(v, 1) != 3 || PyArray_NDIM(f) != 2 || PyArray_DIM(f, 1) != 3) {
+        PyErr_SetString(PyExc_ValueError, "vertices (n, 3) and faces (m, 3)");
+        return NULL;
+    }
+    npy_intp n = PyArray_DIM(v, 0), m = PyArray_DIM(f, 0);
+    if (n > INT32_MAX) {
+        PyErr_SetString(PyExc_ValueError, "more than 2**31 - 1 vertices");
+        return NULL;
+    }
+    npy_intp vshape[2] = {n, 4}, fshape[2] = {m, 3};
+    PyArrayObject *v4 = (PyArrayObject *)PyArray_SimpleNew(2, vshape, NPY_FLOAT32);
+    PyArrayObject *f32 = (PyArrayObject *)PyArray_SimpleNew(2, fshape, NPY_INT32);
+    if (!v4 || !f32) {
+        Py_XDECREF(v4), Py_XDECREF(f32);
+        return NULL;
+    }
+    const double *src = PyArray_DATA(v), *center = PyArray_DATA(c);
+    const int64_t *idx = PyArray_DATA(f);
+    float *dst = PyArray_DATA(v4);
+    int32_t *out = PyArray_DATA(f32);
+    uint64_t bad = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp i = 0; i < n; i++) {
+        for (int k = 0; k < 3; k++)
+            dst[4 * i + k] = (float)(src[3 * i + k] - center[k]);
+        dst[4 * i + 3] = 0.0f;
+    }
+    for (npy_intp i = 0; i < 3 * m; i++) {
+        bad |= (uint64_t)idx[i] >= (uint64_t)n;
+        out[i] = (int32_t)idx[i];
+    }
+    Py_END_ALLOW_THREADS
+    if (bad) {
+        Py_DECREF(v4), Py_DECREF(f32);
+        PyErr_SetString(PyExc_ValueError, "faces: a vertex index out of range");
+        return NULL;
+    }
+    return Py_BuildValue("NN", v4, f32);
+}
+
 /* add(scene, vertices (n, 4) float32, faces (m, 3) int32): one triangle geometry sharing
  * both arrays, which the caller keeps alive as long as the scene. Indices are checked. */
 static PyObject *add(PyObject *self, PyObject *args)
@@ -220,6 +271,9 @@ static PyObject *occluded(PyObject *self, PyObject *args)
 static PyMethodDef methods[] = {
     {"load", load, METH_VARARGS, "load(path): open the Embree 4 library at path (once)."},
     {"new_scene", new_scene, METH_NOARGS, "new_scene() -> an empty robust scene."},
+    {"buffers", buffers, METH_VARARGS,
+     "buffers(vertices (n, 3) float64, center (3,) float64, faces (m, 3) int64) -> (vertices (n, 4) float32, "
+     "faces (m, 3) int32): the arrays add() shares, vertices less center."},
     {"add", add, METH_VARARGS, "add(scene, vertices (n, 4) float32, faces (m, 3) int32): a shared triangle geometry."},
     {"commit", commit, METH_VARARGS, "commit(scene): build the tree."},
     {"occluded", occluded, METH_VARARGS, "occluded(scene, origins, directions, out): whether each ray hits."},

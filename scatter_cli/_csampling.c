@@ -99,10 +99,13 @@ PyDoc_STRVAR(areas_doc,
 "range (the other kernels trust the faces this one has read).");
 
 /* (t1 - t0) x (t2 - t0) of face f: surface.face_cross. */
-static inline void face_cross(const Corners *c, npy_intp f, double x[3])
+static inline void face_cross(const Corners *c, npy_intp f, const double *center, double x[3])
 {
     double t[9], e1[3], e2[3];
     corners_of(c, f, t);
+    if (center) /* the corners less center first (visibility.py centres the scene) */
+        for (int k = 0; k < 9; k++)
+            t[k] -= center[k % 3];
     for (int k = 0; k < 3; k++) {
         e1[k] = t[3 + k] - t[k];
         e2[k] = t[6 + k] - t[k];
@@ -144,7 +147,7 @@ static PyObject *areas(PyObject *self, PyObject *args)
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp f = 0; f < n; f++) {
         double x[3];
-        face_cross(&c, f, x);
+        face_cross(&c, f, NULL, x);
         if (m) { /* surface.apply_matrix */
             double y[3];
             for (int k = 0; k < 3; k++) {
@@ -164,25 +167,27 @@ static PyObject *areas(PyObject *self, PyObject *args)
 }
 
 PyDoc_STRVAR(unit_normals_doc,
-"unit_normals(vertices, faces, out)\n\n"
-"The unit normal of each face (F, 3) int64 of vertices (V, 3) float64 into out (F, 3)\n"
-"float64, zero where it is not finite: visibility.face_normals, operation for operation.\n"
-"Raises ValueError for a vertex index out of range.");
+"unit_normals(vertices, faces, out, center)\n\n"
+"The unit normal of each face (F, 3) int64 of vertices (V, 3) float64 less center (3,)\n"
+"float64 into out (F, 3) float64, zero where it is not finite: visibility.face_normals,\n"
+"operation for operation. Raises ValueError for a vertex index out of range.");
 
 static PyObject *unit_normals(PyObject *self, PyObject *args)
 {
-    PyObject *overts, *ofaces, *oout;
-    PyArrayObject *out_a;
+    PyObject *overts, *ofaces, *oout, *ocenter;
+    PyArrayObject *out_a, *center_a;
     Corners c;
-    if (!PyArg_ParseTuple(args, "OOO", &overts, &ofaces, &oout) || !get(oout, NPY_FLOAT64, -1, &out_a, "out") ||
+    if (!PyArg_ParseTuple(args, "OOOO", &overts, &ofaces, &oout, &ocenter) ||
+        !get(oout, NPY_FLOAT64, -1, &out_a, "out") || !get(ocenter, NPY_FLOAT64, 3, &center_a, "center") ||
         !get_faces(overts, ofaces, PyArray_SIZE(out_a) / 3, &c))
         return NULL;
     npy_intp n = PyArray_SIZE(out_a) / 3;
     double *out = PyArray_DATA(out_a);
+    const double *center = PyArray_DATA(center_a);
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp f = 0; f < n; f++) {
         double x[3];
-        face_cross(&c, f, x);
+        face_cross(&c, f, center, x);
         double s = x[0] * x[0] + x[1] * x[1];
         s += x[2] * x[2];
         s = sqrt(s);

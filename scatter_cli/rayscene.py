@@ -63,18 +63,19 @@ class RayScene:
             raise ScatterError(INSTALL_HINT) from None
         self._scene = rtcore_scene.EmbreeScene(robust=True)  # watertight: no ray slips between two faces
 
-    def add(self, vertices, faces):
-        """Add the triangles ``faces`` (m, 3) int of ``vertices`` (n, 3) (cast to float32)."""
+    def add(self, vertices, faces, center):
+        """Add the triangles ``faces`` (m, 3) int of ``vertices`` (n, 3) float64 less
+        ``center`` (3,) float64, cast to float32."""
         if self._c is not None:
-            v = np.zeros((len(vertices), 4), np.float32)  # Embree reads 16 bytes a vertex
-            v[:, :3] = vertices
-            f = np.ascontiguousarray(faces, dtype=np.int32)
+            v, f = self._c.buffers(np.ascontiguousarray(vertices, np.float64), np.asarray(center, np.float64),
+                                   np.ascontiguousarray(faces, np.int64))
             self._keep += [v, f]
             self._c.add(self._scene, v, f)
         else:
             from embreex.mesh_construction import TriangleMesh
 
-            TriangleMesh(self._scene, np.asarray(vertices, np.float32), np.asarray(faces, np.int32))
+            local = (vertices - center).astype(np.float32)
+            TriangleMesh(self._scene, local, np.asarray(faces, np.int32))
 
     def commit(self):
         """Build the tree (Embree's threads)."""

@@ -51,17 +51,19 @@ def rotate(q, v) -> np.ndarray:
     return v + w * t + np.cross(xyz, t)
 
 
-def face_normals(vertices, faces) -> np.ndarray:
-    """(m, 3) float64 unit normals of ``faces`` (m, 3) int64 of ``vertices`` (n, 3) float64,
-    zero where undefined: the values ``np.cross`` and ``np.linalg.norm`` give (the kernel
-    ``_csampling.unit_normals`` gives the same, on the worker threads)."""
+def face_normals(vertices, faces, center=None) -> np.ndarray:
+    """(m, 3) float64 unit normals of ``faces`` (m, 3) int64 of ``vertices`` (n, 3) float64
+    less ``center`` (3,) (default: none), zero where undefined: the values ``np.cross`` and
+    ``np.linalg.norm`` give (the kernel ``_csampling.unit_normals`` gives the same, on the
+    worker threads)."""
+    center = np.zeros(3) if center is None else np.asarray(center, dtype=np.float64)
     if _kernel is not None:
         out = np.empty((len(faces), 3))
         vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         faces = np.ascontiguousarray(faces, dtype=np.int64)
-        in_blocks(lambda i, j: _kernel.unit_normals(vertices, faces[i:j], out[i:j]), len(faces))
+        in_blocks(lambda i, j: _kernel.unit_normals(vertices, faces[i:j], out[i:j], center), len(faces))
         return out
-    return _numpy_face_normals(vertices, faces)
+    return _numpy_face_normals(vertices - center, faces)
 
 
 def _numpy_face_normals(vertices, faces):
@@ -112,17 +114,16 @@ class Occluder:
         self.normals = np.zeros((int(self.offsets[-1]), 3))
         radius = 0.0
         for k, (v, f, (vlo, vhi, finite)) in enumerate(zip(world, faces, boxes)):
-            local = v - self.center
-            self.normals[self.offsets[k]:self.offsets[k + 1]] = face_normals(local, f)
-            if finite is None:  # every vertex finite: the box's corners bound |local| (rounding is monotonic)
+            self.normals[self.offsets[k]:self.offsets[k + 1]] = face_normals(v, f, self.center)
+            if finite is None:  # every vertex finite: the box's corners bound |v - center| (rounding is monotonic)
                 if len(f):
                     radius = max(radius, float(np.abs([vlo - self.center, vhi - self.center]).max()))
-                    self.scene.add(local, f)
+                    self.scene.add(v, f, self.center)
                 continue
             good = finite[f].all(axis=1)
             if good.any():
-                radius = max(radius, float(np.abs(local[finite]).max()))
-                self.scene.add(np.where(finite[:, None], local, 0.0), f[good])
+                radius = max(radius, float(np.abs(v[finite] - self.center).max()))
+                self.scene.add(np.where(finite[:, None], v, self.center), f[good], self.center)  # (others at 0)
         self.radius = radius
         self._world = [(v, f, inst.geometry, surface.geometries[inst.geometry].vertices)
                        for v, f, inst in zip(world, faces, surface.instances)]

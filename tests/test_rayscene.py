@@ -36,14 +36,14 @@ def scenes(monkeypatch, meshes, drop_last=False):
     ``drop_last``: the kernel's scene misses the last face of the last mesh (broken)."""
     fast = rayscene.RayScene()
     for k, (v, f) in enumerate(meshes):
-        fast.add(v, f[:-1] if drop_last and k == len(meshes) - 1 else f)
+        fast.add(v, f[:-1] if drop_last and k == len(meshes) - 1 else f, np.zeros(3))
     fast.commit()
     with monkeypatch.context() as m:
         m.setattr(rayscene, "_compiled", lambda: None)
         slow = rayscene.RayScene()
     assert fast._c is not None and slow._c is None
     for v, f in meshes:
-        slow.add(v, f)
+        slow.add(v, f, np.zeros(3))
     slow.commit()
     return fast, slow
 
@@ -122,17 +122,37 @@ def numpy_normals(v, f):
     return np.where(np.isfinite(n), n, 0.0)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_face_normals_kernel_is_numpys_bit_for_bit(seed, monkeypatch):
+@pytest.mark.parametrize("seed, center", [(0, None), (1, None), (2, None), (0, [0.3, -1e150, 7.0]), (1, [1.0, 1.0, 1.0])])
+def test_face_normals_kernel_is_numpys_bit_for_bit(seed, center, monkeypatch):
+    """The normals of the faces less a centre (none, one far off, one at a vertex)."""
     v, f = awkward_mesh(seed)
     assert visibility._kernel is not None
     with np.errstate(all="ignore"):
-        fast = visibility.face_normals(v, f)
+        fast = visibility.face_normals(v, f, center)
         monkeypatch.setattr(visibility, "_kernel", None)
-        slow = visibility.face_normals(v, f)
-        want = numpy_normals(v, f)
+        slow = visibility.face_normals(v, f, center)
+        want = numpy_normals(v - (0.0 if center is None else np.array(center)), f)
     assert fast.tobytes() == slow.tobytes() == np.ascontiguousarray(want).tobytes()
-    assert np.all(fast[:2] == 0) and np.any(fast != 0)
+    assert np.any(fast != 0) and (center is not None or np.all(fast[:2] == 0))
+
+
+def test_buffers_are_numpys_float32_of_the_vertices_less_the_centre():
+    """The arrays the kernel shares with Embree: (v - center) as float32 (NaN, inf, huge and
+    tiny coordinates), a zero fourth column, the indices as int32; an index out of range
+    is refused."""
+    v, f = awkward_mesh(3)
+    center = np.array([0.25, -3e38, 1e-300])
+    with np.errstate(all="ignore"):
+        v4, f32 = COMPILED.buffers(v, center, f)
+        want = (v - center).astype(np.float32)
+    assert v4.shape == (len(v), 4) and v4[:, :3].tobytes() == want.tobytes() and not v4[:, 3].any()
+    assert f32.dtype == np.int32 and np.array_equal(f32, f)
+    assert COMPILED.buffers(v, center + 1.0, f)[0][:, :3].tobytes() != want.tobytes()  # (the check can fail)
+    for bad in (len(v), -1):
+        g = f.copy()
+        g[7, 2] = bad
+        with pytest.raises(ValueError, match="out of range"):
+            COMPILED.buffers(v, center, g)
 
 
 def test_normals_with_the_edges_swapped_fail_the_same_check():
@@ -153,7 +173,9 @@ def test_kernels_refuse_bad_arrays():
     with pytest.raises(TypeError):
         COMPILED.occluded(scene, np.zeros((2, 3), np.float32), np.zeros((1, 3), np.float32), np.empty(2, bool))
     with pytest.raises(ValueError, match="out of range"):
-        visibility._kernel.unit_normals(np.zeros((3, 3)), np.array([[0, 1, 3]]), np.empty((1, 3)))
+        visibility._kernel.unit_normals(np.zeros((3, 3)), np.array([[0, 1, 3]]), np.empty((1, 3)), np.zeros(3))
+    with pytest.raises(TypeError):
+        visibility._kernel.unit_normals(np.zeros((3, 3)), np.array([[0, 1, 2]]), np.empty((1, 3)), np.zeros(2))
 
 
 def test_a_library_that_does_not_load_falls_back_to_embreex(monkeypatch):
