@@ -107,6 +107,8 @@ def main():
         for name, mesh in scenes(tmp).items():
             for n in counts:
                 plain, ext, build, bvh, passes, encl, rays, frac = [], [], [], [], [], [], [], []
+                for exterior in (False, True):  # a warm-up of each, not counted
+                    run(mesh, n, tmp / "o.ply", exterior, tmp / "s.json")
                 for _ in range(opts.repeats):  # alternate, so that load drifts hit both alike
                     wall, _ = run(mesh, n, tmp / "o.ply", False, tmp / "s.json")
                     plain.append(wall)

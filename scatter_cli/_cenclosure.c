@@ -526,12 +526,16 @@ typedef struct {
 
 static void *mark_share(void *arg)
 {
-    Share *w = arg;
-    const Grid *g = w->sc->g;
-    const int64_t *n = w->n, *base = w->base, e1 = n[1] + 1, e2 = n[2] + 1;
-    for (int64_t t = w->s0; t < w->s1 && w->ok; t++) {
+    /* on copies: the threads' Share and Crossings lie side by side, and writing them at
+     * every face would make the threads fight over their cache lines */
+    Share me = *(Share *)arg;
+    Crossings cross = *me.cross;
+    const Grid *g = me.sc->g;
+    const int64_t *n = me.n, *base = me.base, e1 = n[1] + 1, e2 = n[2] + 1;
+    int ok = me.ok;
+    for (int64_t t = me.s0; t < me.s1 && ok; t++) {
         double c[3][3], lo[3], hi[3], qc[3][3], qlo[3], qhi[3];
-        corners(w->sc, t, c, lo, hi);
+        corners(me.sc, t, c, lo, hi);
         scaled(g, c, qc, qlo, qhi);
         double span = hi[0] - lo[0];
         span = hi[1] - lo[1] > span ? hi[1] - lo[1] : span;
@@ -541,11 +545,11 @@ static void *mark_share(void *arg)
                 int64_t at[3];
                 for (int k = 0; k < 3; k++)
                     at[k] = clip(floor_i64(qc[v][k]) - base[k], 0, n[k] - 1);
-                w->point[(at[0] * n[1] + at[1]) * n[2] + at[2]] = 1;
+                me.point[(at[0] * n[1] + at[1]) * n[2] + at[2]] = 1;
             }
         } else {
-            if (!w->diff && !(w->diff = calloc((size_t)((n[0] + 1) * e1 * e2), sizeof(int32_t)))) {
-                w->ok = 0;
+            if (!me.diff && !(me.diff = calloc((size_t)((n[0] + 1) * e1 * e2), sizeof(int32_t)))) {
+                ok = 0;
                 break;
             }
             int64_t a[3], b[3];
@@ -557,11 +561,14 @@ static void *mark_share(void *arg)
             for (int corner = 0; corner < 8; corner++) {
                 int64_t x = corner & 1 ? b[0] : a[0], y = corner & 2 ? b[1] : a[1], z = corner & 4 ? b[2] : a[2];
                 int picked = (corner & 1) + ((corner >> 1) & 1) + ((corner >> 2) & 1);
-                w->diff[(x * e1 + y) * e2 + z] += picked % 2 ? -1 : 1;
+                me.diff[(x * e1 + y) * e2 + z] += picked % 2 ? -1 : 1;
             }
         }
-        w->ok = cross_face(w->sc, c, qlo, qhi, w->bit, w->cross, w->unsure);
+        ok = cross_face(me.sc, c, qlo, qhi, me.bit, &cross, me.unsure);
     }
+    Share *w = arg;
+    w->diff = me.diff, w->ok = ok;
+    *w->cross = cross;
     return NULL;
 }
 
