@@ -130,13 +130,15 @@ static void unite(int64_t *root, int64_t a, int64_t b)
         root[a] = b;
 }
 
-/* What parts() shares between its two jobs: the unions (and then the roots, their
- * numbers and each face's part) on one thread, the edges bucketed by their smaller
- * vertex (and then each vertex's odd edges) on the other. */
+/* What parts() shares between its threads. First the unions (then the roots and their
+ * numbers) on one, the edges counted by their smaller vertex on the other, for each half
+ * of the faces; then each half's edges into the buckets on a thread each; then, split by
+ * vertices and faces, each vertex's odd edges and each face's part. */
 typedef struct {
     const int64_t *ids, *f; /* ids NULL: each vertex its own id */
     int64_t nf, size, count;
-    int64_t *root, *start, *rank, *part;
+    int64_t *root, *rank, *part;
+    int64_t *cursor[2]; /* (size,) each: the edges of a half of the faces counted, then where they go */
     uint32_t *other;
     uint8_t *odd;
 } Parts;
@@ -162,22 +164,22 @@ static void union_job(Parts *w)
     w->count = count;
 }
 
-static void bucket_job(Parts *w)
+/* the edge-uses of half h of the faces: i0 .. i1 - 1 */
+static inline void half(const Parts *w, int h, int64_t *i0, int64_t *i1)
 {
-    int64_t *start = w->start;
-    for (int64_t i = 0; i < 3 * w->nf; i++) {
-        int64_t a = vid(w, i), b = vid(w, i % 3 == 2 ? i - 2 : i + 1);
-        start[(a < b ? a : b) + 1]++;
+    *i0 = h ? 3 * (w->nf / 2) : 0, *i1 = h ? 3 * w->nf : 3 * (w->nf / 2);
+}
+
+static void count_job(Parts *w)
+{
+    for (int h = 0; h < 2; h++) {
+        int64_t i0, i1, *count = w->cursor[h];
+        half(w, h, &i0, &i1);
+        for (int64_t i = i0; i < i1; i++) {
+            int64_t a = vid(w, i), b = vid(w, i % 3 == 2 ? i - 2 : i + 1);
+            count[a < b ? a : b]++;
+        }
     }
-    for (int64_t i = 0; i < w->size; i++)
-        start[i + 1] += start[i];
-    for (int64_t i = 0; i < 3 * w->nf; i++) {
-        int64_t a = vid(w, i), b = vid(w, i % 3 == 2 ? i - 2 : i + 1);
-        w->other[start[a < b ? a : b]++] = (uint32_t)(a < b ? b : a);
-    }
-    for (int64_t i = w->size; i > 0; i--)
-        start[i] = start[i - 1];
-    start[0] = 0;
 }
 
 static void parts_first(void *arg, int k, int count)
@@ -186,7 +188,30 @@ static void parts_first(void *arg, int k, int count)
     if (k == 0)
         union_job(arg);
     else
-        bucket_job(arg);
+        count_job(arg);
+}
+
+/* the buckets: vertex a's from the end of a - 1's (the first half's edges first) */
+static void bucket_starts(Parts *w)
+{
+    int64_t at = 0;
+    for (int64_t a = 0; a < w->size; a++) {
+        int64_t n0 = w->cursor[0][a], n1 = w->cursor[1][a];
+        w->cursor[0][a] = at, w->cursor[1][a] = at + n0;
+        at += n0 + n1;
+    }
+}
+
+static void fill_half(void *arg, int h, int count)
+{
+    (void)count;
+    Parts *w = arg;
+    int64_t i0, i1, *cursor = w->cursor[h];
+    half(w, h, &i0, &i1);
+    for (int64_t i = i0; i < i1; i++) {
+        int64_t a = vid(w, i), b = vid(w, i % 3 == 2 ? i - 2 : i + 1);
+        w->other[cursor[a < b ? a : b]++] = (uint32_t)(a < b ? b : a);
+    }
 }
 
 static int cmp_u32(const void *p, const void *q)
@@ -218,9 +243,9 @@ static void parts_second(void *arg, int k, int count)
     Parts *w = arg;
     int64_t a0, a1, i0, i1;
     share(w->size, k, count, &a0, &a1);
-    for (int64_t a = a0; a < a1; a++) {
-        uint32_t *b = w->other + w->start[a];
-        int64_t n = w->start[a + 1] - w->start[a];
+    for (int64_t a = a0; a < a1; a++) { /* (the second half's cursors now end the buckets) */
+        int64_t begin = a ? w->cursor[1][a - 1] : 0, n = w->cursor[1][a] - begin;
+        uint32_t *b = w->other + begin;
         sort_small(b, n);
         uint8_t odd = 0;
         for (int64_t j = 0; j < n;) {
@@ -287,23 +312,26 @@ static PyObject *parts(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "parts: more than 2**32 - 1 vertices");
         return NULL;
     }
-    Parts w = {ids, f, nf, size, 0, malloc(sizeof(int64_t) * (size_t)size), calloc((size_t)size + 1, sizeof(int64_t)),
-               malloc(sizeof(int64_t) * (size_t)size), NULL, malloc(sizeof(uint32_t) * 3 * (size_t)nf),
-               malloc((size_t)size)};
+    Parts w = {ids, f, nf, size, 0, malloc(sizeof(int64_t) * (size_t)size), malloc(sizeof(int64_t) * (size_t)size),
+               NULL, {calloc((size_t)size, sizeof(int64_t)), calloc((size_t)size, sizeof(int64_t))},
+               malloc(sizeof(uint32_t) * 3 * (size_t)nf), malloc((size_t)size)};
     uint8_t *closed = NULL;
     PyArrayObject *part_a = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){nf}, NPY_INT64);
-    if (!w.root || !w.start || !w.rank || !w.other || !w.odd || !part_a) {
-        free(w.root), free(w.start), free(w.rank), free(w.other), free(w.odd);
+    if (!w.root || !w.rank || !w.cursor[0] || !w.cursor[1] || !w.other || !w.odd || !part_a) {
+        free(w.root), free(w.rank), free(w.cursor[0]), free(w.cursor[1]), free(w.other), free(w.odd);
         Py_XDECREF(part_a);
         return PyErr_NoMemory();
     }
     w.part = PyArray_DATA(part_a);
     int jobs = nf < THREAD_FACES ? 1 : threads < 1 ? 1 : threads;
     Py_BEGIN_ALLOW_THREADS
-    if (jobs > 1)
-        in_parallel(2, parts_first, &w);
-    else
-        union_job(&w), bucket_job(&w);
+    in_parallel(jobs > 1 ? 2 : 1, parts_first, &w);
+    if (jobs == 1)
+        count_job(&w);
+    bucket_starts(&w);
+    in_parallel(jobs > 1 ? 2 : 1, fill_half, &w);
+    if (jobs == 1)
+        fill_half(&w, 1, 1);
     in_parallel(jobs, parts_second, &w);
     if ((closed = malloc((size_t)w.count ? (size_t)w.count : 1))) {
         memset(closed, 1, (size_t)w.count);
@@ -312,7 +340,7 @@ static PyObject *parts(PyObject *self, PyObject *args)
                 closed[w.rank[w.root[a]]] = 0;
     }
     Py_END_ALLOW_THREADS
-    free(w.root), free(w.start), free(w.rank), free(w.other), free(w.odd);
+    free(w.root), free(w.rank), free(w.cursor[0]), free(w.cursor[1]), free(w.other), free(w.odd);
     PyArrayObject *closed_a = closed ? (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){w.count}, NPY_BOOL) : NULL;
     if (!closed_a) {
         free(closed);
