@@ -85,9 +85,9 @@ _MALLOPT = ((_M_MMAP_THRESHOLD, 32 << 20), (_M_TRIM_THRESHOLD, 1 << 30))
 
 def keep_freed_memory():
     """Tell glibc's allocator to keep freed memory for reuse (nothing elsewhere, or when
-    the user has set MALLOC_MMAP_THRESHOLD_ or MALLOC_TRIM_THRESHOLD_)."""
-    if not sys.platform.startswith("linux") or any(k in os.environ for k in ("MALLOC_MMAP_THRESHOLD_",
-                                                                             "MALLOC_TRIM_THRESHOLD_")):
+    the user tunes it: MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_, or malloc settings
+    in GLIBC_TUNABLES)."""
+    if not sys.platform.startswith("linux") or _malloc_tuned(os.environ):
         return
     import ctypes
 
@@ -98,6 +98,10 @@ def keep_freed_memory():
         return
     for param, value in _MALLOPT:
         mallopt(param, value)
+
+
+def _malloc_tuned(env) -> bool:
+    return "MALLOC_MMAP_THRESHOLD_" in env or "MALLOC_TRIM_THRESHOLD_" in env or "malloc" in env.get("GLIBC_TUNABLES", "")
 
 
 def run_command(command, argv):

@@ -24,8 +24,9 @@ print(faults)
 """
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux") or any(k.startswith("MALLOC_") for k in os.environ),
-                    reason="glibc's mallopt, not overridden by MALLOC_* variables")
+@pytest.mark.skipif(not sys.platform.startswith("linux") or any(k.startswith("MALLOC_") for k in os.environ)
+                    or "malloc" in os.environ.get("GLIBC_TUNABLES", ""),
+                    reason="glibc's mallopt, with glibc's own defaults (no MALLOC_* or GLIBC_TUNABLES malloc settings)")
 def test_freed_memory_is_reused_without_faults():
     """After keep_freed_memory, arrays of growing size (8 to 24 MB, each freed before the
     next) reuse the pages of the ones before: faults only where the heap grows (about
@@ -35,3 +36,24 @@ def test_freed_memory_is_reused_without_faults():
     faults = {mode: int(run_user([sys.executable, "-c", REUSE, mode], env=env, check=True).stdout)
               for mode in ("keep", "default")}
     assert faults["keep"] < faults["default"] / 2, faults
+
+
+def test_a_users_own_malloc_settings_are_left_alone(monkeypatch):
+    """MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_ or GLIBC_TUNABLES malloc settings: no
+    mallopt call (the user's choice stands); other variables do not count."""
+    from scatter_cli import process
+
+    calls = []
+    monkeypatch.setattr("ctypes.CDLL", lambda name: type("Libc", (), {"mallopt": lambda self, *a: calls.append(a)})())
+    for env, expected in [({}, 2), ({"MALLOC_TRIM_THRESHOLD_": "0"}, 0), ({"MALLOC_MMAP_THRESHOLD_": "1"}, 0),
+                          ({"GLIBC_TUNABLES": "glibc.malloc.trim_threshold=0"}, 0),
+                          ({"GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2"}, 2)]:
+        calls.clear()
+        with monkeypatch.context() as m:
+            for k in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_", "GLIBC_TUNABLES"):
+                m.delenv(k, raising=False)
+            for k, v in env.items():
+                m.setenv(k, v)
+            m.setattr(process.sys, "platform", "linux")
+            process.keep_freed_memory()
+        assert len(calls) == expected, env
