@@ -251,3 +251,25 @@ def test_same_faces_with_many_shells(others, monkeypatch):
         assert same(kernel, numpy_out)
         enclosed = kernel[2]
         assert enclosed[centre].all() and wall_side.sum() == 12 and not enclosed[wall_side].any()
+
+
+def test_same_faces_for_many_parts_split_between_threads(monkeypatch):
+    """400 small boxes (192 faces each, some turned, some crossing the big box's wall or
+    each other) in a big box, as a triangle soup: 77,000 faces, so parts and certificate
+    are split between threads with runs of faces cut at the threads' bounds. The same parts
+    and faces as NumPy on 1, 2 and 3 threads."""
+    rng = np.random.default_rng(5)
+    parts = [es.cuboid([-2, -2, -2], [2, 2, 2], step=1.0)]
+    for _ in range(400):
+        c, h = rng.uniform(-2.1, 2.1, 3), rng.uniform(0.02, 0.12)
+        box = c - h + es.cuboid([0, 0, 0], [1, 1, 1], step=0.25) * 2 * h
+        parts.append((box - c) @ random_rotation(rng).T + c if rng.random() < 0.5 else box)
+    v, f = soup(np.concatenate(parts))
+    assert len(f) > 65536
+    expected = None
+    for threads in ("1", "2", "3"):
+        monkeypatch.setenv("SCATTER_THREADS", threads)
+        kernel, numpy_out = both_paths(v, f, monkeypatch)
+        expected = numpy_out if expected is None else expected
+        assert same(kernel, expected), threads
+    assert 0 < expected[2].sum() < len(f) - len(parts[0]) and len(expected[1]) == 401
