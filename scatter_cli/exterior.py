@@ -92,9 +92,9 @@ class ExteriorSource:
         faces_total = len(occluder.normals)
         hit_faces = np.zeros(faces_total, dtype=bool)
         tried_faces = np.zeros(faces_total, dtype=bool)
-        if occluder.enclosed is None:
-            rays += self._enclose_if_worth_it(count, limit)
         with ThreadPoolExecutor(max_workers=threads) as pool:
+            if occluder.enclosed is None:
+                rays += self._enclose_if_worth_it(pool, threads, count, limit)
             block = 0
             while (count is None or kept[-1] < count) and block * BLOCK < limit:
                 group = [b for b in range(block, block + self._blocks_to_go(count, kept[-1], block, threads))
@@ -137,17 +137,23 @@ class ExteriorSource:
             "seconds": time.perf_counter() - t,
         }
 
-    def _enclose_if_worth_it(self, count, limit):
+    def _enclose_if_worth_it(self, pool, threads, count, limit):
         """Find the enclosed faces when the hidden candidates that the first block
         predicts for the run justify it; the prediction counts the block's candidates
-        whose two normal rays are both blocked (a few of those may yet get out). Returns
-        the rays cast."""
+        whose two normal rays are both blocked (a few of those may yet get out; cast in
+        face order on the pool, as the pass casts them). Returns the rays cast."""
         stop = int(min(BLOCK, limit))
         if stop <= 0:
             return 0
         chunk = self.base.draw(0, stop)
-        blocked, rays = self.occluder.normals_blocked(chunk.points, self.occluder.face_normals(chunk.face, chunk.instance))
-        hidden = int(np.count_nonzero(blocked))
+        rows = self.occluder.rows(chunk.face, chunk.instance)
+        order = np.argsort(_face_buckets(rows, len(self.occluder.normals)), kind="stable")
+        points = np.take(chunk.points, order, axis=0)
+        normals = np.take(self.occluder.normals, rows[order], axis=0)
+        parts = list(pool.map(lambda i: self.occluder.normals_blocked(points[i], normals[i]),
+                              np.array_split(np.arange(stop), threads)))
+        hidden = sum(int(np.count_nonzero(blocked)) for blocked, _ in parts)
+        rays = sum(r for _, r in parts)
         total = limit if count is None else min(limit, count * stop / max(stop - hidden, 1))
         if hidden and hidden / stop * total * ENCLOSE_FACES_PER_HIDDEN >= len(self.occluder.normals):
             t = time.perf_counter()
