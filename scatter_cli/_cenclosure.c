@@ -783,7 +783,8 @@ typedef struct {
 
 typedef struct {
     const Scene *sc;
-    const uint8_t *fin;
+    uint8_t *fin;
+    double limit;
     const int64_t *starts;
     int64_t runs, nf;
     double *slo, *shi;
@@ -814,7 +815,12 @@ static void box_share(void *arg, int k, int count)
         uint8_t fin = 1;
         for (int64_t s = s0; s < s1; s++) {
             corners(w->sc, s, c, lo, hi);
-            fin &= w->fin[s];
+            uint8_t usable = 1; /* no coordinate past the limit, none NaN */
+            for (int v = 0; v < 3; v++)
+                for (int d = 0; d < 3; d++)
+                    usable &= fabs(c[v][d]) <= w->limit;
+            w->fin[s] = usable;
+            fin &= usable;
             for (int d = 0; d < 3; d++) {
                 a[d] = s == s0 || lo[d] < a[d] ? lo[d] : a[d];
                 b[d] = s == s0 || hi[d] > b[d] ? hi[d] : b[d];
@@ -832,16 +838,17 @@ static void box_share(void *arg, int k, int count)
 }
 
 /* the shells: runs of faces in part order (starts (runs + 1,)) of a closed part whose faces
- * are all usable, with their boxes slo, shi (3 runs,), largest volume first,
- * with the boxes of every shell kept for the grid: returns how many */
-static int64_t find_shells(const Scene *sc, const int64_t *part, const uint8_t *closed, const uint8_t *fin,
+ * are all usable (fin (nf,): each face's corners within ``limit``, found here), with their
+ * boxes slo, shi (3 runs,), largest volume first, with the boxes of every shell kept for
+ * the grid: returns how many */
+static int64_t find_shells(const Scene *sc, const int64_t *part, const uint8_t *closed, uint8_t *fin, double limit,
                            const int64_t *starts, int64_t runs, int64_t nf, int threads, double *slo, double *shi,
                            uint8_t *isshell, Shell *shells)
 {
     Boxes *w = malloc(sizeof *w);
     if (!w)
         return -1;
-    *w = (Boxes){.sc = sc, .fin = fin, .starts = starts, .runs = runs, .nf = nf, .slo = slo, .shi = shi,
+    *w = (Boxes){.sc = sc, .fin = fin, .limit = limit, .starts = starts, .runs = runs, .nf = nf, .slo = slo, .shi = shi,
                  .runfin = isshell};
     int count = nf < THREAD_FACES ? 1 : threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
     in_parallel(count, box_share, w);
@@ -1004,9 +1011,8 @@ static int hidden_table(const Grid *g, const Crossings *cross, const uint64_t *p
 /* What certify's per-face steps share, each split between the threads */
 typedef struct {
     const Scene *sc;
-    int64_t nv, nf;
-    double limit;
-    uint8_t *usable, *fin, *maybe, *out;
+    int64_t nf;
+    uint8_t *fin, *maybe, *out;
     const int64_t *starts;
     const double *slo, *shi;
     const Shell *shells;
@@ -1014,28 +1020,6 @@ typedef struct {
     const int32_t *table;
     int64_t candidates[MAX_THREADS];
 } Faces;
-
-static void usable_share(void *arg, int k, int count)
-{
-    Faces *w = arg;
-    int64_t i0, i1;
-    share(w->nv, k, count, &i0, &i1);
-    for (int64_t i = i0; i < i1; i++) {
-        const double *p = w->sc->v + 3 * i;
-        w->usable[i] = fabs(p[0]) <= w->limit && fabs(p[1]) <= w->limit && fabs(p[2]) <= w->limit;
-    }
-}
-
-static void fin_share(void *arg, int k, int count)
-{
-    Faces *w = arg;
-    int64_t s0, s1;
-    share(w->nf, k, count, &s0, &s1);
-    for (int64_t s = s0; s < s1; s++) {
-        const int64_t *f = w->sc->f + 3 * face_at(w->sc, s);
-        w->fin[s] = w->usable[f[0]] && w->usable[f[1]] && w->usable[f[2]];
-    }
-}
 
 /* a face can be enclosed only by a shell other than its own whose box holds its box */
 static void maybe_share(void *arg, int k, int count)
@@ -1087,14 +1071,14 @@ static void final_share(void *arg, int k, int count)
 }
 
 /* enclosure.enclosed_faces into out (F,); 0 when out of memory */
-static int certify(const double *v, npy_intp nv, const int64_t *faces, const int64_t *part, npy_intp nf,
+static int certify(const double *v, const int64_t *faces, const int64_t *part, npy_intp nf,
                    const uint8_t *closed, double offset, int cells, int max_shells, const double *probe, double limit,
                    int threads, uint8_t *out)
 {
     int ok = 0, fail = 0;
     int64_t *sorted = NULL, *starts = NULL;
     double *slo = NULL, *shi = NULL;
-    uint8_t *usable = NULL, *fin = NULL, *maybe = NULL, *unsure = NULL, *isshell = NULL;
+    uint8_t *fin = NULL, *maybe = NULL, *unsure = NULL, *isshell = NULL;
     uint64_t *prefix = NULL;
     Cover cover = {NULL, 8};
     int32_t *table = NULL;
@@ -1106,16 +1090,13 @@ static int certify(const double *v, npy_intp nv, const int64_t *faces, const int
     for (npy_intp i = 0; i < nf; i++)
         np_ = part[i] + 1 > np_ ? part[i] + 1 : np_;
     sorted = part_order(part, nf, np_, &fail);
-    usable = malloc((size_t)nv + 1);
     fin = malloc((size_t)nf);
     maybe = calloc((size_t)nf, 1);
-    if (fail || !usable || !fin || !maybe)
+    if (fail || !fin || !maybe)
         goto done;
     Grid g;
     Scene sc = {v, faces, sorted, probe, &g};
-    Faces w = {.sc = &sc, .nv = nv, .nf = nf, .limit = limit, .usable = usable, .fin = fin, .maybe = maybe, .out = out};
-    in_parallel(nv < THREAD_FACES ? 1 : threads, usable_share, &w);
-    in_parallel(many, fin_share, &w);
+    Faces w = {.sc = &sc, .nf = nf, .fin = fin, .maybe = maybe, .out = out};
     for (npy_intp s = 0; s < nf; s++)
         runs += s == 0 || part[face_at(&sc, s)] != part[face_at(&sc, s - 1)];
     starts = malloc(sizeof(int64_t) * ((size_t)runs + 1));
@@ -1129,7 +1110,7 @@ static int certify(const double *v, npy_intp nv, const int64_t *faces, const int
         if (s == 0 || part[face_at(&sc, s)] != part[face_at(&sc, s - 1)])
             starts[r++] = s;
     starts[runs] = nf;
-    int64_t nshell = find_shells(&sc, part, closed, fin, starts, runs, nf, threads, slo, shi, isshell, shells);
+    int64_t nshell = find_shells(&sc, part, closed, fin, limit, starts, runs, nf, threads, slo, shi, isshell, shells);
     if (nshell < 0)
         goto done;
     w.used = nshell < max_shells ? (int)nshell : max_shells;
@@ -1175,7 +1156,7 @@ static int certify(const double *v, npy_intp nv, const int64_t *faces, const int
     in_parallel(many, final_share, &w);
     ok = 1;
 done:
-    free(sorted), free(starts), free(slo), free(shi), free(usable), free(fin), free(maybe), free(unsure);
+    free(sorted), free(starts), free(slo), free(shi), free(fin), free(maybe), free(unsure);
     free(isshell), free(cover.at), free(prefix), free(table), free(shells), free(cross.at);
     return ok;
 }
@@ -1219,7 +1200,7 @@ static PyObject *enclosed(PyObject *self, PyObject *args)
         Py_RETURN_NONE;
     int ok;
     Py_BEGIN_ALLOW_THREADS
-    ok = certify(PyArray_DATA(va), nv, f, part, nf, PyArray_DATA(ca), offset, cells, max_shells, probe, limit, threads,
+    ok = certify(PyArray_DATA(va), f, part, nf, PyArray_DATA(ca), offset, cells, max_shells, probe, limit, threads,
                  out);
     Py_END_ALLOW_THREADS
     if (!ok)
