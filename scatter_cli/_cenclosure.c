@@ -617,6 +617,18 @@ static void summed(int32_t *d, int64_t e0, int64_t e1, int64_t e2)
                 d[(x * e1 + y) * e2 + z] += d[((x - 1) * e1 + y) * e2 + z];
 }
 
+/* o (len) = m (len) OR, where they exist, the len bytes before m and after it */
+static void or_neighbours(uint8_t *o, const uint8_t *m, int64_t len, int before, int after)
+{
+    memcpy(o, m, (size_t)len);
+    if (before)
+        for (int64_t c = 0; c < len; c++)
+            o[c] |= m[c - len];
+    if (after)
+        for (int64_t c = 0; c < len; c++)
+            o[c] |= m[c + len];
+}
+
 /* mask (n) grown by one cell along each axis in turn (within n): the cells and their 26
  * neighbours; ``spare`` of the same size. Returns the grown mask (mask or spare). */
 static uint8_t *grow_cells(uint8_t *mask, uint8_t *spare, const int64_t *n)
@@ -631,29 +643,11 @@ static uint8_t *grow_cells(uint8_t *mask, uint8_t *spare, const int64_t *n)
         for (int64_t z = 0; z + 1 < row; z++)
             o[z] |= m[z + 1];
     }
-    for (int64_t x = 0; x < n[0]; x++) /* along y */
-        for (int64_t y = 0; y < n[1]; y++) {
-            const uint8_t *m = spare + x * slab + y * row;
-            uint8_t *o = mask + x * slab + y * row;
-            memcpy(o, m, (size_t)row);
-            if (y > 0)
-                for (int64_t z = 0; z < row; z++)
-                    o[z] |= m[z - row];
-            if (y + 1 < n[1])
-                for (int64_t z = 0; z < row; z++)
-                    o[z] |= m[z + row];
-        }
-    for (int64_t x = 0; x < n[0]; x++) { /* along x */
-        const uint8_t *m = mask + x * slab;
-        uint8_t *o = spare + x * slab;
-        memcpy(o, m, (size_t)slab);
-        if (x > 0)
-            for (int64_t c = 0; c < slab; c++)
-                o[c] |= m[c - slab];
-        if (x + 1 < n[0])
-            for (int64_t c = 0; c < slab; c++)
-                o[c] |= m[c + slab];
-    }
+    for (int64_t x = 0; x < n[0]; x++) /* along y: rows */
+        for (int64_t y = 0; y < n[1]; y++)
+            or_neighbours(mask + x * slab + y * row, spare + x * slab + y * row, row, y > 0, y + 1 < n[1]);
+    for (int64_t x = 0; x < n[0]; x++) /* along x: slabs */
+        or_neighbours(spare + x * slab, mask + x * slab, slab, x > 0, x + 1 < n[0]);
     return spare;
 }
 
