@@ -289,8 +289,8 @@ def select_objects(surface: Surface, names) -> Surface:
     wanted = set(names)
     known = {i.name for i in surface.instances} | {g.name for g in surface.geometries}
     missing = sorted(wanted - known)
-    if missing:
-        raise ScatterUsageError(
+    if missing:  # a failure of this mesh (another may have them), not a usage error
+        raise ScatterError(
             f"{surface.source}: no object named {', '.join(map(repr, missing))} "
             f"(objects: {', '.join(sorted(known)) or 'none'})"
         )
