@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from .attributes import AttributeMaker
-from .bounds import choose_precision, sampled_bounds
+from .bounds import choose_precision, normal_frame, output_bounds, sampled_bounds
 from .errors import ScatterUsageError
 from .options import SampleOptions, check_ascii
 from .pipeline import surface_source
@@ -37,7 +37,7 @@ class Run:
     """
 
     def __init__(self, source: Source, maker: AttributeMaker, dtype, chunk_size: int, info: dict, plan,
-                 shard=None):
+                 shard=None, frame=None):
         self.source = source
         self.maker = maker
         self.dtype = np.dtype(dtype)
@@ -47,6 +47,12 @@ class Run:
         self.plan = plan  # the used faces: bounds for LAS, the surface for USD
         self.surface = plan.surface
         self.shard = shard  # (K, M): the run writes only that part of its points
+        self.frame = frame  # (offset (3,), scale): points written as (p - offset) * scale (--normalize)
+
+    @property
+    def bounds(self):
+        """(2, 3) float64 box of the used faces' vertices in the output's frame."""
+        return output_bounds(self.plan, self.frame)
 
     @property
     def span(self):
@@ -73,7 +79,8 @@ class Run:
 
     def _job(self, start, stop):
         raw = self.source.draw(start, stop)
-        return Samples(raw.points.astype(self.dtype, copy=False), self.maker.make(raw, self.dtype))
+        points = raw.points if self.frame is None else (raw.points - self.frame[0]) * self.frame[1]
+        return Samples(points.astype(self.dtype, copy=False), self.maker.make(raw, self.dtype))
 
     def chunks(self, start=None, stop=None, *, threads=None):
         """Samples chunks of points ``start .. stop - 1`` (default: the run's span, all its
@@ -145,11 +152,14 @@ def prepare(mesh, count=None, *, options: SampleOptions | None = None, warn=None
         warn(message)
     maker = AttributeMaker(surface, o.attributes, o.seed)
     source, plan = surface_source(surface, o, maker.needs_bary, info, warn)
-    dtype = choose_precision(plan, o.precision, warn)
+    frame = normal_frame(plan, o.normalize)
+    if frame is not None:
+        info["normalize"] = {"mode": o.normalize, "offset": frame[0].tolist(), "scale": frame[1]}
+    dtype = choose_precision(output_bounds(plan, frame), o.precision, surface.source, warn)
     info["precision"] = dtype.name
     if o.shard is not None:
         info["shard"] = list(o.shard)
-    return Run(source, maker, dtype, o.chunk_size or plan.default_chunk, info, plan, o.shard)
+    return Run(source, maker, dtype, o.chunk_size or plan.default_chunk, info, plan, o.shard, frame)
 
 
 def sample(mesh, count=None, **options) -> Samples:
@@ -213,7 +223,7 @@ def output_options(run: Run, fmt: str) -> dict:
     :func:`~scatter_cli.writers.write_samples`): LAS the sampled bounding box, USD the
     input's up axis and units (when the surface carries them) and the point spacing."""
     if fmt in ("las", "laz"):
-        return {"bounds": sampled_bounds(run.plan)}
+        return {"bounds": run.bounds}
     if fmt == "usd":
         area = run.info["area"]
         return {"up_axis": getattr(run.surface, "up_axis", None),

@@ -73,11 +73,11 @@ def float32_error_bound(bounds) -> float:
     return float(np.sqrt(np.sum(half_ulp**2)))
 
 
-def choose_precision(plan, precision, warn=None):
-    """The output's coordinate dtype for ``--precision precision`` over ``plan``'s used faces."""
-    bounds = sampled_bounds(plan)
+def choose_precision(bounds, precision, source, warn=None):
+    """The output's coordinate dtype for ``--precision precision`` over ``bounds`` (2, 3),
+    the output's box (of the mesh ``source``)."""
     if precision == "float32" and math.isinf(float32_error_bound(bounds)):
-        raise ScatterError(f"{plan.surface.source}: coordinates beyond the float32 range; use --precision float64 or auto")
+        raise ScatterError(f"{source}: coordinates beyond the float32 range; use --precision float64 or auto")
     if precision != "auto":
         return np.dtype(precision)
     with np.errstate(over="ignore"):
@@ -89,3 +89,42 @@ def choose_precision(plan, precision, warn=None):
                  f"more than 1e-6 of the bounding-box diagonal ({diag:.6g})")
         return np.dtype(np.float64)
     return np.dtype(np.float32)
+
+
+NORMAL_FRAMES = ("unit-cube", "unit-sphere")
+
+
+def normal_frame(plan, mode):
+    """(offset (3,) float64, scale float) of ``--normalize mode``: output points are
+    ``(p - offset) * scale``, with offset the centre of the sampled box and the scale
+    that makes its largest side 2 (``unit-cube``) or puts the farthest used vertex at
+    distance 1 (``unit-sphere``). None for ``none``."""
+    if mode not in NORMAL_FRAMES:
+        return None
+    lo, hi = sampled_bounds(plan)
+    centre = (lo + hi) / 2
+    size = float(np.max(hi - lo)) / 2 if mode == "unit-cube" else farthest_distance(plan, centre)
+    if not (math.isfinite(size) and size > 0):
+        raise ScatterError(f"{plan.surface.source}: cannot --normalize {mode}: the sampled surface has no extent")
+    return centre, 1.0 / size
+
+
+def output_bounds(plan, frame=None):
+    """(2, 3) float64 box of the used faces' vertices in the output's frame (``frame``:
+    (offset, scale) of :func:`normal_frame`, or None for world space)."""
+    box = sampled_bounds(plan)
+    return box if frame is None else (box - frame[0]) * frame[1]
+
+
+def farthest_distance(plan, centre) -> float:
+    """Largest distance from ``centre`` (3,) to a world-space vertex the used faces reference."""
+    far = 0.0
+    for part in plan.parts:
+        if not part.count:
+            continue
+        g = plan.surface.geometries[plan.surface.instances[part.instance].geometry]
+        v = _referenced(g.vertices, g.faces if part.faces is None else g.faces[part.faces])
+        if part.matrix is not None:
+            v = v @ part.matrix[:3, :3].T + part.matrix[:3, 3]
+        far = max(far, float(np.sqrt(np.einsum("ij,ij->i", v - centre, v - centre)).max(initial=0.0)))
+    return far
