@@ -20,7 +20,7 @@ from .outputs import ASCII_FORMATS, ATTRIBUTES, FORMATS
 
 app = typer.Typer(
     add_completion=False,
-    no_args_is_help=True,
+    invoke_without_command=True,  # `scatter` alone: the usage line and a hint (_root)
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
     context_settings={"help_option_names": ["-h", "--help"]},
@@ -296,12 +296,27 @@ def _root(
     version: Annotated[bool, typer.Option("--version", is_eager=True, callback=_print_version, help="Print the version and exit.")] = False,
 ):
     ctx.ensure_object(process.Options).debug = debug
+    if ctx.invoked_subcommand is None:  # no command: say how to ask for help, exit 2
+        typer.echo(ctx.get_usage(), err=True)
+        typer.echo(f"Try '{ctx.command_path} --help' for the commands.", err=True)
+        raise typer.Exit(2)
+
+
+def command():
+    """The click command of ``scatter``, with usage lines as a user reads them: a required
+    argument is written ``MESH``, not ``{MESH}``."""
+    root = typer.main.get_command(app)
+    for cmd in [root, *getattr(root, "commands", {}).values()]:
+        for param in cmd.params:
+            if param.param_type_name == "argument" and param.required and param.metavar:
+                param.get_usage_pieces = lambda ctx, name=param.metavar: [name]
+    return root
 
 
 def main(argv=None) -> int:
     """Run ``scatter`` on ``argv`` (default: the process's arguments); returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    return process.run_command(typer.main.get_command(app), argv)
+    return process.run_command(command(), argv)
 
 
 def run():
