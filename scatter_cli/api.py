@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from .attributes import AttributeMaker
-from .bounds import choose_precision, normal_frame, output_bounds, sampled_bounds
+from .bounds import choose_precision, normal_frame, output_bounds, sampled_bounds  # noqa: F401 (api.sampled_bounds: the LAS box)
 from .errors import ScatterUsageError
 from .options import SampleOptions, check_ascii
 from .pipeline import surface_source

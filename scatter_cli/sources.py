@@ -41,7 +41,6 @@ from __future__ import annotations
 
 from typing import Protocol
 
-import numpy as np
 
 from .methods import SOBOL_MAX_COUNT, sobol_draws, stratified_draws
 from .sampling import RawChunk, SamplePlan

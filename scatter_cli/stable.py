@@ -29,7 +29,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from . import native
-from .errors import ScatterError, ScatterUsageError
+from .errors import ScatterError
 from .sampling import DEFAULT_CHUNK, LARGE_MESH_CHUNK, SORT_FACES, RawChunk, in_blocks, interpolate_corners
 from .surface import apply_matrix
 from .warps import square_to_triangle
@@ -676,7 +676,7 @@ class StableSource:
         tau = RADIUS_OVERSAMPLING / (math.sqrt(3) / 2 * radius * radius)
         expected = tau * self.rate
         if max_candidates is not None and expected > max_candidates:
-            raise ScatterUsageError(f"--radius {radius:g} is too small for {self.surface.source} (area "
+            raise ScatterError(f"--radius {radius:g} is too small for {self.surface.source} (area "
                                     f"{self.area:.6g}): thinning would need {expected:,.0f} candidates, more than "
                                     f"{max_candidates:,}")
         self.horizon = tau

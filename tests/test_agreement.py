@@ -34,6 +34,7 @@ SETS = {
     "radius too small for the mesh": (ICO, ["--radius", "1e-5"], "ply", 1),
     "stable": (ICO, ["--stable", "-a", "face"], "ply", 0),
     "stable radius": (ICO, ["--stable", "--radius", "0.3"], "ply", 0),
+    "stable radius too small for the mesh": (ICO, ["--stable", "--radius", "1e-5"], "ply", 1),
     "stratified": (ICO, ["--method", "stratified"], "xyz", 0),
     "sobol with bary": (ICO, ["--method", "sobol", "-a", "bary"], "npy", 0),
     "density": (ICO, ["--density", "5"], "ply", 0),
