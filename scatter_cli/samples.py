@@ -18,22 +18,6 @@ def column_layout(keys, real_dtype):
     return layout
 
 
-def parse_attributes(text_or_list):
-    """``"normal,face"`` or a list -> tuple of attribute names, validated."""
-    from .errors import ScatterUsageError
-
-    if not text_or_list:
-        return ()
-    items = text_or_list.split(",") if isinstance(text_or_list, str) else list(text_or_list)
-    names = tuple(dict.fromkeys(s.strip().lower() for s in items if s.strip()))
-    unknown = [n for n in names if n not in ATTRIBUTES]
-    if unknown:
-        raise ScatterUsageError(f"unknown attribute {', '.join(map(repr, unknown))} (choose from: {', '.join(ATTRIBUTES)})")
-    if "normal" in names and "smooth-normal" in names:
-        raise ScatterUsageError("'normal' and 'smooth-normal' both write nx ny nz: ask for one of them")
-    return names
-
-
 class Samples:
     """Points ``(n, 3)`` and one array per requested attribute.
 

@@ -4,6 +4,7 @@ the file is read (a large mesh is not loaded and planned only to be refused)."""
 import pytest
 
 from scatter_cli import api
+from scatter_cli.options import SampleOptions
 from scatter_cli.errors import ScatterUsageError
 
 from .conftest import run_scatter
@@ -19,6 +20,24 @@ WRONG_FOR_ANY_MESH = {
     "too many --poisson points": dict(count=10**8, poisson=True),
     "oversampling below 0": dict(poisson=True, oversampling=-2),
     "count and density": dict(count=10, density=1.0),
+    "a shard out of range": dict(shard="3/3"),
+    "a shard that is no K/M": dict(shard="half"),
+    "a shard with thinning": dict(shard=(0, 2), poisson=True),
+    "a bad normalization": dict(normalize="unit-ball"),
+    "--volume with --poisson": dict(volume=True, poisson=True),
+    "--volume with --radius": dict(volume=True, radius=0.1),
+    "--volume with --stable": dict(volume=True, stable=True),
+    "--volume with --exterior": dict(volume=True, exterior=True),
+    "--volume with --method sobol": dict(volume=True, method="sobol"),
+    "--volume with normals": dict(volume=True, attributes="sdf,normal"),
+    "--near with uv (it implies --volume)": dict(near="0.1", attributes=["uv"]),
+    "--near with --stable": dict(near=(0.1, 0.02), stable=True),
+    "a sigma of 0": dict(near="0.1,0"),
+    "a sigma that is no number": dict(near="wide"),
+    "a box share above 1": dict(volume=True, box_share=1.5),
+    "a negative padding": dict(volume=True, padding=-0.1),
+    "an unknown sign": dict(volume=True, sign="majority"),
+    "a volume attribute on a surface run": dict(attributes="inside"),
 }
 
 
@@ -44,3 +63,60 @@ def test_the_command_names_the_option_not_the_missing_file(tmp_path):
     proc = run_scatter("sample", tmp_path / "missing.ply", "--poisson", "--radius", 0.5)
     err = proc.stderr.decode()
     assert proc.returncode == 2 and err.startswith("error: give either --poisson") and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("options", list(WRONG_FOR_ANY_MESH.values()), ids=list(WRONG_FOR_ANY_MESH))
+def test_the_options_object_refuses_them_itself(options):
+    with pytest.raises(ScatterUsageError):
+        SampleOptions(**options).check()
+
+
+RIGHT = {
+    "defaults": {},
+    "volume with its settings": dict(volume=True, box_share=0.5, padding=0.0, sign="parity", attributes="sdf,inside"),
+    "near sigmas": dict(near="0.0707,0.0224", box_share=0.06, normalize="unit-sphere", attributes=["sdf"]),
+    "box share at its ends": dict(volume=True, box_share=0),
+    "shard as a pair": dict(shard=(1, 4), attributes=("normal", "face")),
+    "stable radius": dict(stable=True, radius=0.2, weight="texture:r"),
+}
+
+
+@pytest.mark.parametrize("options", list(RIGHT.values()), ids=list(RIGHT))
+def test_right_option_sets_pass_the_check(options):
+    assert SampleOptions(**options).check() == SampleOptions(**options)
+
+
+def test_options_travel_as_json_and_come_back_equal():
+    import json
+
+    o = SampleOptions(count=5, attributes="Normal, face", objects=["a", "b"], shard="1/3", near="0.1,0.02")
+    assert o.attributes == ("normal", "face") and o.shard == (1, 3) and o.near == (0.1, 0.02)
+    assert SampleOptions(**json.loads(json.dumps(o.as_dict()))) == o
+    assert SampleOptions.of({"count": 5, "quiet": True, "output": "x.ply"}) == SampleOptions(count=5)
+    with pytest.raises(TypeError):
+        SampleOptions(colour=True)  # an unknown keyword is a programming error, not an option
+
+
+def test_near_implies_volume_and_its_rules():
+    o = SampleOptions(near="0.1")
+    assert o.volume_run and not o.volume
+    with pytest.raises(ScatterUsageError, match="--poisson"):
+        SampleOptions(near="0.1", poisson=True).check()
+
+
+def test_the_command_line_and_the_options_share_their_defaults():
+    import inspect
+
+    from scatter_cli import cli
+
+    fields = {f: getattr(SampleOptions(), f) for f in SampleOptions.__dataclass_fields__}
+    shared = {}
+    for command in (cli.sample, cli.batch):
+        params = inspect.signature(command).parameters
+        shared[command.__name__] = {n for n in params if n in fields}
+        for name in shared[command.__name__]:
+            default = params[name].default
+            assert default is None or default == fields[name], (command.__name__, name, default)
+    assert shared["sample"] - {"input_format"} == shared["batch"]  # batch reads no standard input
+    # what the command line does not offer: the API's oversampling, and the volume options (not yet built)
+    assert set(fields) - shared["sample"] == {"oversampling", "volume", "near", "box_share", "padding", "sign"}

@@ -12,7 +12,10 @@ from hypothesis import strategies as st
 
 from scatter_cli import api
 from scatter_cli.sampling import SamplePlan
-from scatter_cli.sources import METHOD_SOURCES, ThinnedSource, make_source, thinned
+from scatter_cli.pipeline import plan_surface
+from scatter_cli.sources import METHOD_SOURCES, make_source
+from scatter_cli.sampling import RawChunk
+from scatter_cli.thinning import ThinnedSource, dart_thrown, thinned
 from scatter_cli.surface import load_surface
 
 from .conftest import SAMPLES
@@ -29,7 +32,7 @@ def surface(name):
 
 def _weighted(name, spec, want_bary):
     surface = load_surface(SAMPLES / name)  # its own: a weighting reads the file's colours
-    plan, weighting, area = api.plan_surface(surface, spec)
+    plan, weighting, area = plan_surface(surface, spec)
     return make_source(plan, N, 4, want_bary, weighting=weighting, area=area)
 
 
@@ -42,6 +45,27 @@ def _thinned(want_bary, radius=None):
     return thinned(candidates, None if radius else 300, radius)[0]
 
 
+def _stable(want_bary, **how):
+    from scatter_cli.stable import StableSource
+
+    return StableSource(surface("cesiummilktruck.glb"), 4, want_bary=want_bary, **how)
+
+
+def _dart_thrown(want_bary):
+    return dart_thrown(_stable(want_bary, radius=0.3), 0.3)
+
+
+def _exterior(want_bary, method="random", **how):
+    from scatter_cli.exterior import ExteriorSource, ExteriorSubset
+    from scatter_cli.visibility import Occluder
+
+    plan = SamplePlan(surface("cesiummilktruck.glb"))
+    occluder = Occluder(plan.surface)
+    if method == "stratified":
+        return ExteriorSubset(lambda m: METHOD_SOURCES[method](plan, m, 4, want_bary), occluder, 4, plan.area, N)
+    return ExteriorSource(METHOD_SOURCES[method](plan, N, 4, want_bary), occluder, 4, plan.area, **how)
+
+
 BUILDERS = {
     "random": lambda b: _method("random", b),
     "random, one mesh": lambda b: _method("random", b, "spot_triangulated.obj"),
@@ -51,7 +75,15 @@ BUILDERS = {
     "texture": lambda b: _weighted("boxtextured.glb", "texture:r", b),
     "thinned to a count": lambda b: _thinned(b),
     "thinned to a radius": lambda b: _thinned(b, radius=0.3),
+    "stable, N earliest": lambda b: _stable(b, count=N),
+    "stable, before a density": lambda b: _stable(b, density=40.0),
+    "stable, dart thrown": _dart_thrown,
+    "exterior, exactly N": lambda b: _exterior(b, count=N),
+    "exterior, among N candidates": lambda b: _exterior(b, candidates=N),
+    "exterior subset of stratified": lambda b: _exterior(b, "stratified"),
 }
+THINNED = {"thinned to a count", "thinned to a radius", "stable, dart thrown"}
+FILTERED = {"exterior, exactly N", "exterior, among N candidates", "exterior subset of stratified"}
 _built = {}
 
 
@@ -95,6 +127,21 @@ def test_barycentrics_only_when_asked(kind):
     without, with_bary = source(kind, False)[0].draw(5, 50), source(kind, True)[0].draw(5, 50)
     assert without.bary is None and with_bary.bary.shape == (45, 3)
     np.testing.assert_array_equal(with_bary.points, without.points)
+
+
+@pytest.mark.parametrize("kind", list(BUILDERS))
+def test_every_source_declares_what_callers_read(kind):
+    """The protocol's attributes, on every source: a caller reads them, it never sniffs."""
+    src = source(kind, False)[0]
+    assert isinstance(src.count, int) and src.count > 0 and src.area > 0
+    if kind in THINNED:
+        assert isinstance(src.kept, RawChunk) and len(src.kept.points) == src.count
+    else:
+        assert src.kept is None
+    if kind in FILTERED:
+        assert 0 < src.stats["exterior_fraction"] <= 1 and src.area == pytest.approx(src.stats["exterior_area"])
+    else:
+        assert src.stats is None
 
 
 def test_a_source_that_restarts_its_stream_fails_the_same_check():
@@ -148,3 +195,10 @@ def test_thinning_makes_a_new_source():
     assert isinstance(thin, ThinnedSource) and thin.count == info["count"] == 300
     assert candidates.count == info["candidates"] == 4000 and thin.candidates is candidates
     assert thin.area == candidates.area
+
+
+def test_a_run_reads_the_kept_points_from_its_source(runs):
+    assert runs["random"].kept is None and runs["stratified"].kept is None
+    kept = runs["poisson"].kept
+    assert len(kept.points) == runs["poisson"].count == 300
+    np.testing.assert_array_equal(kept.points, runs["poisson"].source.draw(0, 300).points)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from scatter_cli import stable
+from scatter_cli import stable, thinning
 from scatter_cli.stable import StableSource
 from scatter_cli.surface import load_surface
 
@@ -39,7 +39,7 @@ def run(mesh, seed=0, **kw):
     the candidates' source and the dart-thrown set)."""
     src = StableSource(load_surface(mesh), seed, want_bary=True, **kw)
     if "radius" in kw:
-        kept = stable.dart_thrown(src, kw["radius"])
+        kept = thinning.dart_thrown(src, kw["radius"])
         return src, kept.draw(0, kept.count)
     return src, src.draw(0, src.count)
 
