@@ -12,6 +12,10 @@ import numpy as np
 # Upper bound on the entries of one (faces x values) work matrix; each chunk
 # holds a handful of such temporaries, so this keeps them to tens of MB.
 CHUNK_ENTRIES = 1 << 21
+# Bisection steps between two narrowings of the faces each bracket involves.
+NARROW_EVERY = 2
+# Bisection steps of the slabs scatter check counts in.
+SLAB_ITERATIONS = 12
 
 # Unordered coordinate pairs for second central moments: xx, yy, zz, xy, xz, yz.
 COV_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -113,46 +117,75 @@ class _Sorted:
         return self.cum2[np.searchsorted(self.h2, t, side="right")]
 
 
-def _solve_heights(h, areas, targets, iterations, pad=0.0, budget=4 * CHUNK_ENTRIES):
+def _solve_heights(h, areas, targets, iterations, pad=0.0):
     """Heights (m,) where the area function reaches each of targets (m,), by
     vectorised bisection, and the area function for heights (m,) each no more
     than ``pad`` above its solution.  Each bracket only involves the faces
-    straddling it, so the work is those faces rather than all F per target."""
+    straddling it, and every few halvings the faces a bracket has left behind are
+    dropped (those wholly below it join its base area), so the work shrinks to the
+    faces that cross each solution."""
     lo0 = float(h[:, 0].min())
     extent = float(h[:, 2].max()) - lo0
     table = _Sorted(h, areas)
     lo, hi = table.bracket(targets, lo0 - extent)
-    # Straddling faces per target, concatenated: (face index, target index).
-    masks = [(h[:, 2] > l) & (h[:, 0] <= u + pad) for l, u in zip(lo.tolist(), hi.tolist())]
-    sizes = [int(m.sum()) for m in masks]
-    if sum(sizes) > budget:  # long faces everywhere: plain chunked evaluation
-        area_at = lambda t: _cdf_from_heights(h, areas, t)
-    else:
-        faces = np.concatenate([np.nonzero(m)[0] for m in masks]) if masks else np.zeros(0, np.intp)
-        owner = np.repeat(np.arange(len(targets)), sizes)
-        h_sel, a_sel = h[faces], areas[faces]
-        base = table.area_below(lo)
-
-        def area_at(t):
-            frac = _below_fraction(h_sel[:, 0], h_sel[:, 1], h_sel[:, 2], t[owner])
-            return base + np.bincount(owner, a_sel * frac, minlength=len(targets))
-
-    for _ in range(iterations):
+    base = table.area_below(lo)
+    owner, faces = _straddling(h, lo, hi + pad)
+    for step in range(iterations):
+        if step and step % NARROW_EVERY == 0:
+            owner, faces, base = _narrow(h, areas, owner, faces, base, lo, hi + pad)
         mid = 0.5 * (lo + hi)
-        below = area_at(mid) < targets
+        below = _area_at(h, areas, owner, faces, base, mid) < targets
         lo = np.where(below, mid, lo)
         hi = np.where(below, hi, mid)
-    return hi, area_at
+    owner, faces, base = _narrow(h, areas, owner, faces, base, lo, hi + pad)
+    return hi, lambda t: _area_at(h, areas, owner, faces, base, t)
 
 
-def _split(h, areas, k, iterations=48):
+def _straddling(h, lo, hi):
+    """(target (s,), face (s,)) int64 pairs of the faces that reach into each bracket
+    lo (m,) .. hi (m,): highest vertex above lo, lowest at or below hi."""
+    order = np.argsort(h[:, 0], kind="stable")
+    h0, h2 = h[order, 0], h[order, 2]
+    owners, faces = [], []
+    for k, (a, b) in enumerate(zip(lo.tolist(), hi.tolist())):  # a few dozen targets
+        top = int(np.searchsorted(h0, b, side="right"))
+        got = order[:top][h2[:top] > a]
+        faces.append(got)
+        owners.append(np.full(len(got), k, dtype=np.int64))
+    return np.concatenate(owners), np.concatenate(faces)
+
+
+def _narrow(h, areas, owner, faces, base, lo, hi):
+    """The pairs of :func:`_straddling` for the brackets lo .. hi inside the old ones,
+    and the base areas (m,) with the faces now wholly below lo added."""
+    h0, h2 = h[faces, 0], h[faces, 2]
+    below = h2 <= lo[owner]
+    base = base + np.bincount(owner[below], areas[faces[below]], minlength=len(lo))
+    keep = ~below & (h0 <= hi[owner])
+    return owner[keep], faces[keep], base
+
+
+def _area_at(h, areas, owner, faces, base, t):
+    """The area below heights t (m,): ``base`` (m,) plus the straddling faces' shares,
+    in blocks of CHUNK_ENTRIES pairs."""
+    out = base.copy()
+    for s in range(0, len(owner), CHUNK_ENTRIES):
+        o, f = owner[s : s + CHUNK_ENTRIES], faces[s : s + CHUNK_ENTRIES]
+        hf = h[f]
+        frac = _below_fraction(hf[:, 0], hf[:, 1], hf[:, 2], t[o])
+        out += np.bincount(o, areas[f] * frac, minlength=len(t))
+    return out
+
+
+def _split(h, areas, k, iterations=48, least_nudge=0.0):
     """Interior edges (k-1,) of k equal-area slabs over sorted heights h, and
-    the area below each edge."""
+    the area below each edge; an edge at a jump of the area sits at least
+    ``least_nudge`` above it."""
     lo0, hi0 = float(h[:, 0].min()), float(h[:, 2].max())
     extent = hi0 - lo0
     if extent <= 0:
         return np.full(k - 1, hi0), np.full(k - 1, areas.sum())
-    nudge = 1e-11 * extent + 1e-13 * max(abs(lo0), abs(hi0))
+    nudge = max(1e-11 * extent + 1e-13 * max(abs(lo0), abs(hi0)), least_nudge)
     hi, area_at = _solve_heights(h, areas, areas.sum() * np.arange(1, k) / k, iterations, pad=nudge)
     inner = np.minimum(hi + nudge, hi0)
     return inner, area_at(inner)
@@ -219,17 +252,39 @@ def slab_counts(points, d, edges):
     return np.bincount(idx, minlength=k)
 
 
-def slabs(tri, areas, directions, k):
-    """[(direction (3,), edges (k+1,), exact probabilities (k,))] for each of the
-    directions (m, 3): k equal-area slabs along each, as ``equal_area_slabs`` finds them."""
+def rounding(tri):
+    """How far a computed height of a point on the surface ``tri`` (F, 3, 3) may be from
+    the exact one: 2^-38 of the largest coordinate, thousands of ulps (a sampler's point
+    on a face lies within a few ulps of it, a height adds a few more)."""
+    return 2.0**-38 * max(float(np.abs(tri).max()), _TINY)
+
+
+def slabs(tri, areas, directions, k, iterations=SLAB_ITERATIONS):
+    """[(direction (3,), edges (j+1,), exact probabilities (j,))] for each of the
+    directions (m, 3): about k equal-area slabs along each, as ``equal_area_slabs``
+    finds them, made robust to rounding.
+
+    edges[0] and edges[j] are the lowest and highest heights of the surface. An interior
+    edge where the area jumps (a face flat in the direction) sits just above the flat
+    face, so the face's points fall below it whatever their rounding; interior edges
+    within :func:`rounding` of the highest height or of the edge below are dropped, so
+    that no slab of zero probability lies where a rounded point of the surface can
+    fall (j <= k). The bisection stops at 2^-iterations of its bracket: the edges only
+    need to be near equal-area, the probabilities are exact for the edges found.
+    """
     dirs = np.asarray(directions, dtype=float).reshape(-1, 3)
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     tri, areas, ref = _kept(tri, areas)
     total = areas.sum()
+    tol = rounding(tri)
     out = []
     for d in dirs:  # a handful of directions
         h, off = _heights(tri, ref, d)
-        inner, below = _split(h, areas, int(k))
+        inner, below = _split(h, areas, int(k), iterations, 2.0 * tol)
+        top = float(h[:, 2].max())
+        keep = inner < top - tol
+        keep[1:] &= np.diff(inner) > tol
+        inner, below = inner[keep], below[keep]
         below = np.maximum.accumulate(np.clip(below / total, 0.0, 1.0))
         prob = np.diff(np.concatenate(([0.0], below, [1.0])))
         out.append((d, _edges(h, inner) + off, prob))
