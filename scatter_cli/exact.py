@@ -4,7 +4,8 @@ slabs, moments and quadrature.
 A surface is ``tri`` ``(F, 3, 3) float64`` (vertex ``k`` of face ``f`` is ``tri[f, k]``)
 and ``areas`` ``(F,) float64``; faces of zero area contribute nothing. Everything is a
 closed form per triangle, vectorised over faces and points. Used by ``scatter check``
-(through :mod:`scatter_cli.uniformity`), ``scatter bench`` and the tests.
+(through :mod:`scatter_cli.uniformity`), ``scatter bench`` and the tests (tests/exact_reference.py
+holds what only the tests use).
 """
 
 import numpy as np
@@ -54,14 +55,6 @@ def _heights(tri, ref, d):
     return np.sort((tri - ref) @ d, axis=1), float(ref @ d)
 
 
-def _face_heights(tri, areas, d):
-    """Sorted heights (F', 3) and areas (F',) of the faces with positive
-    area, and the height offset removed from the heights."""
-    tri, areas, ref = _kept(tri, areas)
-    h, off = _heights(tri, ref, d)
-    return h, areas, off
-
-
 def _chunks(n_rows, row_size, budget=CHUNK_ENTRIES):
     step = max(1, budget // max(1, row_size))
     for start in range(0, n_rows, step):
@@ -79,16 +72,6 @@ def _below_fraction(h0, h1, h2, t):
     lower = (t - h0) ** 2 / np.where(den_lo > 0, den_lo, 1.0)
     upper = 1.0 - (h2 - t) ** 2 / np.where(den_hi > 0, den_hi, 1.0)
     return np.where(t >= h2, 1.0, np.where(t >= h1, upper, np.where(t >= h0, lower, 0.0)))
-
-
-def _cdf_from_heights(h, areas, s):
-    """Area with height <= s for each s in (m,), from sorted heights (F, 3)."""
-    s = np.asarray(s, dtype=float).ravel()
-    out = np.zeros(s.size)
-    for sl in _chunks(len(h), s.size):
-        frac = _below_fraction(h[sl, 0, None], h[sl, 1, None], h[sl, 2, None], s[None, :])
-        out += areas[sl] @ frac
-    return out
 
 
 class _Sorted:
@@ -191,52 +174,8 @@ def _split(h, areas, k, iterations=48, least_nudge=0.0):
     return inner, area_at(inner)
 
 
-def height_cdf(tri, areas, d, t):
-    """Area of the surface whose height x.d is <= t.
-
-    tri (F, 3, 3), areas (F,), d (3,) direction (normalised here), t any
-    shape; returns an array of t's shape (float for scalar t).  Divide by
-    ``areas.sum()`` for the CDF of the height of a uniform surface point.
-    """
-    h, a, off = _face_heights(tri, areas, d)
-    t = np.asarray(t, dtype=float)
-    out = _cdf_from_heights(h, a, t.ravel() - off).reshape(t.shape)
-    return float(out) if out.ndim == 0 else out
-
-
-def equal_area_slabs(tri, areas, d, k, iterations=48):
-    """Edges (k+1,) of k slabs along d that each hold 1/k of the area.
-
-    edges[0] and edges[k] are the lowest and highest surface heights; the
-    k-1 interior edges are found together by bisection on the exact area
-    function.  Where the area jumps (faces flat in d) an exact split may not
-    exist; the edge then sits just above the jump, so use
-    ``slab_probabilities`` for the exact share of each slab.  Interior edges
-    are nudged up by ~1e-11 of the extent so points lying on a flat face at an
-    edge's height fall below it whatever their rounding.
-    """
-    k = int(k)
-    if k < 1:
-        raise ValueError("equal_area_slabs: k must be >= 1")
-    tri, areas, ref = _kept(tri, areas)
-    h, off = _heights(tri, ref, d)
-    inner, _ = _split(h, areas, k, iterations)
-    return _edges(h, inner) + off
-
-
 def _edges(h, inner):
     return np.concatenate(([h[:, 0].min()], inner, [h[:, 2].max()]))
-
-
-def slab_probabilities(tri, areas, d, edges):
-    """Exact probability (k,) that a uniform surface point falls in each slab
-    of ``edges`` (k+1,): slab 0 is (-inf, e1], slab j is (e_j, e_j+1], the last
-    is (e_k-1, inf) — the same convention as ``slab_counts``."""
-    h, a, off = _face_heights(tri, areas, d)
-    inner = _cdf_from_heights(h, a, np.asarray(edges, dtype=float)[1:-1] - off) / a.sum()
-    # Rounding in the per-face sums can make the CDF step back by an ulp: keep it monotone.
-    inner = np.maximum.accumulate(np.clip(inner, 0.0, 1.0))
-    return np.diff(np.concatenate(([0.0], inner, [1.0])))
 
 
 def slab_counts(points, d, edges):
@@ -307,15 +246,6 @@ def centred_moments(tri, areas):
     cov = second - np.outer(mean, mean)
     cov = 0.5 * (cov + cov.T)
     return ref, mean, cov, tri, areas
-
-
-def surface_moments(tri, areas):
-    """Exact mean (3,) and second moment E[x x^T] (3, 3) of a uniform point
-    on the surface.  Computed about the bounding-box centre; for large
-    coordinates prefer ``surface_covariance``, which never forms E[x x^T]."""
-    ref, mean, cov, _, _ = centred_moments(tri, areas)
-    mu = ref + mean
-    return mu, cov + np.outer(mu, mu)
 
 
 def surface_covariance(tri, areas):

@@ -105,8 +105,7 @@ class Regions:
         for d, edges, _ in self.slabs:
             h = pts @ d
             off |= (h < edges[0] - self.tol) | (h > edges[-1] + self.tol)
-            j = len(edges) - 1
-            out.append(np.bincount(np.clip(np.searchsorted(edges, h, side="left") - 1, 0, j - 1), minlength=j))
+            out.append(exact.slab_counts(pts, d, edges))
         return out, int(np.count_nonzero(off))
 
 
