@@ -49,12 +49,6 @@ def _kept(tri, areas):
     return tri, areas, 0.5 * (tri.min(axis=(0, 1)) + tri.max(axis=(0, 1)))
 
 
-def _heights(tri, ref, d):
-    """Sorted vertex heights (F, 3) about ref, and the offset ref.d removed."""
-    d = _unit(d)
-    return np.sort((tri - ref) @ d, axis=1), float(ref @ d)
-
-
 def _chunks(n_rows, row_size, budget=CHUNK_ENTRIES):
     step = max(1, budget // max(1, row_size))
     for start in range(0, n_rows, step):
@@ -80,6 +74,7 @@ class _Sorted:
 
     def __init__(self, h, areas):
         o0, o2 = np.argsort(h[:, 0], kind="stable"), np.argsort(h[:, 2], kind="stable")
+        self.order0 = o0
         self.h0, self.h2 = h[o0, 0], h[o2, 2]
         self.cum0 = np.concatenate(([0.0], np.cumsum(areas[o0])))
         self.cum2 = np.concatenate(([0.0], np.cumsum(areas[o2])))
@@ -111,53 +106,59 @@ def _solve_heights(h, areas, targets, iterations, pad=0.0):
     extent = float(h[:, 2].max()) - lo0
     table = _Sorted(h, areas)
     lo, hi = table.bracket(targets, lo0 - extent)
-    base = table.area_below(lo)
-    owner, faces = _straddling(h, lo, hi + pad)
+    pairs = _Pairs(h, areas, table, lo, hi + pad)
     for step in range(iterations):
         if step and step % NARROW_EVERY == 0:
-            owner, faces, base = _narrow(h, areas, owner, faces, base, lo, hi + pad)
+            pairs.narrow(lo, hi + pad)
         mid = 0.5 * (lo + hi)
-        below = _area_at(h, areas, owner, faces, base, mid) < targets
+        below = pairs.area_at(mid) < targets
         lo = np.where(below, mid, lo)
         hi = np.where(below, hi, mid)
-    owner, faces, base = _narrow(h, areas, owner, faces, base, lo, hi + pad)
-    return hi, lambda t: _area_at(h, areas, owner, faces, base, t)
+    pairs.narrow(lo, hi + pad)
+    return hi, pairs.area_at
 
 
-def _straddling(h, lo, hi):
-    """(target (s,), face (s,)) int64 pairs of the faces that reach into each bracket
-    lo (m,) .. hi (m,): highest vertex above lo, lowest at or below hi."""
-    order = np.argsort(h[:, 0], kind="stable")
-    h0, h2 = h[order, 0], h[order, 2]
-    owners, faces = [], []
-    for k, (a, b) in enumerate(zip(lo.tolist(), hi.tolist())):  # a few dozen targets
-        top = int(np.searchsorted(h0, b, side="right"))
-        got = order[:top][h2[:top] > a]
-        faces.append(got)
-        owners.append(np.full(len(got), k, dtype=np.int64))
-    return np.concatenate(owners), np.concatenate(faces)
+class _Pairs:
+    """The (target, face) pairs of the faces that reach into each bracket lo (m,) ..
+    hi (m,) (highest vertex above lo, lowest at or below hi), with what the area
+    function needs of each face gathered once, and ``base`` (m,): the area of the
+    faces wholly below each bracket."""
 
+    def __init__(self, h, areas, table, lo, hi):
+        order, h0 = table.order0, table.h0
+        h2 = h[order, 2]
+        owners, faces = [], []
+        for k, (a, b) in enumerate(zip(lo.tolist(), hi.tolist())):  # a few dozen targets
+            top = int(np.searchsorted(h0, b, side="right"))
+            got = order[:top][h2[:top] > a]
+            faces.append(got)
+            owners.append(np.full(len(got), k, dtype=np.int64))
+        faces = np.concatenate(faces)
+        self.owner, self.base = np.concatenate(owners), table.area_below(lo)
+        self.h0, self.h1, self.h2 = (np.ascontiguousarray(h[faces, c]) for c in range(3))
+        self.area = areas[faces]
 
-def _narrow(h, areas, owner, faces, base, lo, hi):
-    """The pairs of :func:`_straddling` for the brackets lo .. hi inside the old ones,
-    and the base areas (m,) with the faces now wholly below lo added."""
-    h0, h2 = h[faces, 0], h[faces, 2]
-    below = h2 <= lo[owner]
-    base = base + np.bincount(owner[below], areas[faces[below]], minlength=len(lo))
-    keep = ~below & (h0 <= hi[owner])
-    return owner[keep], faces[keep], base
+    def narrow(self, lo, hi):
+        """Keep the pairs of the brackets lo .. hi inside the old ones; the faces now
+        wholly below lo join the base."""
+        below = self.h2 <= lo[self.owner]
+        self.base = self.base + np.bincount(self.owner[below], self.area[below], minlength=len(lo))
+        keep = np.flatnonzero(~below & (self.h0 <= hi[self.owner]))
+        for name in ("owner", "h0", "h1", "h2", "area"):
+            setattr(self, name, getattr(self, name)[keep])
 
+    def __len__(self):
+        return len(self.owner)
 
-def _area_at(h, areas, owner, faces, base, t):
-    """The area below heights t (m,): ``base`` (m,) plus the straddling faces' shares,
-    in blocks of CHUNK_ENTRIES pairs."""
-    out = base.copy()
-    for s in range(0, len(owner), CHUNK_ENTRIES):
-        o, f = owner[s : s + CHUNK_ENTRIES], faces[s : s + CHUNK_ENTRIES]
-        hf = h[f]
-        frac = _below_fraction(hf[:, 0], hf[:, 1], hf[:, 2], t[o])
-        out += np.bincount(o, areas[f] * frac, minlength=len(t))
-    return out
+    def area_at(self, t):
+        """The area below heights t (m,), in blocks of CHUNK_ENTRIES pairs."""
+        out = self.base.copy()
+        for s in range(0, len(self.owner), CHUNK_ENTRIES):
+            cut = slice(s, s + CHUNK_ENTRIES)
+            o = self.owner[cut]
+            frac = _below_fraction(self.h0[cut], self.h1[cut], self.h2[cut], t[o])
+            out += np.bincount(o, self.area[cut] * frac, minlength=len(t))
+        return out
 
 
 def _split(h, areas, k, iterations=48, least_nudge=0.0):
@@ -198,7 +199,7 @@ def rounding(tri):
     return 2.0**-38 * max(float(np.abs(tri).max()), _TINY)
 
 
-def slabs(tri, areas, directions, k, iterations=SLAB_ITERATIONS):
+def slabs(tri, areas, directions, k, iterations=SLAB_ITERATIONS, progress=None):
     """[(direction (3,), edges (j+1,), exact probabilities (j,))] for each of the
     directions (m, 3): about k equal-area slabs along each, as ``equal_area_slabs``
     finds them, made robust to rounding.
@@ -210,15 +211,19 @@ def slabs(tri, areas, directions, k, iterations=SLAB_ITERATIONS):
     that no slab of zero probability lies where a rounded point of the surface can
     fall (j <= k). The bisection stops at 2^-iterations of its bracket: the edges only
     need to be near equal-area, the probabilities are exact for the edges found.
+    ``progress(i, m)`` is called before direction i of m.
     """
     dirs = np.asarray(directions, dtype=float).reshape(-1, 3)
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     tri, areas, ref = _kept(tri, areas)
     total = areas.sum()
     tol = rounding(tri)
+    centred = tri - ref
     out = []
-    for d in dirs:  # a handful of directions
-        h, off = _heights(tri, ref, d)
+    for i, d in enumerate(dirs):  # a handful of directions
+        if progress:
+            progress(i, len(dirs))
+        h, off = np.sort(centred @ d, axis=1), float(ref @ d)
         inner, below = _split(h, areas, int(k), iterations, 2.0 * tol)
         top = float(h[:, 2].max())
         keep = inner < top - tol
@@ -242,7 +247,8 @@ def centred_moments(tri, areas):
     s = v.sum(axis=1)
     mean = w @ (s / 3.0)
     # Per triangle E[x x^T] = (sum_i v_i v_i^T + s s^T) / 12, s = v0 + v1 + v2.
-    second = (np.einsum("f,fki,fkj->ij", w, v, v) + np.einsum("f,fi,fj->ij", w, s, s)) / 12.0
+    corners = v.reshape(-1, 3)
+    second = ((corners * np.repeat(w, 3)[:, None]).T @ corners + (s * w[:, None]).T @ s) / 12.0
     cov = second - np.outer(mean, mean)
     cov = 0.5 * (cov + cov.T)
     return ref, mean, cov, tri, areas

@@ -91,11 +91,8 @@ class Regions:
         dirs = default_directions() if directions is None else np.asarray(directions, dtype=float).reshape(-1, 3)
         self.k = int(k)
         self.tol = exact.rounding(np.asarray(tri, dtype=float))
-        self.slabs = []
-        for i, d in enumerate(dirs):
-            if progress:
-                progress(f"exact regions, direction {i + 1}/{len(dirs)}")
-            self.slabs += exact.slabs(tri, areas, d, self.k)
+        tell = progress and (lambda i, m: progress(f"exact regions, direction {i + 1}/{m}"))
+        self.slabs = exact.slabs(tri, areas, dirs, self.k, progress=tell)
 
     def counts(self, points):
         """([(j,) int64 counts per slab, one array per direction], points off the surface)

@@ -4,7 +4,13 @@ the origin. Built on :mod:`scatter_cli.exact`'s closed forms per triangle."""
 
 import numpy as np
 
-from scatter_cli.exact import _below_fraction, _chunks, _edges, _heights, _kept, _split, centred_moments
+from scatter_cli.exact import _below_fraction, _chunks, _edges, _kept, _split, _unit, centred_moments
+
+
+def _heights(tri, ref, d):
+    """Sorted vertex heights (F, 3) about ref, and the offset ref.d removed."""
+    d = _unit(d)
+    return np.sort((tri - ref) @ d, axis=1), float(ref @ d)
 
 
 def face_heights(tri, areas, d):

@@ -69,10 +69,11 @@ def test_check_counts_points_an_ulp_off_in_the_region_they_are_on(three_cubes):
     """pymeshlab's points on the top face sit an ulp above the highest vertex (checked
     here, so the case is exercised); they must count in the top face's slab, not in a
     slab of probability 0 that makes the two sets 'differ' (p 1e-26 before the fix)."""
-    from scatter_cli.check import pymeshlab_sampler, world_triangles
+    from scatter_cli.check import pymeshlab_sampler, world_mesh
 
-    tri, _ = world_triangles(load_surface(three_cubes))
-    theirs = pymeshlab_sampler(tri, 50_000)
+    vertices, faces, _ = world_mesh(load_surface(three_cubes))
+    tri = vertices[faces]
+    theirs = pymeshlab_sampler(vertices, faces, 50_000)
     assert (theirs[:, 2] > tri[..., 2].max()).sum() > 100
     lines = []
     assert run_check(three_cubes, count=50_000, seed=1, out=lines.append) == 0, "\n".join(lines)
@@ -86,7 +87,8 @@ def test_check_says_which_sampler_fits_when_the_sets_differ(three_cubes, monkeyp
     pymeshlab is the one that does not fit; scatter still passes."""
     from scatter_cli import check
 
-    def unweighted(tri, count, poisson=False, radius=None):
+    def unweighted(vertices, faces, count, poisson=False, radius=None):
+        tri = vertices[faces]
         rng = np.random.default_rng(3)
         f = rng.integers(0, len(tri), count)
         u = rng.random((count, 2))
@@ -160,8 +162,8 @@ def test_exact_slabs_work_is_a_small_multiple_of_the_faces(monkeypatch):
     tri = _terrain()
     areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     work = []
-    real = exact._area_at
-    monkeypatch.setattr(exact, "_area_at", lambda h, a, o, *rest: work.append(len(o)) or real(h, a, o, *rest))
+    real = exact._Pairs.area_at
+    monkeypatch.setattr(exact._Pairs, "area_at", lambda pairs, t: work.append(len(pairs)) or real(pairs, t))
     regions = uniformity.Regions(tri, areas, 32)
     assert sum(work) < 100 * len(tri), sum(work) / len(tri)
     for d, edges, prob in regions.slabs:
