@@ -405,3 +405,17 @@ def test_two_sample_test(make):
     bad = sample_face_uniform(tri, 35_000, rng)
     assert uniformity.two_sample_test(a, b, tri, areas)["p"] > ALPHA
     assert uniformity.two_sample_test(a, bad, tri, areas)["p"] < ALPHA
+
+
+def test_fourth_moments_rule_agrees_with_the_product_rule():
+    """The 6-point degree-4 rule of the fourth moments against the 12-point product rule
+    (exact to degree 5) on random triangles; a degree-3 rule (the broken variant: the
+    order-2 product rule) is off by far more."""
+    rng = np.random.default_rng(1)
+    tri, areas = rng.normal(size=(50, 3, 3)), rng.random(50) + 0.1
+    i = np.array([p[0] for p in exact.COV_PAIRS])
+    j = np.array([p[1] for p in exact.COV_PAIRS])
+    f = lambda p: p[:, i] ** 2 * p[:, j] ** 2  # noqa: E731
+    want = exact.surface_integral(f, tri, areas, order=3) / areas.sum()
+    assert np.allclose(exact.fourth_central_moments(tri, areas), want, rtol=1e-13, atol=0)
+    assert not np.allclose(exact.surface_integral(f, tri, areas, order=2) / areas.sum(), want, rtol=1e-6, atol=0)
