@@ -61,6 +61,13 @@ def exact_face_errors(points, tri, limit=400, seed=0, dtype=np.float64):
     return np.asarray(dist), np.asarray(over)
 
 
+def pooled_pvalue(observed, expected, min_expected=5.0):
+    """The p-value of the pooled chi-square (scatter_cli.chisquare.chi2_gof) of counts
+    in bins with no order of their own (faces, area groups): pooled smallest expectation
+    first."""
+    return chi2_gof(observed, expected, min_expected, smallest_first=True)[2]
+
+
 def bary_bins(b1, b2, k=16):
     """Index of the sub-triangle (of the k*k equal-area ones) holding (b1, b2); -1 outside."""
     x, y = np.asarray(b1) * k, np.asarray(b2) * k

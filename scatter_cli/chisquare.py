@@ -94,8 +94,3 @@ def chi2_two_sample(counts_a, counts_b, min_expected=5.0):
     stat = float((((ga - ea) ** 2) / ea).sum() + (((gb - eb) ** 2) / eb).sum())
     dof = int(groups - 1)
     return stat, dof, chi2_sf(stat, dof)
-
-
-def gof_pvalue(observed, expected, min_expected=5.0, smallest_first=True):
-    """The p-value of :func:`chi2_gof` (pooled smallest expectation first by default)."""
-    return chi2_gof(observed, expected, min_expected, smallest_first)[2]
