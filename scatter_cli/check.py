@@ -116,7 +116,7 @@ def run_check(mesh, count=100_000, seed=0, poisson=False, radius=None, sampler=N
 
     mode = "radius" if radius is not None else ("poisson" if poisson else "uniform")
     out(f"scatter check {surface.source} ({mode}; {len(tri):,} faces, area {areas.sum():.6g})")
-    out(f"exact-distribution tests: 7 directions x {k} equal-area slabs (chi-square) and 9 moments "
+    out(f"exact-distribution tests: 7 directions x up to {k} equal-area slabs (chi-square) and 9 moments "
         f"(z), Bonferroni-combined; alpha = {ALPHA:g}")
     rows = [
         ("points", f"{len(ours):,}", f"{len(theirs):,}"),
