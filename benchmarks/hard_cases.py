@@ -21,7 +21,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from scatter_cli.sampling import SamplePlan  # noqa: E402
 from scatter_cli.surface import load_surface  # noqa: E402
-from benchmarks.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_chi2_pvalue,  # noqa: E402
+from benchmarks.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_pvalue,  # noqa: E402
                                   spread_triangles, triangles_mesh, two_sum_le_one)
 
 
@@ -68,8 +68,8 @@ def wide(faces, n):
         t = time.perf_counter()
         counts = counts_of()
         obs, exp = area_groups(areas, counts, n)
-        p_dec = pooled_chi2_pvalue(obs, exp)
-        p_face = pooled_chi2_pvalue(counts, n * areas / areas.sum())
+        p_dec = pooled_pvalue(obs, exp)
+        p_face = pooled_pvalue(counts, n * areas / areas.sum())
         verdict = "pass" if min(p_dec, p_face) > ALPHA else "FAIL"
         ok = (verdict == "pass") == must_pass
         print(f"    {name:12s} {n:,} points: p(decades)={p_dec:.3g} p(faces, pooled)={p_face:.3g} -> {verdict}"

@@ -1,5 +1,5 @@
 """Builders and checks shared by the hard-case tests (tests/) and benchmarks/hard_cases.py:
-meshes of separate triangles, the exact on-face test, chi-square helpers.
+meshes of separate triangles, the exact on-face test, the in-triangle chi-square (through scatter_cli.chisquare).
 
 Here rather than in tests/ so that a benchmark never imports a test module."""
 
@@ -8,7 +8,8 @@ from __future__ import annotations
 from fractions import Fraction
 
 import numpy as np
-from scipy import stats
+
+from scatter_cli.chisquare import chi2_gof
 
 EPS = np.finfo(np.float64).eps
 ALPHA = 1e-3  # significance level of every statistical test in the hard-case suite
@@ -60,29 +61,11 @@ def exact_face_errors(points, tri, limit=400, seed=0, dtype=np.float64):
     return np.asarray(dist), np.asarray(over)
 
 
-def pooled_chi2_pvalue(observed, expected, min_expected=5.0):
-    """Pearson test of counts against expectations after pooling, smallest expectation first,
-    into groups that each expect at least ``min_expected``."""
-    observed, expected = np.asarray(observed, float), np.asarray(expected, float)
-    order = np.argsort(expected, kind="stable")
-    o, e = observed[order], expected[order]
-    groups_o, groups_e, acc_o, acc_e = [], [], 0.0, 0.0
-    for oi, ei in zip(o, e):
-        acc_o += oi
-        acc_e += ei
-        if acc_e >= min_expected:
-            groups_o.append(acc_o); groups_e.append(acc_e); acc_o = acc_e = 0.0
-    if acc_e > 0 or acc_o > 0:
-        if groups_e:
-            groups_o[-1] += acc_o; groups_e[-1] += acc_e
-        else:
-            groups_o.append(acc_o); groups_e.append(acc_e)
-    go, ge = np.asarray(groups_o), np.asarray(groups_e)
-    if len(ge) < 2:
-        return 1.0
-    # expectation mass of nowhere (e == 0) with observations there is an outright failure
-    stat = np.sum((go - ge) ** 2 / ge)
-    return float(stats.chi2.sf(stat, len(ge) - 1))
+def pooled_pvalue(observed, expected, min_expected=5.0):
+    """The p-value of the pooled chi-square (scatter_cli.chisquare.chi2_gof) of counts
+    in bins with no order of their own (faces, area groups): pooled smallest expectation
+    first."""
+    return chi2_gof(observed, expected, min_expected, smallest_first=True)[2]
 
 
 def bary_bins(b1, b2, k=16):
@@ -106,9 +89,7 @@ def uniform_in_triangle_pvalue(b1, b2, k=16):
                 valid[(i * k + j) * 2 + 1] = True
     if counts[~valid].sum():
         return 0.0
-    obs = counts[valid]
-    exp = np.full(len(obs), len(b1) / len(obs))
-    return float(stats.chi2.sf(np.sum((obs - exp) ** 2 / exp), len(obs) - 1))
+    return chi2_gof(counts[valid], np.ones(int(valid.sum())))[2]
 
 
 def recover_bary(points, tri):

@@ -23,7 +23,7 @@ from sanitized import ROOT, sanitized_copy  # noqa: E402
 CHECK = r'''
 import numpy as np, os, sys, trimesh
 import scatter_cli
-from scatter_cli import stable
+from scatter_cli import stable, stable_arrivals, stable_order
 assert stable._kernel is not None and sys.argv[1] in stable._kernel.__file__
 rng = np.random.default_rng(0)
 for name in ("skull.ply", "cesiummilktruck.glb", "narrow_triangles.obj", "moebius-160-10.ply"):
@@ -32,8 +32,8 @@ for name in ("skull.ply", "cesiummilktruck.glb", "narrow_triangles.obj", "moebiu
 # over 2^16 arrivals: face ranges share the time buckets, three threads sort in place
 # (side arrays); then every bucket overflows and the pass reruns with exact room
 os.environ["SCATTER_THREADS"] = "3"
-for sds in (stable.ROOM_SDS, -50.0):
-    stable.ROOM_SDS = sds
+for sds in (stable_order.ROOM_SDS, -50.0):
+    stable_order.ROOM_SDS = sds
     scatter_cli.sample(sys.argv[2] + "/skull.ply", 200000, stable=True, attributes=("face", "bary"))
 scatter_cli.sample(sys.argv[2] + "/boxtextured.glb", 20000, stable=True, weight="texture:g")
 for k in range(30):
@@ -47,9 +47,9 @@ for k in range(30):
         pass
 key, rate = np.zeros(3, np.uint64), np.ones(3)
 t, ids, none = np.zeros(4), np.zeros(4, np.uint64), (np.empty(0), np.empty(0, np.uint64))
-bad = [lambda: stable._kernel.arrivals(key, rate, 1.0, 2.0, stable.POISSON_CDF, 0, 5, 8, 4.0, 2, 4,
+bad = [lambda: stable._kernel.arrivals(key, rate, 1.0, 2.0, stable_arrivals.POISSON_CDF, 0, 5, 8, 4.0, 2, 4,
                                        np.zeros(1, np.int64), np.full(1, 4), t, ids),
-       lambda: stable._kernel.arrivals(key, rate, 1.0, 2.0, stable.POISSON_CDF, 0, 3, 8, 4.0, 2, 4,
+       lambda: stable._kernel.arrivals(key, rate, 1.0, 2.0, stable_arrivals.POISSON_CDF, 0, 3, 8, 4.0, 2, 4,
                                        np.zeros(1, np.int64), np.full(1, 9), t, ids),
        lambda: stable._kernel.faces(np.zeros((3, 3)), np.array([[0, 1, 7]]), 0, 1, 0, np.empty(1, np.uint8),
                                     np.empty(1, np.uint64), np.empty(1), np.empty((1, 9))),

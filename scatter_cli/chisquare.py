@@ -1,7 +1,8 @@
-"""Pearson chi-square tests of counts in bins: goodness of fit and two samples.
+"""Pearson chi-square tests of counts in bins, pooled: goodness of fit and two samples.
 
-P-values come from SciPy (``pip install 'scatter-cli[check]'``), imported when a test
-runs: only ``scatter check`` and the tests call these.
+The one pooled chi-square of the project: ``scatter check``, the benchmarks and the
+tests call these. P-values come from SciPy (``pip install 'scatter-cli[check]'``),
+imported when a test runs.
 """
 
 import numpy as np
@@ -33,19 +34,24 @@ def _pool_groups(weight, min_weight):
     return labels
 
 
-def chi2_gof(observed, expected, min_expected=5.0):
+def chi2_gof(observed, expected, min_expected=5.0, smallest_first=False):
     """Pearson goodness of fit of counts ``observed`` (k,) to ``expected`` (k,).
 
     ``expected`` is rescaled to sum to ``observed.sum()`` (so probabilities
-    may be passed).  Consecutive bins are pooled in order until each pooled
-    bin expects at least ``min_expected``; a short tail joins the last pooled
-    bin.  Returns ``(statistic, dof, p)`` with ``dof = pooled bins - 1``;
-    with fewer than two pooled bins the result is ``(0.0, 0, 1.0)``.
+    may be passed).  Consecutive bins are pooled in order (``smallest_first``:
+    in order of increasing expectation, for bins with no order of their own
+    such as faces) until each pooled bin expects at least ``min_expected``; a
+    short tail joins the last pooled bin.  Returns ``(statistic, dof, p)`` with
+    ``dof = pooled bins - 1``; with fewer than two pooled bins the result is
+    ``(0.0, 0, 1.0)``.
     """
     obs = np.asarray(observed, dtype=float).ravel()
     exp = np.asarray(expected, dtype=float).ravel()
     if obs.shape != exp.shape:
         raise ValueError("chi2_gof: observed and expected differ in length")
+    if smallest_first:
+        order = np.argsort(exp, kind="stable")
+        obs, exp = obs[order], exp[order]
     if np.any(exp < 0) or exp.sum() <= 0:
         raise ValueError("chi2_gof: expected must be non-negative with positive sum")
     exp = exp * (obs.sum() / exp.sum())

@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import native
+from .hashing import mix
 
 _kernel = native.kernel("_cenclosure")
 
@@ -65,18 +66,11 @@ def components(count: int, a, b) -> np.ndarray:
             label = up
 
 
-def _mix(x):
-    """splitmix64's finaliser, elementwise on uint64 (wrapping)."""
-    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return x ^ (x >> np.uint64(31))
-
-
 def weld(vertices) -> np.ndarray:
     """(V,) int64: one id per distinct row of ``vertices`` (V, 3) float64 (bitwise equal)."""
     bits = np.ascontiguousarray(vertices).view(np.uint64)
     with np.errstate(over="ignore"):
-        h = _mix(_mix(_mix(bits[:, 0]) ^ bits[:, 1]) ^ bits[:, 2])
+        h = mix(mix(mix(bits[:, 0].copy()) ^ bits[:, 1]) ^ bits[:, 2])
     order = np.argsort(h)
     rows = bits[order]
     same_row = (rows[1:] == rows[:-1]).all(axis=1)

@@ -4,7 +4,8 @@ slabs, moments and quadrature.
 A surface is ``tri`` ``(F, 3, 3) float64`` (vertex ``k`` of face ``f`` is ``tri[f, k]``)
 and ``areas`` ``(F,) float64``; faces of zero area contribute nothing. Everything is a
 closed form per triangle, vectorised over faces and points. Used by ``scatter check``
-(through :mod:`scatter_cli.uniformity`), ``scatter bench`` and the tests.
+(through :mod:`scatter_cli.uniformity`), ``scatter bench`` and the tests (tests/exact_reference.py
+holds what only the tests use).
 """
 
 import numpy as np
@@ -12,11 +13,23 @@ import numpy as np
 # Upper bound on the entries of one (faces x values) work matrix; each chunk
 # holds a handful of such temporaries, so this keeps them to tens of MB.
 CHUNK_ENTRIES = 1 << 21
+# Bisection steps between two narrowings of the faces each bracket involves.
+NARROW_EVERY = 2
+# Bisection steps of the slabs scatter check counts in.
+SLAB_ITERATIONS = 12
 
 # Unordered coordinate pairs for second central moments: xx, yy, zz, xy, xz, yz.
 COV_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 
 _TINY = 1e-300
+
+# Dunavant's 6-point rule on the triangle, exact to degree 4 (the fourth moments):
+# barycentric nodes (6, 3) and weights (6,) summing to 1.
+_A, _B = 0.445948490915965, 0.091576213509771
+DEGREE4_NODES = np.array([[1 - 2 * _A, _A, _A], [_A, 1 - 2 * _A, _A], [_A, _A, 1 - 2 * _A],
+                          [1 - 2 * _B, _B, _B], [_B, 1 - 2 * _B, _B], [_B, _B, 1 - 2 * _B]])
+DEGREE4_WEIGHTS = np.array([0.223381589678011] * 3 + [0.109951743655322] * 3)
+DEGREE4_WEIGHTS /= DEGREE4_WEIGHTS.sum()
 
 
 # ---------------------------------------------------------------------------
@@ -44,20 +57,6 @@ def _kept(tri, areas):
     return tri, areas, 0.5 * (tri.min(axis=(0, 1)) + tri.max(axis=(0, 1)))
 
 
-def _heights(tri, ref, d):
-    """Sorted vertex heights (F, 3) about ref, and the offset ref.d removed."""
-    d = _unit(d)
-    return np.sort((tri - ref) @ d, axis=1), float(ref @ d)
-
-
-def _face_heights(tri, areas, d):
-    """Sorted heights (F', 3) and areas (F',) of the faces with positive
-    area, and the height offset removed from the heights."""
-    tri, areas, ref = _kept(tri, areas)
-    h, off = _heights(tri, ref, d)
-    return h, areas, off
-
-
 def _chunks(n_rows, row_size, budget=CHUNK_ENTRIES):
     step = max(1, budget // max(1, row_size))
     for start in range(0, n_rows, step):
@@ -77,22 +76,13 @@ def _below_fraction(h0, h1, h2, t):
     return np.where(t >= h2, 1.0, np.where(t >= h1, upper, np.where(t >= h0, lower, 0.0)))
 
 
-def _cdf_from_heights(h, areas, s):
-    """Area with height <= s for each s in (m,), from sorted heights (F, 3)."""
-    s = np.asarray(s, dtype=float).ravel()
-    out = np.zeros(s.size)
-    for sl in _chunks(len(h), s.size):
-        frac = _below_fraction(h[sl, 0, None], h[sl, 1, None], h[sl, 2, None], s[None, :])
-        out += areas[sl] @ frac
-    return out
-
-
 class _Sorted:
     """Faces sorted by lowest and by highest vertex height, with running areas:
     bounds the area function cheaply, area(h2 <= t) <= A(t) <= area(h0 <= t)."""
 
     def __init__(self, h, areas):
         o0, o2 = np.argsort(h[:, 0], kind="stable"), np.argsort(h[:, 2], kind="stable")
+        self.order0 = o0
         self.h0, self.h2 = h[o0, 0], h[o2, 2]
         self.cum0 = np.concatenate(([0.0], np.cumsum(areas[o0])))
         self.cum2 = np.concatenate(([0.0], np.cumsum(areas[o2])))
@@ -113,97 +103,88 @@ class _Sorted:
         return self.cum2[np.searchsorted(self.h2, t, side="right")]
 
 
-def _solve_heights(h, areas, targets, iterations, pad=0.0, budget=4 * CHUNK_ENTRIES):
+def _solve_heights(h, areas, targets, iterations, pad=0.0):
     """Heights (m,) where the area function reaches each of targets (m,), by
     vectorised bisection, and the area function for heights (m,) each no more
     than ``pad`` above its solution.  Each bracket only involves the faces
-    straddling it, so the work is those faces rather than all F per target."""
+    straddling it, and every few halvings the faces a bracket has left behind are
+    dropped (those wholly below it join its base area), so the work shrinks to the
+    faces that cross each solution."""
     lo0 = float(h[:, 0].min())
     extent = float(h[:, 2].max()) - lo0
     table = _Sorted(h, areas)
     lo, hi = table.bracket(targets, lo0 - extent)
-    # Straddling faces per target, concatenated: (face index, target index).
-    masks = [(h[:, 2] > l) & (h[:, 0] <= u + pad) for l, u in zip(lo.tolist(), hi.tolist())]
-    sizes = [int(m.sum()) for m in masks]
-    if sum(sizes) > budget:  # long faces everywhere: plain chunked evaluation
-        area_at = lambda t: _cdf_from_heights(h, areas, t)
-    else:
-        faces = np.concatenate([np.nonzero(m)[0] for m in masks]) if masks else np.zeros(0, np.intp)
-        owner = np.repeat(np.arange(len(targets)), sizes)
-        h_sel, a_sel = h[faces], areas[faces]
-        base = table.area_below(lo)
-
-        def area_at(t):
-            frac = _below_fraction(h_sel[:, 0], h_sel[:, 1], h_sel[:, 2], t[owner])
-            return base + np.bincount(owner, a_sel * frac, minlength=len(targets))
-
-    for _ in range(iterations):
+    pairs = _Pairs(h, areas, table, lo, hi + pad)
+    for step in range(iterations):
+        if step and step % NARROW_EVERY == 0:
+            pairs.narrow(lo, hi + pad)
         mid = 0.5 * (lo + hi)
-        below = area_at(mid) < targets
+        below = pairs.area_at(mid) < targets
         lo = np.where(below, mid, lo)
         hi = np.where(below, hi, mid)
-    return hi, area_at
+    pairs.narrow(lo, hi + pad)
+    return hi, pairs.area_at
 
 
-def _split(h, areas, k, iterations=48):
+class _Pairs:
+    """The (target, face) pairs of the faces that reach into each bracket lo (m,) ..
+    hi (m,) (highest vertex above lo, lowest at or below hi), with what the area
+    function needs of each face gathered once, and ``base`` (m,): the area of the
+    faces wholly below each bracket."""
+
+    def __init__(self, h, areas, table, lo, hi):
+        order, h0 = table.order0, table.h0
+        h2 = h[order, 2]
+        owners, faces = [], []
+        for k, (a, b) in enumerate(zip(lo.tolist(), hi.tolist())):  # a few dozen targets
+            top = int(np.searchsorted(h0, b, side="right"))
+            got = order[:top][h2[:top] > a]
+            faces.append(got)
+            owners.append(np.full(len(got), k, dtype=np.int64))
+        faces = np.concatenate(faces)
+        self.owner, self.base = np.concatenate(owners), table.area_below(lo)
+        self.h0, self.h1, self.h2 = (np.ascontiguousarray(h[faces, c]) for c in range(3))
+        self.area = areas[faces]
+
+    def narrow(self, lo, hi):
+        """Keep the pairs of the brackets lo .. hi inside the old ones; the faces now
+        wholly below lo join the base."""
+        below = self.h2 <= lo[self.owner]
+        self.base = self.base + np.bincount(self.owner[below], self.area[below], minlength=len(lo))
+        keep = np.flatnonzero(~below & (self.h0 <= hi[self.owner]))
+        for name in ("owner", "h0", "h1", "h2", "area"):
+            setattr(self, name, getattr(self, name)[keep])
+
+    def __len__(self):
+        return len(self.owner)
+
+    def area_at(self, t):
+        """The area below heights t (m,), in blocks of CHUNK_ENTRIES pairs."""
+        out = self.base.copy()
+        for s in range(0, len(self.owner), CHUNK_ENTRIES):
+            cut = slice(s, s + CHUNK_ENTRIES)
+            o = self.owner[cut]
+            frac = _below_fraction(self.h0[cut], self.h1[cut], self.h2[cut], t[o])
+            out += np.bincount(o, self.area[cut] * frac, minlength=len(t))
+        return out
+
+
+def _split(h, areas, k, iterations=48, least_nudge=0.0):
     """Interior edges (k-1,) of k equal-area slabs over sorted heights h, and
-    the area below each edge."""
+    the area below each edge; an edge at a jump of the area sits at least
+    ``least_nudge`` above it."""
     lo0, hi0 = float(h[:, 0].min()), float(h[:, 2].max())
     extent = hi0 - lo0
     if extent <= 0:
         return np.full(k - 1, hi0), np.full(k - 1, areas.sum())
-    nudge = 1e-11 * extent + 1e-13 * max(abs(lo0), abs(hi0))
+    nudge = max(1e-11 * extent + 1e-13 * max(abs(lo0), abs(hi0)), least_nudge)
     hi, area_at = _solve_heights(h, areas, areas.sum() * np.arange(1, k) / k, iterations, pad=nudge)
     inner = np.minimum(hi + nudge, hi0)
     return inner, area_at(inner)
 
 
-def height_cdf(tri, areas, d, t):
-    """Area of the surface whose height x.d is <= t.
-
-    tri (F, 3, 3), areas (F,), d (3,) direction (normalised here), t any
-    shape; returns an array of t's shape (float for scalar t).  Divide by
-    ``areas.sum()`` for the CDF of the height of a uniform surface point.
-    """
-    h, a, off = _face_heights(tri, areas, d)
-    t = np.asarray(t, dtype=float)
-    out = _cdf_from_heights(h, a, t.ravel() - off).reshape(t.shape)
-    return float(out) if out.ndim == 0 else out
-
-
-def equal_area_slabs(tri, areas, d, k, iterations=48):
-    """Edges (k+1,) of k slabs along d that each hold 1/k of the area.
-
-    edges[0] and edges[k] are the lowest and highest surface heights; the
-    k-1 interior edges are found together by bisection on the exact area
-    function.  Where the area jumps (faces flat in d) an exact split may not
-    exist; the edge then sits just above the jump, so use
-    ``slab_probabilities`` for the exact share of each slab.  Interior edges
-    are nudged up by ~1e-11 of the extent so points lying on a flat face at an
-    edge's height fall below it whatever their rounding.
-    """
-    k = int(k)
-    if k < 1:
-        raise ValueError("equal_area_slabs: k must be >= 1")
-    tri, areas, ref = _kept(tri, areas)
-    h, off = _heights(tri, ref, d)
-    inner, _ = _split(h, areas, k, iterations)
-    return _edges(h, inner) + off
-
-
 def _edges(h, inner):
     return np.concatenate(([h[:, 0].min()], inner, [h[:, 2].max()]))
-
-
-def slab_probabilities(tri, areas, d, edges):
-    """Exact probability (k,) that a uniform surface point falls in each slab
-    of ``edges`` (k+1,): slab 0 is (-inf, e1], slab j is (e_j, e_j+1], the last
-    is (e_k-1, inf) — the same convention as ``slab_counts``."""
-    h, a, off = _face_heights(tri, areas, d)
-    inner = _cdf_from_heights(h, a, np.asarray(edges, dtype=float)[1:-1] - off) / a.sum()
-    # Rounding in the per-face sums can make the CDF step back by an ulp: keep it monotone.
-    inner = np.maximum.accumulate(np.clip(inner, 0.0, 1.0))
-    return np.diff(np.concatenate(([0.0], inner, [1.0])))
 
 
 def slab_counts(points, d, edges):
@@ -219,17 +200,43 @@ def slab_counts(points, d, edges):
     return np.bincount(idx, minlength=k)
 
 
-def slabs(tri, areas, directions, k):
-    """[(direction (3,), edges (k+1,), exact probabilities (k,))] for each of the
-    directions (m, 3): k equal-area slabs along each, as ``equal_area_slabs`` finds them."""
+def rounding(tri):
+    """How far a computed height of a point on the surface ``tri`` (F, 3, 3) may be from
+    the exact one: 2^-38 of the largest coordinate, thousands of ulps (a sampler's point
+    on a face lies within a few ulps of it, a height adds a few more)."""
+    return 2.0**-38 * max(float(np.abs(tri).max()), _TINY)
+
+
+def slabs(tri, areas, directions, k, iterations=SLAB_ITERATIONS, progress=None):
+    """[(direction (3,), edges (j+1,), exact probabilities (j,))] for each of the
+    directions (m, 3): about k equal-area slabs along each, as ``equal_area_slabs``
+    finds them, made robust to rounding.
+
+    edges[0] and edges[j] are the lowest and highest heights of the surface. An interior
+    edge where the area jumps (a face flat in the direction) sits just above the flat
+    face, so the face's points fall below it whatever their rounding; interior edges
+    within :func:`rounding` of the highest height or of the edge below are dropped, so
+    that no slab of zero probability lies where a rounded point of the surface can
+    fall (j <= k). The bisection stops at 2^-iterations of its bracket: the edges only
+    need to be near equal-area, the probabilities are exact for the edges found.
+    ``progress(i, m)`` is called before direction i of m.
+    """
     dirs = np.asarray(directions, dtype=float).reshape(-1, 3)
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     tri, areas, ref = _kept(tri, areas)
     total = areas.sum()
+    tol = rounding(tri)
+    centred = tri - ref
     out = []
-    for d in dirs:  # a handful of directions
-        h, off = _heights(tri, ref, d)
-        inner, below = _split(h, areas, int(k))
+    for i, d in enumerate(dirs):  # a handful of directions
+        if progress:
+            progress(i, len(dirs))
+        h, off = np.sort(centred @ d, axis=1), float(ref @ d)
+        inner, below = _split(h, areas, int(k), iterations, 2.0 * tol)
+        top = float(h[:, 2].max())
+        keep = inner < top - tol
+        keep[1:] &= np.diff(inner) > tol
+        inner, below = inner[keep], below[keep]
         below = np.maximum.accumulate(np.clip(below / total, 0.0, 1.0))
         prob = np.diff(np.concatenate(([0.0], below, [1.0])))
         out.append((d, _edges(h, inner) + off, prob))
@@ -248,19 +255,11 @@ def centred_moments(tri, areas):
     s = v.sum(axis=1)
     mean = w @ (s / 3.0)
     # Per triangle E[x x^T] = (sum_i v_i v_i^T + s s^T) / 12, s = v0 + v1 + v2.
-    second = (np.einsum("f,fki,fkj->ij", w, v, v) + np.einsum("f,fi,fj->ij", w, s, s)) / 12.0
+    corners = v.reshape(-1, 3)
+    second = ((corners * np.repeat(w, 3)[:, None]).T @ corners + (s * w[:, None]).T @ s) / 12.0
     cov = second - np.outer(mean, mean)
     cov = 0.5 * (cov + cov.T)
     return ref, mean, cov, tri, areas
-
-
-def surface_moments(tri, areas):
-    """Exact mean (3,) and second moment E[x x^T] (3, 3) of a uniform point
-    on the surface.  Computed about the bounding-box centre; for large
-    coordinates prefer ``surface_covariance``, which never forms E[x x^T]."""
-    ref, mean, cov, _, _ = centred_moments(tri, areas)
-    mu = ref + mean
-    return mu, cov + np.outer(mu, mu)
 
 
 def surface_covariance(tri, areas):
@@ -273,8 +272,12 @@ def fourth_central_moments(tri_c, areas):
     """E[(x_i)^2 (x_j)^2] (6,) for COV_PAIRS, surface already centred at its mean."""
     i = np.array([p[0] for p in COV_PAIRS])
     j = np.array([p[1] for p in COV_PAIRS])
-    # Degree-4 integrand: the order-3 rule (exact to degree 5) is exact.
-    total = surface_integral(lambda p: p[:, i] ** 2 * p[:, j] ** 2, tri_c, areas, order=3)
+    tri_c = np.asarray(tri_c, dtype=float)
+    areas = np.asarray(areas, dtype=float)
+    total = np.zeros(len(COV_PAIRS))
+    for sl in _chunks(len(tri_c), len(DEGREE4_WEIGHTS), budget=1 << 18):
+        sq = np.matmul(DEGREE4_NODES, tri_c[sl]) ** 2  # (f, 6, 3): the rule's points, squared
+        total += np.einsum("fq,fqp->p", areas[sl, None] * DEGREE4_WEIGHTS, sq[..., i] * sq[..., j])
     return total / areas.sum()
 
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .hashing import lane
 from .warps import square_to_triangle
 
 SOBOL_BITS = 32
@@ -189,13 +190,6 @@ def owen_scramble(x, seed):
     return _reverse_bits(x)
 
 
-def _mix64(z):
-    """splitmix64 finaliser of uint64 (n,): a fast stateless hash."""
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
-
-
 def sobol_uniforms(start: int, stop: int, seed: int):
     """Scrambled Sobol points ``start .. stop - 1`` for ``seed``: (n, 3) float64 in [0, 1).
 
@@ -204,7 +198,7 @@ def sobol_uniforms(start: int, stop: int, seed: int):
     """
     keys = np.random.SeedSequence([_SOBOL_TAG, seed]).generate_state(4, dtype=np.uint64)
     x = sobol_integers(start, stop)
-    low = _mix64(np.arange(start, stop, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15) + keys[3])
+    low = lane(keys[3], np.arange(start, stop, dtype=np.uint64))
     u = np.empty(x.shape)
     for d in range(3):
         hi = owen_scramble(x[:, d], int(keys[d] & 0xFFFFFFFF)).astype(np.float64)

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .hashing import lane, to_unit
+
 # Keeps the spin stream apart from every placement stream of the same seed.
 SPIN_STREAM = 0x6F7269656E74  # "orient"
-_GAMMA = np.uint64(0x9E3779B97F4A7C15)
 
 
 def spin_key(seed: int) -> np.uint64:
@@ -25,15 +26,7 @@ def spin_uniforms(seed: int, start: int, n: int) -> np.ndarray:
 
     Counter-based SplitMix64: value ``i`` is the SplitMix64 finaliser of ``key + (i + 1) * gamma``.
     """
-    x = np.arange(start + 1, start + n + 1, dtype=np.uint64)
-    x *= _GAMMA
-    x += spin_key(seed)
-    x ^= x >> np.uint64(30)
-    x *= np.uint64(0xBF58476D1CE4E5B9)
-    x ^= x >> np.uint64(27)
-    x *= np.uint64(0x94D049BB133111EB)
-    x ^= x >> np.uint64(31)
-    return (x >> np.uint64(11)).astype(np.float64) * 2.0**-53
+    return to_unit(lane(spin_key(seed), np.arange(start + 1, start + n + 1, dtype=np.uint64)))
 
 
 def align_z(n: np.ndarray) -> np.ndarray:

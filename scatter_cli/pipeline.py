@@ -68,7 +68,8 @@ class StableBase:
     stream when the exterior filter keeps the N earliest exterior ones."""
 
     def __init__(self, surface, o: SampleOptions, want_bary, info, warn):
-        from .stable import StableSource, stable_weight
+        from .stable import StableSource
+        from .stable_weights import stable_weight
 
         t = time.perf_counter()
         self.fixed = o.density is None and o.radius is None

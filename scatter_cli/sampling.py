@@ -16,6 +16,7 @@ import numpy as np
 
 from . import native
 from .errors import ScatterError
+from .areas import norms
 from .surface import Surface, apply_matrix, cofactor, cofactors, corners, face_cross, transformed_columns
 from .warps import square_to_triangle
 
@@ -322,19 +323,19 @@ def _instance_areas(surface, tris):
             still = [k for k in ks if surface.instances[k].matrix is None]
             moved = [k for k in ks if surface.instances[k].matrix is not None]
             if still:
-                a = _norms(list(cross.T))
+                a = norms(list(cross.T))
                 good = bool(len(a) and a.min() > 0 and a.max() < np.inf)
                 for k in still:
                     areas[k], clean[k] = a, good
             if moved:
-                table = _moved_norms(cofactors(np.stack([surface.instances[k].matrix for k in moved])), cross)
+                table = _movednorms(cofactors(np.stack([surface.instances[k].matrix for k in moved])), cross)
                 good = ((table.min(axis=1) > 0) & (table.max(axis=1) < np.inf)).tolist() if len(tri) else [False] * len(moved)
                 for r, k in enumerate(moved):
                     areas[k], clean[k] = table[r], good[r]
     return areas, clean
 
 
-def _moved_norms(cof, cross):
+def _movednorms(cof, cross):
     """(k, F) float64 lengths of ``cross`` (F, 3) under each cofactor matrix of ``cof``
     (k, 3, 3), in blocks of instances of about 2^20 values."""
     out = np.empty((len(cof), len(cross)))
@@ -343,18 +344,10 @@ def _moved_norms(cof, cross):
     def fill(i, j):
         for s in range(i, j, step):
             e = min(s + step, j)
-            out[s:e] = _norms(transformed_columns(cof[s:e], cross))
+            out[s:e] = norms(transformed_columns(cof[s:e], cross))
 
     in_blocks(fill, len(cof), min_block=step)
     return out
-
-
-def _norms(cols):
-    """sqrt(x^2 + y^2 + z^2) of three columns, summed in this order as the kernel sums it."""
-    s = cols[0] * cols[0]
-    s += cols[1] * cols[1]
-    s += cols[2] * cols[2]
-    return np.sqrt(s, out=s)
 
 
 def _geometry_corners(surface):

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .areas import cross_columns, norms
 from .errors import ScatterError, ScatterUsageError
 from .inputs import INPUT_FORMATS, USD_FORMATS
 
@@ -321,10 +322,7 @@ def doubled_areas(tri, matrix=None):
     n = face_cross(tri)
     if matrix is not None:
         n = apply_matrix(cofactor(matrix[:3, :3]), n, out=n)
-    s = n[:, 0] * n[:, 0]  # in this order, as the compiled kernel sums it
-    s += n[:, 1] * n[:, 1]
-    s += n[:, 2] * n[:, 2]
-    return np.sqrt(s, out=s)
+    return norms([n[:, 0], n[:, 1], n[:, 2]])
 
 
 def column_bounds(v, rows=1 << 16):
@@ -343,13 +341,9 @@ def column_bounds(v, rows=1 << 16):
 
 def face_cross(tri):
     """(v1 - v0) x (v2 - v0) for each face: (F, 9) corners -> (F, 3) float64."""
-    t = tri.T
-    e1 = [t[3 + c] - t[c] for c in range(3)]
-    e2 = [t[6 + c] - t[c] for c in range(3)]
     n = np.empty((tri.shape[0], 3))
-    for c in range(3):
-        a, b = (c + 1) % 3, (c + 2) % 3
-        np.subtract(e1[a] * e2[b], e1[b] * e2[a], out=n[:, c])
+    for c, col in enumerate(cross_columns(tri.T)):
+        n[:, c] = col
     return n
 
 

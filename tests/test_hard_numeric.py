@@ -18,7 +18,7 @@ from scatter_cli.sources import RandomSource
 from scatter_cli.surface import load_surface
 from scatter_cli.warps import square_to_triangle
 
-from benchmarks.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_chi2_pvalue, recover_bary,
+from benchmarks.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_pvalue, recover_bary,
                                   spread_triangles, triangles_mesh, two_sum_le_one, uniform_in_triangle_pvalue)
 from .doubles import Float32CdfPlan, UnweightedSource
 
@@ -118,7 +118,7 @@ def test_slivers_next_to_big_faces():
     assert np.isfinite(s.points).all() and np.isfinite(s.bary).all()
     counts = np.bincount(s.face, minlength=5)
     assert counts[2] == 0  # expects 4e-15 points
-    assert pooled_chi2_pvalue(counts, n * areas / areas.sum()) > ALPHA
+    assert pooled_pvalue(counts, n * areas / areas.sum()) > ALPHA
     assert_on_faces(s.points, world_tri(mesh, s.face))
 
 
@@ -175,11 +175,11 @@ def test_face_shares_follow_areas_from_1e_minus_12_to_1e6(wide_mesh, kind, shoul
     n = 4_000_000
     counts = face_counts(SOURCES[kind](surface, n, 6), surface.face_count)
     obs, exp = area_groups(areas, counts, n)
-    p = pooled_chi2_pvalue(obs, exp)
+    p = pooled_pvalue(obs, exp)
     assert (p > ALPHA) == should_pass, (p, obs, exp.round(1))
     if should_pass:
         # and per face, pooled smallest-expectation first
-        assert pooled_chi2_pvalue(counts, n * areas / areas.sum()) > ALPHA
+        assert pooled_pvalue(counts, n * areas / areas.sum()) > ALPHA
 
 
 # ---------------------------------------------------------------- huge coordinates
@@ -368,7 +368,7 @@ def test_polygons_and_quads_are_triangulated_in_file_order(tmp_path):
     areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     all_areas = 0.5 * np.linalg.norm(np.cross(*(np.asarray(mesh.vertices)[mesh.faces][:, 1:] -
                                                np.asarray(mesh.vertices)[mesh.faces][:, :1]).transpose(1, 0, 2)), axis=1)
-    assert pooled_chi2_pvalue(np.bincount(s.face, minlength=4), 100_000 * all_areas / all_areas.sum()) > ALPHA
+    assert pooled_pvalue(np.bincount(s.face, minlength=4), 100_000 * all_areas / all_areas.sum()) > ALPHA
     assert np.isclose(areas.max(), 1.0)
 
 
@@ -389,10 +389,10 @@ def test_duplicate_faces_count_twice_and_non_manifold_and_flipped(dup_seed, shou
     n = 300_000
     s = scatter_cli.sample(mesh, n, attributes=("face", "normal"), seed=dup_seed, precision="float64")
     counts = np.bincount(s.face, minlength=5)
-    assert pooled_chi2_pvalue(counts, np.full(5, n / 5)) > ALPHA
+    assert pooled_pvalue(counts, np.full(5, n / 5)) > ALPHA
     # the paired failure: treating the duplicate as one face (shares 1:1:1:1 over 4 faces)
     merged = np.array([counts[0], counts[1], counts[2] + counts[3], counts[4]])
-    assert pooled_chi2_pvalue(merged, np.full(4, n / 4)) < ALPHA
+    assert pooled_pvalue(merged, np.full(4, n / 4)) < ALPHA
     # the flipped face's normal points the other way
     assert np.allclose(s.normal[s.face == 0], [0, 0, 1]) and np.allclose(s.normal[s.face == 4], [0, 0, -1])
     assert_on_faces(s.points, world_tri(mesh, s.face))

@@ -7,31 +7,16 @@ area weights and must fail the same test.
 
 import numpy as np
 import pytest
-from scipy import stats
 
 from scatter_cli.sampling import SamplePlan
 from scatter_cli.sources import RandomSource
 from scatter_cli.surface import load_surface
 
+from benchmarks.hardcheck import pooled_pvalue
 from .conftest import spread_triangles, triangles_mesh
 from .doubles import UnweightedSource
 
 ALPHA = 1e-3
-
-
-def pooled_chi2_pvalue(observed, expected, min_expected=5.0):
-    """Pearson test after pooling bins, smallest expectation first, to >= min_expected."""
-    order = np.argsort(expected)
-    observed, expected = np.asarray(observed, float)[order], np.asarray(expected, float)[order]
-    groups = np.searchsorted(np.cumsum(expected), np.arange(min_expected, expected.sum(), min_expected))
-    groups = np.unique(np.minimum(groups, len(expected) - 1))
-    edges = np.concatenate([[0], groups + 1])
-    edges = edges[edges < len(expected)]
-    o, e = np.add.reduceat(observed, edges), np.add.reduceat(expected, edges)
-    if e[-1] < min_expected and len(e) > 1:
-        o[-2] += o[-1]; e[-2] += e[-1]; o, e = o[:-1], e[:-1]
-    stat = np.sum((o - e) ** 2 / e)
-    return stats.chi2.sf(stat, len(e) - 1)
 
 
 def face_counts(source, faces):
@@ -63,7 +48,7 @@ def test_face_counts_follow_areas_over_twelve_decades(spread_plan_inputs, seed):
     surface, areas = spread_plan_inputs
     n = 2_000_000
     counts = face_counts(area_weighted(surface, n, seed), surface.face_count)
-    assert pooled_chi2_pvalue(counts, n * areas / areas.sum()) > ALPHA
+    assert pooled_pvalue(counts, n * areas / areas.sum()) > ALPHA
     assert counts[areas < 1e-6 * areas.sum() / n].sum() <= 3  # no spurious hits on tiny faces
 
 
@@ -71,7 +56,7 @@ def test_dropping_area_weights_fails_the_same_test(spread_plan_inputs):
     surface, areas = spread_plan_inputs
     n = 2_000_000
     counts = face_counts(unweighted(surface, n), surface.face_count)
-    assert pooled_chi2_pvalue(counts, n * areas / areas.sum()) < ALPHA
+    assert pooled_pvalue(counts, n * areas / areas.sum()) < ALPHA
 
 
 def test_real_mesh_face_counts_follow_areas(sample_mesh):
@@ -81,8 +66,8 @@ def test_real_mesh_face_counts_follow_areas(sample_mesh):
     n = 1_000_000
     counts = face_counts(area_weighted(surface, n), surface.face_count)
     assert counts[areas == 0].sum() == 0
-    assert pooled_chi2_pvalue(counts, n * areas / areas.sum()) > ALPHA
-    assert pooled_chi2_pvalue(face_counts(unweighted(surface, n), surface.face_count), n * areas / areas.sum()) < ALPHA
+    assert pooled_pvalue(counts, n * areas / areas.sum()) > ALPHA
+    assert pooled_pvalue(face_counts(unweighted(surface, n), surface.face_count), n * areas / areas.sum()) < ALPHA
 
 
 def test_tiny_faces_get_their_share_next_to_huge_ones():

