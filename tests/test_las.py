@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import scatter_cli.api as api
-import scatter_cli.las as las_module
+import scatter_cli.writers.las as las_module
 from scatter_cli.api import sampled_bounds
 from scatter_cli.errors import ScatterError
 from scatter_cli.sampling import chunk_ranges
@@ -105,7 +105,7 @@ def test_same_bytes_for_any_chunk_size(tmp_path, monkeypatch, suffix, block):
 
 @pytest.mark.parametrize("suffix", ["las", "laz"])
 def test_shards_merge_to_the_run(tmp_path, suffix):
-    from scatter_cli.las import merge_las
+    from scatter_cli.writers.las import merge_las
 
     write(tmp_path / f"whole.{suffix}")
     write(tmp_path / f"a.{suffix}", span=(0, 1234))
@@ -142,7 +142,7 @@ def test_a_failed_write_stops_the_writer_thread_and_leaves_no_file(tmp_path, mon
     assert failing_write(tmp_path / "t.las") == []
     assert not list(tmp_path.iterdir())
     # the check can tell: a writer that does not stop its thread leaves it running
-    from scatter_cli.las import LasWriter
+    from scatter_cli.writers.las import LasWriter
 
     monkeypatch.setattr(LasWriter, "close", lambda self: None)
     assert failing_write(tmp_path / "u.las")
@@ -152,7 +152,7 @@ def test_standard_output_is_refused():
     run = api.prepare(SAMPLES / "boxvertexcolors.glb", 10, precision="float64")
     stream = io.BytesIO()
     stream.seekable = lambda: False
-    from scatter_cli.las import LasWriter
+    from scatter_cli.writers.las import LasWriter
 
     writer = LasWriter(stream, run.layout, 10, sampled_bounds(run.plan))
     with pytest.raises(ScatterError, match="needs a file"):
@@ -163,7 +163,7 @@ def test_without_laspy_one_line_saying_what_to_install(tmp_path, monkeypatch):
     import sys
 
     monkeypatch.setitem(sys.modules, "laspy", None)
-    with pytest.raises(ScatterError, match=r"pip install 'scatter-cli\[las\]'"):
+    with pytest.raises(ScatterError, match=r"needs laspy and lazrs: pip install laspy lazrs pyproj$"):
         write(tmp_path / "t.las", n=10)
     assert not list(tmp_path.iterdir())
 

@@ -16,8 +16,9 @@ import os
 
 import numpy as np
 
-from .errors import ScatterError
-from .writers import _Writer, open_output
+from ..errors import ScatterError
+from .base import Writer, open_output
+from .parts import Part
 
 SOFTWARE = "scatter"
 FINEST_STEP = 1e-4  # 0.1 mm in metres: never coarser than this
@@ -30,7 +31,7 @@ def _laspy():
     try:
         import laspy
     except ImportError:
-        raise ScatterError("LAS/LAZ output needs laspy and lazrs: pip install 'scatter-cli[las]'") from None
+        raise ScatterError("LAS/LAZ output needs laspy and lazrs: pip install laspy lazrs pyproj") from None
     return laspy
 
 
@@ -102,7 +103,7 @@ BLOCK = 1 << 15  # points per record block: its records and scratch stay in the 
 EXTREMES_ROW = 256  # points per row of the wide reductions in column_extremes
 
 
-class LasWriter(_Writer):
+class LasWriter(Writer):
     def __init__(self, stream, layout, count, bounds=None, compress=False):
         super().__init__(stream, layout, count)
         if bounds is None:
@@ -222,6 +223,21 @@ class LasWriter(_Writer):
         clear_creation_date(self.stream)
 
 
+def make(fmt, stream, layout, count, bounds=None, **options):
+    return LasWriter(stream, layout, count, bounds, compress=fmt == "laz")
+
+
+HEADER_SIZE = 375  # LAS 1.4 public header block
+VLR_HEADER_SIZE = 54
+
+
+def file_size(fmt, layout, count, bounds=None, **options):
+    """Bytes of an (uncompressed) LAS file of ``count`` points of ``layout``."""
+    header = make_header(layout, bounds)[0]
+    vlrs = sum(VLR_HEADER_SIZE + len(vlr.record_data_bytes()) for vlr in header.vlrs)
+    return HEADER_SIZE + vlrs + count * header.point_format.size
+
+
 def record_views(records, extras):
     """{name: strided view (n,)} of the fields of ``records`` (n,) filled per block:
     ``xyz`` (V12: X Y Z), ``rg`` (uint32: red and green), ``bb`` (uint16: blue), each extra."""
@@ -310,6 +326,13 @@ def clear_creation_date(stream):
 
 
 # -- merge ------------------------------------------------------------------------------
+
+def read_part(path, fmt):
+    """A LAS or LAZ part: re-written through laspy (LAZ points are compressed chunks)."""
+    head = read_header(path)
+    return Part(path, ("las",) + layout_of(head), head.point_count, (0, 0), None,
+                lambda parts, stream: write_joined([p.path for p in parts], head, stream, fmt == "laz"))
+
 
 def read_header(path):
     """The laspy header of the LAS/LAZ file ``path``; a one-line error when it is not one."""
