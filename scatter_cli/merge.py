@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 
 from .errors import ScatterError, ScatterUsageError
+from .interrupts import held
 from .writers import MERGEABLE, check_extra, infer_format, load, open_output
 from .writers.parts import copy_body
 
@@ -47,7 +48,8 @@ def merge(parts, output, fmt=None):
     with open_output(output) as stream:
         first = loaded[0]
         if first.join is not None:
-            first.join(loaded, stream)
+            with held():  # laspy and lazrs write: a signal is raised once they are done
+                first.join(loaded, stream)
         else:
             stream.write(first.header(loaded))
             for part in loaded:

@@ -7,12 +7,13 @@ imported when a file of it is written.
 
 from __future__ import annotations
 
+from ..interrupts import held
 from .base import Writer, _Writer, check_room, copy_tail, open_output
 from .formats import (ASCII_FORMATS, BY_NAME, FORMATS, MERGEABLE, SUFFIXES, check_extra, check_output, infer_format,
                       load, run_precision)
 
 __all__ = ["ASCII_FORMATS", "FORMATS", "MERGEABLE", "PLY_TYPES", "SUFFIXES", "Writer", "check_output", "copy_tail",
-           "file_size", "infer_format", "make_writer", "open_output", "run_precision", "write_samples"]
+           "file_size", "infer_format", "make_writer", "open_output", "run_precision", "write_samples", "write_stream"]
 
 
 def make_writer(stream, fmt, layout, count, ascii=False, bounds=None, **options):
@@ -40,17 +41,28 @@ def write_samples(chunks, path, fmt, layout, count, ascii=False, bounds=None, **
     check_output(fmt, ascii)
     check_extra(fmt)
     check_room(path, file_size(fmt, layout, count, ascii, bounds=bounds, **options))
+    if fmt == "usd":
+        options["path"] = path
     with open_output(path) as stream:
-        if fmt == "usd":
-            options["path"] = path
-        writer = make_writer(stream, fmt, layout, count, ascii, bounds, **options)
-        try:
+        return write_stream(chunks, stream, fmt, layout, count, ascii, bounds, **options)
+
+
+def write_stream(chunks, stream, fmt, layout, count, ascii=False, bounds=None, **options):
+    """Write the chunks to the binary ``stream`` as :func:`write_samples` does (no checks).
+
+    SIGINT and SIGTERM are held while the writer works (a library it calls, such as lazrs,
+    would turn them into its own error) and raised between its steps."""
+    writer = make_writer(stream, fmt, layout, count, ascii, bounds, **options)
+    try:
+        with held():
             writer.header()
-            for chunk in chunks:
+        for chunk in chunks:
+            with held():
                 writer.write(chunk)
+        with held():
             writer.finish()
-        finally:
-            writer.close()
+    finally:
+        writer.close()
     return writer.report
 
 
