@@ -188,13 +188,14 @@ def batch(inputs, output, *, jobs=None, skip_existing=False, timeout=None, max_m
     """
     fmt = sample_options.pop("format", None)
     ascii = sample_options.pop("ascii", False)
+    crs = sample_options.pop("crs", None)
     return run_batch(inputs, output, jobs=jobs, skip_existing=skip_existing, timeout=timeout,
-                     max_memory=max_memory, report=report, client=client, fmt=fmt, ascii=ascii,
+                     max_memory=max_memory, report=report, client=client, fmt=fmt, ascii=ascii, crs=crs,
                      options=sample_options, quiet=True, collect=True)["records"]
 
 
 def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False, timeout=None, max_memory=None,
-              report=None, engine="local", scheduler=None, client=None, fmt=None, ascii=False, options=None,
+              report=None, engine="local", scheduler=None, client=None, fmt=None, ascii=False, crs=None, options=None,
               quiet=False, progress=False, collect=False):
     """The batch behind both the command and :func:`batch`.
 
@@ -217,7 +218,13 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
     plan_outputs(found, template, fmt)
     if ascii and infer_format(template.fill(found.fields(0)), fmt) != "ply":
         raise ScatterUsageError("--ascii applies to PLY output only")
-    setup = {"options": options, "ascii": ascii, "quiet": quiet}
+    if crs is not None:
+        from .writers import check_output
+        from .writers.crs import crs_wkt
+
+        check_output(infer_format(template.fill(found.fields(0)), fmt), crs=crs)
+        crs_wkt(crs)
+    setup = {"options": options, "ascii": ascii, "quiet": quiet, "crs": crs}
     tally = Tally(len(found), report, collect, progress and not quiet, quiet)
     jobs_iter = ((i, found.paths[i], template.fill(found.fields(i))) for i in range(len(found)))
     try:

@@ -42,6 +42,7 @@ Seed = Annotated[int, typer.Option("--seed", metavar="S", help="Random seed: sam
 Exterior = Annotated[bool, typer.Option("--exterior", help="Only the exterior surface: what can be seen from outside the mesh (needs embreex).")]
 Stable = Annotated[bool, typer.Option("--stable", help="Placement keyed to the faces themselves: points stay put when the mesh is edited elsewhere, renumbered or re-exported.")]
 Shard = Annotated[Optional[str], typer.Option("--shard", metavar="K/M", help="Write only shard K (0-based) of M of the run's points; join shards with 'scatter merge'.")]
+Crs = Annotated[Optional[str], typer.Option("--crs", metavar="EPSG:N|WKT", help="LAS/LAZ only: the coordinate system to record (an EPSG code needs pyproj).")]
 
 
 @app.command(no_args_is_help=True)
@@ -67,6 +68,7 @@ def sample(
     input_format: InputFormat = None,
     stable: Stable = False,
     shard: Shard = None,
+    crs: Crs = None,
 ):
     """Sample points on the surface of MESH.
 
@@ -103,7 +105,7 @@ def sample(
     t = time.perf_counter()
     show = not quiet and sys.stderr.isatty()
     report = write_samples(with_progress(run.chunks(), run.size, show), output, out_format, run.layout, run.size,
-                           ascii, **api.output_options(run, out_format))
+                           ascii, crs=crs, **api.output_options(run, out_format))
     if report:
         run.info["output"] = report
     run.info["timings"]["sample_and_write"] = time.perf_counter() - t
@@ -222,6 +224,7 @@ def batch(
     exterior: Exterior = False,
     stable: Stable = False,
     shard: Shard = None,
+    crs: Crs = None,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress, warnings, error lines or summary (the exit status and report still tell).")] = False,
 ):
     """Sample many meshes: for each, what 'scatter sample MESH -o OUTPUT' writes.
@@ -245,7 +248,7 @@ def batch(
     options = {k: v for k, v in options.items() if v is not None}
     result = run_batch(inputs or [], output, from_list=from_list, jobs=jobs, skip_existing=skip_existing,
                        timeout=timeout, max_memory=max_memory, report=report, engine=engine, scheduler=scheduler,
-                       fmt=fmt, ascii=ascii, options=options, quiet=quiet, progress=sys.stderr.isatty())
+                       fmt=fmt, ascii=ascii, crs=crs, options=options, quiet=quiet, progress=sys.stderr.isatty())
     if result["failed"]:
         raise typer.Exit(1)
 

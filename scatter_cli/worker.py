@@ -60,7 +60,7 @@ def serve():
 def sample_file(input, output, fmt, setup, warn=None):
     """Sample ``input`` to ``output`` in format ``fmt`` as ``scatter sample INPUT -o OUTPUT`` does.
 
-    ``setup``: ``{"options": keyword arguments of api.prepare, "ascii": bool}``.
+    ``setup``: ``{"options": keyword arguments of api.prepare, "ascii": bool, "crs": --crs or None}``.
 
     Returns ``{"error": None or one line, "count", "faces", "area"}``.
     """
@@ -76,7 +76,7 @@ def sample_file(input, output, fmt, setup, warn=None):
         options["precision"] = run_precision(fmt, options.get("precision", "auto"))  # as sample sets it
         run = api.prepare(input, warn=warn, **options)
         write_samples(run.chunks(), output, fmt, run.layout, run.size, setup.get("ascii", False),
-                      **api.output_options(run, fmt))
+                      crs=setup.get("crs"), **api.output_options(run, fmt))
         return {"error": None, "count": run.size, "faces": int(run.info["faces"]), "area": float(run.info["area"])}
     except ScatterError as exc:
         message = str(exc)

@@ -148,3 +148,26 @@ def test_merge_offers_only_the_formats_it_joins(tmp_path):
     assert_one_line_error(proc, 2, f"merge cannot join USD files (it joins: {', '.join(MERGEABLE)})")
     assert_one_line_error(run_scatter("merge", tmp_path / "a.ply", "-f", "usd", "-o", tmp_path / "m.ply"), 2,
                           "merge cannot join USD")
+
+
+# -- --crs through the command ----------------------------------------------------------
+
+def test_crs_through_sample_and_batch(tmp_path):
+    laspy = pytest.importorskip("laspy")
+    pyproj = pytest.importorskip("pyproj")
+    run_scatter("sample", MESH, "-n", 100, "--crs", "EPSG:2056", "-o", tmp_path / "s.laz", check=True)
+    run_scatter("batch", MESH, "-n", 100, "--crs", "EPSG:2056", "-o", tmp_path / "b" / "{stem}.laz", "-q",
+                check=True)
+    assert (tmp_path / "s.laz").read_bytes() == (tmp_path / "b" / "boxvertexcolors.laz").read_bytes()
+    assert laspy.read(tmp_path / "s.laz").header.parse_crs() == pyproj.CRS.from_epsg(2056)
+
+
+@pytest.mark.parametrize("command", ["sample", "batch"])
+def test_crs_elsewhere_or_malformed_is_a_usage_error(tmp_path, command):
+    pytest.importorskip("pyproj")
+    out = tmp_path / ("{stem}" if command == "batch" else "p")
+    assert_one_line_error(run_scatter(command, MESH, "-n", 10, "--crs", "EPSG:2056", "-o", f"{out}.ply"), 2,
+                          "--crs applies to LAS/LAZ output only")
+    assert_one_line_error(run_scatter(command, MESH, "-n", 10, "--crs", "UTM 32N", "-o", f"{out}.las"), 2,
+                          "--crs 'UTM 32N': neither EPSG:N nor WKT")
+    assert not list(tmp_path.iterdir())

@@ -31,15 +31,21 @@ def file_size(fmt, layout, count, ascii=False, **options):
     return BY_NAME[fmt].file_size(layout, count, ascii, **options)
 
 
-def write_samples(chunks, path, fmt, layout, count, ascii=False, bounds=None, **options):
+def write_samples(chunks, path, fmt, layout, count, ascii=False, bounds=None, crs=None, **options):
     """Write an iterable of Samples chunks (``count`` points in all) to ``path`` or stdout.
+
+    ``crs``: LAS/LAZ only, the coordinate system to record, ``EPSG:N`` or WKT.
 
     Before any chunk is drawn: the output options are checked (usage errors), the format's
     extra must be installed, and a file whose size is known must fit on its file system.
     Returns what the writer reports for ``--stats`` (LAS: the quantisation), a dict.
     """
-    check_output(fmt, ascii)
+    check_output(fmt, ascii, crs)
     check_extra(fmt)
+    if crs is not None:
+        from .crs import crs_wkt
+
+        options["wkt"] = crs_wkt(crs)
     check_room(path, file_size(fmt, layout, count, ascii, bounds=bounds, **options))
     if fmt == "usd":
         options["path"] = path
