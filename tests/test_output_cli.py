@@ -79,17 +79,23 @@ def test_merge_joins_shards_into_the_run(tmp_path, suffix, ascii):
 
 
 @pytest.mark.parametrize("attributes", ["", "normal,color,face"])
-@pytest.mark.parametrize("fmt", ["ply", "npy", "pcd", "las"])
-def test_the_size_known_beforehand_is_the_size_written(tmp_path, fmt, attributes):
+@pytest.mark.parametrize("fmt,crs", [("ply", None), ("npy", None), ("pcd", None), ("las", None), ("las", "EPSG:2056")])
+def test_the_size_known_beforehand_is_the_size_written(tmp_path, fmt, crs, attributes):
     from scatter_cli import api
     from scatter_cli.writers import file_size, run_precision, write_samples
 
     if fmt == "las":
         pytest.importorskip("laspy")
+    options = {}
+    if crs:
+        from scatter_cli.writers.crs import crs_wkt
+
+        pytest.importorskip("pyproj")
+        options = {"wkt": crs_wkt(crs)}
     run = api.prepare(str(MESH), 1234, attributes=attributes, precision=run_precision(fmt, "auto"))
     out = tmp_path / f"p.{fmt}"
-    write_samples(run.chunks(), out, fmt, run.layout, run.size, **api.output_options(run, fmt))
-    assert file_size(fmt, run.layout, run.size, **api.output_options(run, fmt)) == out.stat().st_size
+    write_samples(run.chunks(), out, fmt, run.layout, run.size, crs=crs, **api.output_options(run, fmt))
+    assert file_size(fmt, run.layout, run.size, **options, **api.output_options(run, fmt)) == out.stat().st_size
 
 
 @pytest.mark.parametrize("fmt,ascii", [("csv", False), ("xyz", False), ("ply", True), ("pcd", True), ("laz", False),
