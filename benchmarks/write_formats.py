@@ -75,7 +75,7 @@ def sampled_chunks(count, attrs, precision):
 
 def held_records(chunks, layout, count, bounds):
     """The LAS point records of ``chunks``, as our writer makes them (one array per chunk)."""
-    from scatter_cli.las import LasWriter
+    from scatter_cli.writers.las import LasWriter
 
     writer = LasWriter(None, layout, count, bounds)
     return [writer.records(c).copy() for c in chunks], writer.header_
@@ -91,7 +91,7 @@ def lazrs_alone(records, header, out, backend_name):
 
 
 def raw_bytes(size, out, block=1 << 20):
-    from scatter_cli.las import file_descriptor, write_all
+    from scatter_cli.writers.las import file_descriptor, write_all
     from scatter_cli.writers import open_output
 
     data = np.ones(block, np.uint8)  # written pages: a bytes(block) of zeros wrote 4-6x slower here
@@ -131,7 +131,7 @@ class _InTurn:
 
 def las_in_turn(chunks, out, layout, count, bounds):
     """Our LAS writer with each block written on the main thread, in turn."""
-    from scatter_cli.las import LasWriter
+    from scatter_cli.writers.las import LasWriter
     from scatter_cli.writers import open_output
 
     with open_output(out) as stream:

@@ -18,7 +18,7 @@ import numpy as np
 from .attributes import AttributeMaker
 from .bounds import choose_precision, normal_frame, output_bounds, sampled_bounds  # noqa: F401 (api.sampled_bounds: the LAS box)
 from .errors import ScatterUsageError
-from .options import SampleOptions, check_ascii
+from .options import SampleOptions
 from .pipeline import surface_source
 from .samples import ATTRIBUTES, Samples, column_layout
 from .sampling import chunk_ranges, run_chunks
@@ -179,32 +179,33 @@ def sample(mesh, count=None, **options) -> Samples:
     return samples
 
 
-def output_format(path, format=None, ascii=False) -> str:
+def output_format(path, format=None, ascii=False, crs=None) -> str:
     """The format of the output ``path`` (``format`` if given, else its suffix; CSV on
-    standard output), with ``--ascii`` checked against it: usage errors."""
-    from .writers import infer_format
+    standard output), with ``--ascii`` and ``--crs`` checked against it: usage errors."""
+    from .writers import check_output, infer_format
 
     fmt = infer_format(path, format)
-    check_ascii(fmt, ascii)
+    check_output(fmt, ascii, crs)
     return fmt
 
 
-def sample_to(mesh, options: SampleOptions, path, format=None, ascii=False, *, warn=None, progress=False) -> Run:
+def sample_to(mesh, options: SampleOptions, path, format=None, ascii=False, *, crs=None, warn=None,
+              progress=False) -> Run:
     """Sample ``mesh`` with ``options`` and write the run to ``path`` (``None`` or ``-``:
     standard output): what ``scatter sample MESH -o PATH`` does, and a batch worker for
     each mesh. Returns the run (its ``info`` holds the writer's report)."""
     from .writers import run_precision
 
-    fmt = output_format(path, format, ascii)
+    fmt = output_format(path, format, ascii, crs)
     options = dataclasses.replace(options, precision=run_precision(fmt, options.precision))
     run = prepare(mesh, options=options, warn=warn)
     t = time.perf_counter()
-    write(run, path, fmt, ascii, progress=progress)
+    write(run, path, fmt, ascii, crs=crs, progress=progress)
     run.info["timings"]["sample_and_write"] = time.perf_counter() - t
     return run
 
 
-def write(run: Run, path, format, ascii=False, *, progress=False):
+def write(run: Run, path, format, ascii=False, *, crs=None, progress=False):
     """Write the points of ``run`` to ``path`` in ``format`` (a name, as :func:`output_format`
     gives), streamed chunk by chunk; ``progress``: a progress line on standard error.
     Returns the writer's report (also in ``run.info["output"]`` when not empty)."""
@@ -212,7 +213,7 @@ def write(run: Run, path, format, ascii=False, *, progress=False):
     from .writers import write_samples
 
     report = write_samples(with_progress(run.chunks(), run.size, progress), path, format, run.layout, run.size,
-                           ascii, **output_options(run, format))
+                           ascii, crs=crs, **output_options(run, format))
     if report:
         run.info["output"] = report
     return report

@@ -16,7 +16,7 @@ import time
 
 from .errors import ScatterUsageError
 from .inputs import MESH_SUFFIXES
-from .options import SampleOptions, check_ascii
+from .options import SampleOptions
 
 TEMPLATE_FIELDS = ("stem", "name", "rel", "index")
 ENGINES = ("local", "dask")
@@ -159,13 +159,14 @@ def batch(inputs, output, *, jobs=None, skip_existing=False, timeout=None, max_m
     """
     fmt = sample_options.pop("format", None)
     ascii = sample_options.pop("ascii", False)
+    crs = sample_options.pop("crs", None)
     return run_batch(inputs, output, jobs=jobs, skip_existing=skip_existing, timeout=timeout,
-                     max_memory=max_memory, report=report, client=client, fmt=fmt, ascii=ascii,
+                     max_memory=max_memory, report=report, client=client, fmt=fmt, ascii=ascii, crs=crs,
                      options=SampleOptions(**sample_options), quiet=True, collect=True)["records"]
 
 
 def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False, timeout=None, max_memory=None,
-              report=None, engine="local", scheduler=None, client=None, fmt=None, ascii=False, options=None,
+              report=None, engine="local", scheduler=None, client=None, fmt=None, ascii=False, crs=None, options=None,
               quiet=False, progress=False, collect=False):
     """The batch behind both the command and :func:`batch`; ``options``: the
     :class:`~scatter_cli.options.SampleOptions` of every mesh.
@@ -174,7 +175,7 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
     with ``collect``). KeyboardInterrupt and other exceptions stop the workers, remove
     the outputs in progress and propagate.
     """
-    from .writers import infer_format
+    from .writers import check_output, infer_format
 
     started = time.monotonic()
     if client is not None:
@@ -183,12 +184,12 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
     options = (options or SampleOptions()).check()
     if fmt is not None:
         fmt = infer_format(None, fmt)
-        check_ascii(fmt, ascii)
+        check_output(fmt, ascii, crs)
     template = Template(output)
     found = collect_inputs(inputs, from_list)
     plan_outputs(found, template, fmt)
-    check_ascii(infer_format(template.fill(found.fields(0)), fmt), ascii)
-    setup = {"options": options.as_dict(), "ascii": ascii, "quiet": quiet}
+    check_output(infer_format(template.fill(found.fields(0)), fmt), ascii, crs)
+    setup = {"options": options.as_dict(), "ascii": ascii, "crs": crs, "quiet": quiet}
     tally = Tally(len(found), report, collect, progress and not quiet, quiet)
     jobs_iter = ((i, found.paths[i], template.fill(found.fields(i))) for i in range(len(found)))
     try:

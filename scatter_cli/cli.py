@@ -71,6 +71,7 @@ ChunkSize = Annotated[Optional[int], typer.Option("--chunk-size", metavar="K", h
 Stable = Annotated[bool, typer.Option("--stable", help="Placement keyed to the faces themselves: points stay put when the mesh is edited elsewhere, renumbered or re-exported.")]
 Shard = Annotated[Optional[str], typer.Option("--shard", metavar="K/M", help="Write only shard K (0-based) of M of the run's points; join shards with 'scatter merge'.")]
 Normalize = Annotated[str, typer.Option("--normalize", metavar="MODE", help="none | unit-cube | unit-sphere: points centred on the surface's box, scaled to fit [-1, 1] or the unit sphere.")]
+Crs = Annotated[Optional[str], typer.Option("--crs", metavar="EPSG:N|WKT", help="LAS/LAZ only: the coordinate system to record (an EPSG code needs pyproj).")]
 
 
 @app.command()
@@ -97,6 +98,7 @@ def sample(
     stable: Stable = D.stable,
     shard: Shard = None,
     normalize: Normalize = D.normalize,
+    crs: Crs = None,
 ):
     """Sample points on the surface of MESH.
 
@@ -120,7 +122,7 @@ def sample(
 
     started = time.perf_counter()
     options = SampleOptions.of(locals())
-    run = api.sample_to(mesh, options, output, fmt, ascii, warn=_warner(quiet), progress=not quiet and sys.stderr.isatty())
+    run = api.sample_to(mesh, options, output, fmt, ascii, crs=crs, warn=_warner(quiet), progress=not quiet and sys.stderr.isatty())
     run.info["timings"]["total"] = time.perf_counter() - started
     if stats and run.kept is not None:
         run.info.update(run.spacing())
@@ -237,6 +239,7 @@ def batch(
     stable: Stable = D.stable,
     shard: Shard = None,
     normalize: Normalize = D.normalize,
+    crs: Crs = None,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress, warnings, error lines or summary (the exit status and report still tell).")] = False,
 ):
     """Sample many meshes: for each, what 'scatter sample MESH -o OUTPUT' writes.

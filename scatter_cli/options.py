@@ -20,7 +20,7 @@ import numbers
 from dataclasses import dataclass
 
 from .errors import ScatterUsageError
-from .outputs import ASCII_FORMATS, ATTRIBUTES
+from .outputs import ATTRIBUTES
 
 METHODS = ("random", "stratified", "sobol")
 PRECISIONS = ("auto", "float32", "float64")
@@ -197,12 +197,6 @@ def check_sobol_count(method, count, error=ScatterUsageError):
 
     if method == "sobol" and count > SOBOL_MAX_COUNT:
         raise error(f"--method sobol gives at most 2^32 = {SOBOL_MAX_COUNT:,} points per run, not {count:,}")
-
-
-def check_ascii(fmt, ascii):
-    """``--ascii`` with an output format that has no ASCII variant is a usage error."""
-    if ascii and fmt not in ASCII_FORMATS:
-        raise ScatterUsageError(f"--ascii applies to {' and '.join(f.upper() for f in ASCII_FORMATS)} output only")
 
 
 def attribute_names(text_or_list) -> tuple:

@@ -1,15 +1,13 @@
-"""What an output can hold: the file formats and the per-point attributes a user asks for.
+"""What an output can hold: the per-point attributes a user asks for (and, from the
+format table :mod:`scatter_cli.writers.formats`, the file formats).
 
 Names and columns only (no NumPy), so that ``--help`` and usage errors list them at no
-start-up cost. A new format or attribute added here appears in ``--help`` by itself.
+start-up cost. A new format (in the table) or attribute (here) appears in ``--help`` by itself.
 """
 
-# Output formats (-f), and the file suffixes that select them.
-FORMATS = ("ply", "csv", "xyz", "npy", "pcd", "las", "laz", "usd")
-SUFFIXES = {"ply": "ply", "csv": "csv", "xyz": "xyz", "txt": "xyz", "npy": "npy", "pcd": "pcd", "las": "las",
-            "laz": "laz", "usd": "usd", "usda": "usd", "usdc": "usd"}
-# Formats --ascii applies to.
-ASCII_FORMATS = ("ply", "pcd")
+# Output formats (-f), the file suffixes that select them, those --ascii applies to: from
+# the one table of formats.
+from .writers.formats import ASCII_FORMATS, FORMATS, SUFFIXES  # noqa: E402,F401
 
 # Attribute name (as given to -a) -> (key in Samples, output columns, dtype kind).
 # "real" columns take the coordinate precision; the others have a fixed type.

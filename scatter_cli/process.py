@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import contextlib
 import os
-import signal
 import sys
 
 from .errors import STDOUT, OutputClosed, ScatterError, writing
+from .interrupts import Interrupted, Terminated, install
 
 
 class Options:
@@ -22,26 +22,7 @@ class Options:
     debug = False
 
 
-class Terminated(BaseException):
-    """SIGTERM."""
-
-
-class Interrupted(BaseException):
-    """SIGINT, raised instead of KeyboardInterrupt: click turns that into a silent exit."""
-
-
-def _on_sigterm(signum, frame):
-    raise Terminated()
-
-
-def _on_sigint(signum, frame):
-    raise Interrupted()
-
-
-def install_signal_handlers():
-    signal.signal(signal.SIGTERM, _on_sigterm)
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # not when started ignoring it (`cmd &`)
-        signal.signal(signal.SIGINT, _on_sigint)
+install_signal_handlers = install
 
 
 def echo(text):

@@ -60,7 +60,7 @@ def serve():
 def sample_file(input, output, fmt, setup, warn=None):
     """Sample ``input`` to ``output`` in format ``fmt`` as ``scatter sample INPUT -o OUTPUT`` does.
 
-    ``setup``: ``{"options": SampleOptions.as_dict(), "ascii": bool}``.
+    ``setup``: ``{"options": SampleOptions.as_dict(), "ascii": bool, "crs": --crs or None}``.
 
     Returns ``{"error": None or one line, "count", "faces", "area"}``.
     """
@@ -72,7 +72,8 @@ def sample_file(input, output, fmt, setup, warn=None):
         folder = os.path.dirname(output)
         if folder:
             os.makedirs(folder, exist_ok=True)
-        run = api.sample_to(input, SampleOptions(**setup["options"]), output, fmt, setup.get("ascii", False), warn=warn)
+        run = api.sample_to(input, SampleOptions(**setup["options"]), output, fmt, setup.get("ascii", False),
+                            crs=setup.get("crs"), warn=warn)
         return {"error": None, "count": run.size, "faces": int(run.info["faces"]), "area": float(run.info["area"])}
     except ScatterError as exc:
         message = str(exc)

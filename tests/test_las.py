@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import scatter_cli.api as api
-import scatter_cli.las as las_module
+import scatter_cli.writers.las as las_module
 from scatter_cli.api import sampled_bounds
 from scatter_cli.errors import ScatterError
 from scatter_cli.sampling import chunk_ranges
@@ -20,12 +20,12 @@ laspy = pytest.importorskip("laspy")
 
 
 def write(path, mesh=SAMPLES / "boxvertexcolors.glb", n=3000, attributes="normal,color,face,orient", span=None,
-          **kw):
+          crs=None, **kw):
     fmt = str(path).rsplit(".", 1)[1]
     run = api.prepare(mesh, n, attributes=attributes, seed=6, precision=run_precision(fmt, "auto"), **kw)
     a, b = span or (0, run.count)
     chunks = (run._job(a + i, a + j) for i, j in chunk_ranges(b - a, 1000))
-    report = write_samples(chunks, path, fmt, run.layout, b - a, bounds=sampled_bounds(run.plan))
+    report = write_samples(chunks, path, fmt, run.layout, b - a, bounds=sampled_bounds(run.plan), crs=crs)
     return run.collect(), report
 
 
@@ -105,7 +105,7 @@ def test_same_bytes_for_any_chunk_size(tmp_path, monkeypatch, suffix, block):
 
 @pytest.mark.parametrize("suffix", ["las", "laz"])
 def test_shards_merge_to_the_run(tmp_path, suffix):
-    from scatter_cli.las import merge_las
+    from scatter_cli.writers.las import merge_las
 
     write(tmp_path / f"whole.{suffix}")
     write(tmp_path / f"a.{suffix}", span=(0, 1234))
@@ -142,7 +142,7 @@ def test_a_failed_write_stops_the_writer_thread_and_leaves_no_file(tmp_path, mon
     assert failing_write(tmp_path / "t.las") == []
     assert not list(tmp_path.iterdir())
     # the check can tell: a writer that does not stop its thread leaves it running
-    from scatter_cli.las import LasWriter
+    from scatter_cli.writers.las import LasWriter
 
     monkeypatch.setattr(LasWriter, "close", lambda self: None)
     assert failing_write(tmp_path / "u.las")
@@ -152,7 +152,7 @@ def test_standard_output_is_refused():
     run = api.prepare(SAMPLES / "boxvertexcolors.glb", 10, precision="float64")
     stream = io.BytesIO()
     stream.seekable = lambda: False
-    from scatter_cli.las import LasWriter
+    from scatter_cli.writers.las import LasWriter
 
     writer = LasWriter(stream, run.layout, 10, sampled_bounds(run.plan))
     with pytest.raises(ScatterError, match="needs a file"):
@@ -163,7 +163,7 @@ def test_without_laspy_one_line_saying_what_to_install(tmp_path, monkeypatch):
     import sys
 
     monkeypatch.setitem(sys.modules, "laspy", None)
-    with pytest.raises(ScatterError, match=r"pip install 'scatter-cli\[las\]'"):
+    with pytest.raises(ScatterError, match=r"needs laspy and lazrs: pip install laspy lazrs pyproj$"):
         write(tmp_path / "t.las", n=10)
     assert not list(tmp_path.iterdir())
 
@@ -176,3 +176,66 @@ def test_pdal_info_accepts_the_file(tmp_path, suffix):
     from .conftest import run_user
 
     assert run_user(["pdal", "info", str(tmp_path / f"t.{suffix}")]).returncode == 0
+
+
+# -- coordinate system (--crs) ---------------------------------------------------------
+
+GLOBAL_ENCODING_AT, WKT_BIT = 6, 1 << 4  # header bytes 6-7: global encoding; bit 4: WKT
+
+
+def crs_records(header):
+    return [(v.user_id, v.record_id) for v in header.vlrs if v.user_id == "LASF_Projection"]
+
+
+@pytest.mark.parametrize("suffix", ["las", "laz"])
+@pytest.mark.parametrize("attributes", ["", "normal,color"])
+def test_every_file_has_the_wkt_bit_and_no_crs_record_without_crs(tmp_path, suffix, attributes):
+    write(tmp_path / f"t.{suffix}", attributes=attributes)
+    raw = (tmp_path / f"t.{suffix}").read_bytes()
+    assert int.from_bytes(raw[GLOBAL_ENCODING_AT:GLOBAL_ENCODING_AT + 2], "little") & WKT_BIT
+    header = laspy.read(tmp_path / f"t.{suffix}").header
+    assert header.point_format.id in (6, 7) and crs_records(header) == [] and header.parse_crs() is None
+
+
+@pytest.mark.parametrize("suffix", ["las", "laz"])
+def test_an_epsg_code_is_one_wkt_record_read_back_by_laspy(tmp_path, suffix):
+    pyproj = pytest.importorskip("pyproj")
+    write(tmp_path / f"t.{suffix}", crs="EPSG:2056")
+    header = laspy.read(tmp_path / f"t.{suffix}").header
+    assert crs_records(header) == [("LASF_Projection", 2112)]  # WKT, no GeoTIFF keys
+    assert header.global_encoding.wkt
+    assert header.parse_crs() == pyproj.CRS.from_epsg(2056)
+
+
+def test_a_wkt_is_recorded_as_given(tmp_path):
+    pyproj = pytest.importorskip("pyproj")
+    wkt = pyproj.CRS.from_epsg(32632).to_wkt()  # WKT2, as a user may have it
+    write(tmp_path / "t.las", crs=wkt)
+    header = laspy.read(tmp_path / "t.las").header
+    assert [v.string for v in header.vlrs if v.record_id == 2112] == [wkt]
+    assert header.parse_crs().to_epsg() == 32632
+
+
+@pytest.mark.parametrize("value", ["EPSG:0", "EPSG:", "UTM 32N", "GEOGCS[oops"])
+def test_a_crs_that_is_neither_epsg_nor_wkt_is_a_usage_error(tmp_path, value):
+    from scatter_cli.errors import ScatterUsageError
+
+    pytest.importorskip("pyproj")
+    with pytest.raises(ScatterUsageError, match="--crs"):
+        write(tmp_path / "t.las", crs=value)
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("suffix", ["las", "laz"])
+def test_merge_keeps_the_crs_and_refuses_another(tmp_path, suffix):
+    pytest.importorskip("pyproj")
+    from scatter_cli.merge import merge
+
+    write(tmp_path / f"whole.{suffix}", crs="EPSG:2056")
+    write(tmp_path / f"a.{suffix}", span=(0, 1234), crs="EPSG:2056")
+    write(tmp_path / f"b.{suffix}", span=(1234, 3000), crs="EPSG:2056")
+    merge([tmp_path / f"a.{suffix}", tmp_path / f"b.{suffix}"], tmp_path / f"m.{suffix}")
+    assert (tmp_path / f"m.{suffix}").read_bytes() == (tmp_path / f"whole.{suffix}").read_bytes()
+    write(tmp_path / f"c.{suffix}", span=(1234, 3000), crs="EPSG:2193")
+    with pytest.raises(ScatterError, match=f"c.{suffix}: columns or types differ"):
+        merge([tmp_path / f"a.{suffix}", tmp_path / f"c.{suffix}"], tmp_path / f"n.{suffix}")

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import scatter_cli.api as api
-from scatter_cli.pcd import merge_pcd, pack_rgb
+from scatter_cli.writers.pcd import merge_pcd, pack_rgb
 from scatter_cli.writers import write_samples
 
 from .conftest import SAMPLES

@@ -95,7 +95,7 @@ def test_float64_points_sit_under_a_double_translate(tmp_path):
 
 
 def test_a_count_beyond_memory_is_refused_and_leaves_no_file(tmp_path, monkeypatch):
-    import scatter_cli.usdwrite as usdwrite
+    import scatter_cli.writers.usd as usdwrite
 
     monkeypatch.setattr(usdwrite, "available_memory", lambda: 10_000)
     with pytest.raises(ScatterError, match=r"t\.usdc: USD output is built in memory .* 1,000 points"):
@@ -110,7 +110,7 @@ def test_without_usd_core_one_line_saying_what_to_install(tmp_path, monkeypatch)
     import sys
 
     monkeypatch.setitem(sys.modules, "pxr", None)
-    with pytest.raises(ScatterError, match=r"pip install 'scatter-cli\[usd\]'"):
+    with pytest.raises(ScatterError, match=r"needs usd-core: pip install usd-core$"):
         write(tmp_path / "t.usda", "", n=10)
 
 

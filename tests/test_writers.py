@@ -100,3 +100,48 @@ def test_standard_output_binary_formats(sample_mesh, reference):
     proc = run_scatter(*command(sample_mesh, "-f", "npy"), check=True)
     arr = np.load(io.BytesIO(proc.stdout))
     np.testing.assert_array_equal(arr["x"], reference.points[:, 0])
+
+
+# -- the format table ------------------------------------------------------------------
+
+def test_every_format_module_provides_what_its_row_says():
+    from scatter_cli.writers import formats
+
+    for spec in formats.TABLE:
+        module = formats.load(spec.name)
+        assert callable(module.make), spec.name
+        assert hasattr(module, "file_size") or not spec.sized, spec.name
+        assert hasattr(module, "read_part") == spec.mergeable or spec.name == "text", spec.name
+        for suffix in spec.suffixes:
+            assert formats.infer_format(f"a.{suffix.upper()}") == spec.name
+
+
+def test_precision_ascii_and_crs_rules_come_from_the_table():
+    from scatter_cli.errors import ScatterUsageError
+    from scatter_cli.writers import formats
+
+    for spec in formats.TABLE:
+        assert formats.run_precision(spec.name, "float32") == ("float64" if spec.float64 else "float32")
+        for ascii, crs, allowed in [(True, None, spec.ascii), (False, "EPSG:4326", spec.crs)]:
+            if allowed:
+                formats.check_output(spec.name, ascii, crs)
+            else:
+                with pytest.raises(ScatterUsageError):
+                    formats.check_output(spec.name, ascii, crs)
+    assert formats.ASCII_FORMATS == ("ply", "pcd") and formats.CRS_FORMATS == ("las", "laz")
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["sample", "--help"], ["merge", "--help"]])
+def test_help_and_the_table_import_no_numpy(argv):
+    import subprocess
+    import sys
+
+    from .conftest import run_user
+
+    proc = run_user([sys.executable, "-X", "importtime", "-m", "scatter_cli", *argv])
+    assert proc.returncode == 0
+    imported = {line.rsplit("|", 1)[-1].strip() for line in proc.stderr.decode().splitlines()}
+    assert "scatter_cli.writers.formats" in imported and "numpy" not in imported
+    code = "import sys, scatter_cli.writers, scatter_cli.merge; print('numpy' in sys.modules)"
+    proc = run_user([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+    assert proc.stdout.strip() == b"False"

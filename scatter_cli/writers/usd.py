@@ -23,8 +23,8 @@ import tempfile
 
 import numpy as np
 
-from .errors import ScatterError
-from .writers import _Writer
+from ..errors import ScatterError
+from .base import Writer
 
 # Bytes per point of each value as the stage holds it (float32 values, colour as rgb and
 # opacity, orient as quatf, quath and a protoIndices int), once as a Vt array and once
@@ -44,7 +44,7 @@ def _pxr():
     try:
         from pxr import Gf, Sdf, Usd, UsdGeom, Vt
     except ImportError:
-        raise ScatterError("USD output needs usd-core: pip install 'scatter-cli[usd]'") from None
+        raise ScatterError("USD output needs usd-core: pip install usd-core") from None
     return Gf, Sdf, Usd, UsdGeom, Vt
 
 
@@ -81,7 +81,7 @@ def check_fits(count, layout, available=None, path=None):
                            "write PLY, PCD or LAS instead, or split the run with --shard")
 
 
-class UsdWriter(_Writer):
+class UsdWriter(Writer):
     def __init__(self, stream, layout, count, path=None, up_axis=None, meters_per_unit=None, spacing=None):
         super().__init__(stream, layout, count)
         _pxr()
@@ -176,6 +176,10 @@ class UsdWriter(_Writer):
                 Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(c[:, :3])))
             api.CreatePrimvar("displayOpacity", Sdf.ValueTypeNames.FloatArray, vertex).Set(
                 Vt.FloatArray.FromNumpy(np.ascontiguousarray(c[:, 3])))
+
+
+def make(fmt, stream, layout, count, path=None, up_axis=None, meters_per_unit=None, spacing=None, **options):
+    return UsdWriter(stream, layout, count, path, up_axis, meters_per_unit, spacing)
 
 
 def export_crate(stage):

@@ -6,7 +6,9 @@ from the sampled bounding box so that a stored point is within 1e-6 of the box's
 diagonal of its float64 position and never coarser than 0.1 mm (1e-4, for data in
 metres); the offset is the box's centre. Every other column is an Extra Bytes field of
 its own, in the contract's column order: real columns as float32, indices as int32, the
-colour's alpha as uint8.
+colour's alpha as uint8. The global-encoding WKT bit is set in every file (LAS 1.4 requires
+WKT for point formats 6-10); a coordinate system (``--crs``) is one OGC coordinate system
+WKT record (LASF_Projection 2112), and there are no GeoTIFF keys.
 """
 
 from __future__ import annotations
@@ -16,8 +18,9 @@ import os
 
 import numpy as np
 
-from .errors import ScatterError
-from .writers import _Writer, open_output
+from ..errors import ScatterError
+from .base import Writer, open_output
+from .parts import Part
 
 SOFTWARE = "scatter"
 FINEST_STEP = 1e-4  # 0.1 mm in metres: never coarser than this
@@ -30,7 +33,7 @@ def _laspy():
     try:
         import laspy
     except ImportError:
-        raise ScatterError("LAS/LAZ output needs laspy and lazrs: pip install 'scatter-cli[las]'") from None
+        raise ScatterError("LAS/LAZ output needs laspy and lazrs: pip install laspy lazrs pyproj") from None
     return laspy
 
 
@@ -73,7 +76,9 @@ def extra_fields(layout):
     return out
 
 
-def make_header(layout, bounds):
+def make_header(layout, bounds, wkt=None):
+    """(laspy header, step, offset (3,), extra fields) of a file of ``layout`` inside
+    ``bounds`` (2, 3), recording the coordinate system ``wkt`` (OGC WKT) if given."""
     laspy = _laspy()
     colour = any(key == "color" for key, _, _ in layout)
     header = laspy.LasHeader(point_format=7 if colour else 6, version="1.4")
@@ -86,7 +91,24 @@ def make_header(layout, bounds):
     if extras:
         header.add_extra_dims([laspy.ExtraBytesParams(name=name, type=dt) for _, _, name, dt in extras])
         _no_extra_statistics(header)
+    set_crs(header, wkt)  # after the Extra Bytes record, where a merged file has it too
     return header, step, offset, extras
+
+
+def set_crs(header, wkt):
+    """Set the global-encoding WKT bit and, when ``wkt`` is given, add its record."""
+    header.global_encoding.wkt = True
+    if wkt:
+        from laspy.vlrs.known import WktCoordinateSystemVlr
+
+        header.vlrs.append(WktCoordinateSystemVlr(wkt))
+
+
+def crs_of(header):
+    """The WKT a LAS header records, or None."""
+    from laspy.vlrs.known import WktCoordinateSystemVlr
+
+    return next((vlr.string for vlr in header.vlrs if isinstance(vlr, WktCoordinateSystemVlr)), None)
 
 
 def _no_extra_statistics(header):
@@ -102,13 +124,13 @@ BLOCK = 1 << 15  # points per record block: its records and scratch stay in the 
 EXTREMES_ROW = 256  # points per row of the wide reductions in column_extremes
 
 
-class LasWriter(_Writer):
-    def __init__(self, stream, layout, count, bounds=None, compress=False):
+class LasWriter(Writer):
+    def __init__(self, stream, layout, count, bounds=None, compress=False, wkt=None):
         super().__init__(stream, layout, count)
         if bounds is None:
             raise ScatterError("internal error: LAS output needs the sampled bounding box")
         self.compress = compress
-        self.header_, self.step, self.offset, self.extras = make_header(layout, bounds)
+        self.header_, self.step, self.offset, self.extras = make_header(layout, bounds, wkt)
         self.report = {"las": quantisation_report(self.step, self.offset, bounds)}
         self._las = None
         self._fd = None
@@ -222,6 +244,21 @@ class LasWriter(_Writer):
         clear_creation_date(self.stream)
 
 
+def make(fmt, stream, layout, count, bounds=None, wkt=None, **options):
+    return LasWriter(stream, layout, count, bounds, compress=fmt == "laz", wkt=wkt)
+
+
+HEADER_SIZE = 375  # LAS 1.4 public header block
+VLR_HEADER_SIZE = 54
+
+
+def file_size(fmt, layout, count, bounds=None, wkt=None, **options):
+    """Bytes of an (uncompressed) LAS file of ``count`` points of ``layout``."""
+    header = make_header(layout, bounds, wkt)[0]
+    vlrs = sum(VLR_HEADER_SIZE + len(vlr.record_data_bytes()) for vlr in header.vlrs)
+    return HEADER_SIZE + vlrs + count * header.point_format.size
+
+
 def record_views(records, extras):
     """{name: strided view (n,)} of the fields of ``records`` (n,) filled per block:
     ``xyz`` (V12: X Y Z), ``rg`` (uint32: red and green), ``bb`` (uint16: blue), each extra."""
@@ -311,6 +348,13 @@ def clear_creation_date(stream):
 
 # -- merge ------------------------------------------------------------------------------
 
+def read_part(path, fmt):
+    """A LAS or LAZ part: re-written through laspy (LAZ points are compressed chunks)."""
+    head = read_header(path)
+    return Part(path, ("las",) + layout_of(head), head.point_count, (0, 0), None,
+                lambda parts, stream: write_joined([p.path for p in parts], head, stream, fmt == "laz"))
+
+
 def read_header(path):
     """The laspy header of the LAS/LAZ file ``path``; a one-line error when it is not one."""
     laspy = _laspy()
@@ -324,9 +368,10 @@ def read_header(path):
 
 
 def layout_of(header):
-    """What parts must share to be joined: point format, extra bytes, scale and offset."""
+    """What parts must share to be joined: point format, extra bytes, scale, offset and
+    coordinate system."""
     return (header.point_format.id, tuple(header.point_format.extra_dimension_names),
-            tuple(header.scales.tolist()), tuple(header.offsets.tolist()))
+            tuple(header.scales.tolist()), tuple(header.offsets.tolist()), crs_of(header))
 
 
 def merge_las(paths, out, chunk=1 << 20):
@@ -338,7 +383,8 @@ def merge_las(paths, out, chunk=1 << 20):
     heads = [read_header(p) for p in paths]
     for p, h in zip(paths, heads):
         if layout_of(h) != layout_of(heads[0]):
-            raise ScatterError(f"{p}: LAS point format, extra bytes, scale or offset differ from {paths[0]}")
+            raise ScatterError(f"{p}: LAS point format, extra bytes, scale, offset or coordinate system differ "
+                               f"from {paths[0]}")
     with open_output(out) as stream:
         write_joined(paths, heads[0], stream, str(out).lower().endswith(".laz"), chunk)
 
@@ -350,6 +396,7 @@ def write_joined(paths, first, stream, compress, chunk=1 << 20):
     header.scales, header.offsets = first.scales, first.offsets
     header.generating_software = first.generating_software
     header.system_identifier = first.system_identifier
+    set_crs(header, crs_of(first))
     _no_extra_statistics(header)
     backend = laspy.LazBackend.LazrsParallel if compress else None
     with laspy.open(stream, mode="w", header=header, do_compress=compress, laz_backend=backend,

@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import ScatterError
-from .samples import Samples
-from .writers import _TextEncoder, _Writer, copy_tail, open_output
+from ..errors import ScatterError
+from ..samples import Samples
+from .base import Writer, copy_tail, open_output
+from .parts import Part, check_rows, size
+from .text import TextEncoder
 
 PCL_NAMES = {"nx": "normal_x", "ny": "normal_y", "nz": "normal_z"}
 PCD_TYPES = {"f": "F", "i": "I", "u": "U"}
@@ -51,14 +53,14 @@ def header(fields, count, ascii):
     return ("\n".join(lines) + "\n").encode("ascii")
 
 
-class PcdWriter(_Writer):
+class PcdWriter(Writer):
     def __init__(self, stream, layout, count, ascii=False):
         super().__init__(stream, layout, count)
         self.ascii = ascii
         self.fields = pcd_layout(layout, ascii)
         self.dtype = np.dtype([(c, dt) for _, cols, dt in self.fields for c in cols])
         if ascii:
-            self._text = _TextEncoder(self.fields, " ")
+            self._text = TextEncoder(self.fields, " ")
 
     def header(self):
         self.stream.write(header(self.fields, self.count, self.ascii))
@@ -87,6 +89,16 @@ class PcdWriter(_Writer):
             for j, c in enumerate(cols):
                 rec[c] = columns[key][:, j]
         return rec.data
+
+
+def make(fmt, stream, layout, count, ascii=False, **options):
+    return PcdWriter(stream, layout, count, ascii)
+
+
+def file_size(fmt, layout, count, **options):
+    """Bytes of a binary PCD file of ``count`` points of ``layout``."""
+    fields = pcd_layout(layout)
+    return len(header(fields, count, False)) + count * sum(dt.itemsize * len(cols) for _, cols, dt in fields)
 
 
 # -- merge ------------------------------------------------------------------------------
@@ -139,3 +151,12 @@ def header_from_lines(layout, count):
             lines.append(f"POINTS {count}")
         lines.append(ln)
     return ("\n".join(lines) + "\n").encode("ascii")
+
+
+def read_part(path, fmt="pcd"):
+    """A binary or ASCII PCD part."""
+    layout, count, offset = read_header(path)
+    sizes = next((ln.split()[1:] for ln in layout if ln.startswith("SIZE ")), [])
+    check_rows(path, "DATA binary" in layout, offset, count, sum(int(x) for x in sizes))
+    return Part(path, ("pcd", tuple(layout)), count, (offset, size(path)),
+                lambda parts: header_from_lines(layout, sum(p.count for p in parts)))

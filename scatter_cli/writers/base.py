@@ -1,0 +1,147 @@
+"""What every writer shares: the writer protocol and atomic output files.
+
+A file is written to a temporary name beside it and renamed into place only when
+complete, so a failure never leaves a partial file and an existing one stays untouched.
+Imports no format module and no NumPy.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import stat
+import sys
+
+from ..errors import STDOUT, ScatterError, writing
+
+
+class Writer:
+    """The writer protocol: ``header()``, ``write(samples)`` per chunk, ``finish()``, and
+    ``close()`` in every case. ``report``: what the writer tells ``--stats``."""
+
+    def __init__(self, stream, layout, count):
+        self.stream = stream
+        self.layout = layout
+        self.count = count
+        self.written = 0
+        self.report = {}
+
+    def header(self):
+        pass
+
+    def write(self, samples):
+        self.written += len(samples)
+        self.stream.write(self.encode(samples))
+
+    def finish(self):
+        if self.count is not None and self.written != self.count:
+            raise ScatterError(f"internal error: wrote {self.written} points, announced {self.count}")
+
+    def close(self):
+        """Release what the writer holds before its stream is closed, finished or not."""
+
+
+_Writer = Writer  # the name the format modules of other branches import
+
+
+def copy_tail(path, offset, stream, block=1 << 22):
+    """Copy the bytes of file ``path`` from ``offset`` to its end into ``stream`` (for merging)."""
+    with reading(path), open(path, "rb") as f:
+        f.seek(offset)
+        for data in iter(lambda: f.read(block), b""):
+            stream.write(data)
+
+
+@contextlib.contextmanager
+def reading(path):
+    """Turn OS errors while reading ``path`` into one-line ScatterErrors naming it."""
+    try:
+        yield
+    except FileNotFoundError:
+        raise ScatterError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise ScatterError(f"{path}: is a directory") from None
+    except OSError as exc:
+        raise ScatterError(f"{path}: cannot read: {exc.strerror or exc}") from None
+
+
+def is_stdout(path) -> bool:
+    return path is None or str(path) == "-"
+
+
+def check_room(path, size):
+    """Refuse, before any work, a file of ``size`` bytes that the file system of ``path``
+    cannot take (its temporary copy is written beside it). Standard output, devices and
+    pipes are not checked; nor is a file system that does not say."""
+    if size is None or is_stdout(path):
+        return
+    path = os.fspath(path)
+    if os.path.exists(path) and not os.path.isfile(path):
+        return
+    folder = os.path.dirname(os.path.abspath(path))
+    try:
+        fs = os.statvfs(folder)
+    except OSError:
+        return  # a missing folder is open_output's to report
+    room = fs.f_bavail * fs.f_frsize
+    if size > room:
+        raise ScatterError(f"{path}: the output needs {_bytes(size)}, its file system has {_bytes(room)} free")
+
+
+def _bytes(n):
+    """``n`` bytes for a person: ``12 TB (12,000,000,000,000 bytes)``."""
+    value = float(n)
+    for unit in ("bytes", "kB", "MB", "GB", "TB", "PB"):
+        if value < 1000:
+            break
+        value /= 1000
+    return f"{n:,} bytes" if unit == "bytes" else f"{value:.3g} {unit} ({n:,} bytes)"
+
+
+@contextlib.contextmanager
+def open_output(path):
+    """A binary stream for ``path``; ``None`` or ``'-'`` is standard output.
+
+    Regular files are written atomically through a temporary file in the same folder.
+    Devices and pipes (``/dev/null``, a FIFO) are written in place.
+    """
+    if is_stdout(path):
+        with writing(STDOUT):
+            yield sys.stdout.buffer
+            sys.stdout.buffer.flush()
+        return
+    path = os.fspath(path)
+    if os.path.exists(path) and not os.path.isfile(path):
+        if os.path.isdir(path):
+            raise ScatterError(f"{path}: is a directory")
+        with writing(path), open(path, "wb") as stream:
+            yield stream
+        return
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise ScatterError(f"{path}: cannot write: folder '{os.path.dirname(path) or '.'}' does not exist")
+    import tempfile  # here: importing it costs the start-up of commands that write nothing
+
+    with writing(path):
+        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".part", dir=folder)
+    try:
+        with writing(path), os.fdopen(fd, "wb", buffering=1 << 20) as stream:
+            yield stream
+        _set_mode(tmp, path)
+        with writing(path):
+            os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def _set_mode(tmp, path):
+    """Give the new file the mode an ordinary ``open(path, 'w')`` would (mkstemp makes 0600)."""
+    if os.path.exists(path):
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+    else:
+        umask = os.umask(0)
+        os.umask(umask)
+        mode = 0o666 & ~umask
+    os.chmod(tmp, mode)
