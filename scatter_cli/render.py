@@ -1,0 +1,153 @@
+"""Draw a point set as a small picture on the CPU with NumPy: no display, no GPU.
+
+Orthographic projection along one of four views, each point splatted as a small disc,
+a depth buffer so that front points hide back points, and depth shading (nearer is
+brighter) so that shapes read as shapes.
+
+Views are taken in the points' frame, whose up axis is +Z or +Y (``up``):
+
+- ``front`` looks horizontally along +Y (Z up) or -Z (Y up), +X to the right;
+- ``side`` looks along -X, so +Y (Z up) or -Z (Y up) is to the right;
+- ``top`` looks down the up axis, +X to the right;
+- ``iso`` looks from above the front right corner of the bounding box (the ``front``
+  camera turned 45 degrees about the up axis and raised 35.26 degrees: along the box
+  diagonal (-1, +1, -1) in Z-up coordinates).
+
+A thumbnail is framed on the bounding box of the points, not on the points, so that
+one shape seen from several views keeps its scale.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+VIEWS = ("iso", "front", "side", "top")
+BACKGROUND = 255
+MARGIN = 0.06  # of the side, left empty around the box
+NEAR_SHADE, FAR_SHADE = 1.0, 0.45  # brightness of the nearest and the farthest point
+MAX_SPLAT = 4.0  # largest disc radius in pixels (sparse sets are dots, not blobs)
+SPLAT_FILL = 0.6  # disc radius as a fraction of size / sqrt(n): discs of a surface's points close up
+# Colours of inside and outside points: vermillion and blue of the Okabe-Ito palette,
+# told apart with every common form of colour blindness.
+INSIDE_RGB, OUTSIDE_RGB = (213, 94, 0), (0, 114, 178)
+# Height colour ramp (low to high): viridis at five stops.
+HEIGHT_RAMP = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=np.float64)
+
+# Camera rows (right, screen up, toward the viewer) for Z-up points.
+_Z_UP = {
+    "front": [[1, 0, 0], [0, 0, 1], [0, -1, 0]],
+    "side": [[0, 1, 0], [0, 0, 1], [1, 0, 0]],
+    "top": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+}
+# A Z-up direction (x, y, z) is (x, z, -y) in Y-up coordinates.
+_Z_TO_Y = np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0]], dtype=np.float64)
+
+
+def camera(view, up="Z"):
+    """(3, 3) float64 orthonormal rows: screen right, screen up, toward the viewer."""
+    if view == "iso":
+        toward = np.array([1.0, -1.0, 1.0]) / np.sqrt(3.0)
+        screen_up = np.array([0.0, 0.0, 1.0]) - toward[2] * toward
+        screen_up /= np.linalg.norm(screen_up)
+        rows = np.stack([np.cross(screen_up, toward), screen_up, toward])
+    else:
+        rows = np.array(_Z_UP[view], dtype=np.float64)
+    return rows if up == "Z" else rows @ _Z_TO_Y.T
+
+
+def splat_offsets(radius):
+    """(k, 2) int pixel offsets (dx, dy) of a disc of ``radius`` pixels, centre first."""
+    r = int(np.floor(radius))
+    dy, dx = np.mgrid[-r : r + 1, -r : r + 1]
+    keep = dx * dx + dy * dy <= radius * radius
+    offsets = np.stack([dx[keep], dy[keep]], axis=1)
+    return offsets[np.argsort(np.abs(offsets).sum(axis=1), kind="stable")]
+
+
+def splat_radius(n, size):
+    """Disc radius in pixels for ``n`` points in a ``size`` thumbnail: about half the
+    spacing of a surface's points on screen, at least one pixel's half, at most MAX_SPLAT."""
+    return float(np.clip(SPLAT_FILL * size / np.sqrt(max(n, 1)), 0.5, MAX_SPLAT))
+
+
+def point_colors(points, attributes, up="Z"):
+    """(n, 3) uint8 colours from the first the set has: ``color``, ``inside``/``sdf``
+    (inside points INSIDE_RGB, outside OUTSIDE_RGB), ``normal`` (x, y, z to r, g, b),
+    else the height along the up axis (HEIGHT_RAMP)."""
+    n = len(points)
+    if "color" in attributes:
+        return np.asarray(attributes["color"])[:, :3].astype(np.uint8)
+    for name in ("inside", "sdf"):
+        if name in attributes:
+            values = np.asarray(attributes[name]).reshape(n)
+            inside = values > 0.5 if name == "inside" else values < 0
+            return np.where(inside[:, None], np.array(INSIDE_RGB, np.uint8), np.array(OUTSIDE_RGB, np.uint8))
+    if "normal" in attributes:
+        normal = np.nan_to_num(np.asarray(attributes["normal"], dtype=np.float64))
+        return np.clip(np.rint((normal + 1.0) * 127.5), 0, 255).astype(np.uint8)
+    height = points[:, 2 if up == "Z" else 1] if n else np.empty(0)
+    lo, hi = (height.min(), height.max()) if n else (0.0, 0.0)
+    t = (height - lo) / (hi - lo) if hi > lo else np.full(n, 0.5)
+    at = t * (len(HEIGHT_RAMP) - 1)
+    i = np.minimum(at.astype(np.int64), len(HEIGHT_RAMP) - 2)
+    f = (at - i)[:, None]
+    return np.rint(HEIGHT_RAMP[i] * (1 - f) + HEIGHT_RAMP[i + 1] * f).astype(np.uint8)
+
+
+def box_corners(points):
+    """(8, 3) corners of the bounding box of ``points`` (n, 3)."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    pick = np.array([[(i >> k) & 1 for k in range(3)] for i in range(8)], dtype=bool)
+    return np.where(pick, hi, lo)
+
+
+def project(points, view, up, size):
+    """(x, y, depth) of ``points`` (n, 3) seen from ``view`` in a ``size`` square: pixel
+    coordinates (y down) and depth in [0, 1] (0 nearest), framed on the bounding box."""
+    rows = camera(view, up)
+    corners = box_corners(points) @ rows.T
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    extent = max(hi[0] - lo[0], hi[1] - lo[1])
+    scale = (1 - 2 * MARGIN) * size / extent if extent > 0 else 1.0
+    screen = points @ rows.T - centre
+    x = size / 2 + screen[:, 0] * scale
+    y = size / 2 - screen[:, 1] * scale
+    depth_span = hi[2] - lo[2]
+    depth = (hi[2] - centre[2] - screen[:, 2]) / depth_span if depth_span > 0 else np.zeros(len(points))
+    return x, y, depth
+
+
+def thumbnail(points, colors, view="iso", up="Z", size=256, depth_test=True):
+    """(size, size, 3) uint8 picture of ``points`` (n, 3) float64 coloured ``colors``
+    (n, 3) uint8, seen from ``view``. Without ``depth_test`` the discs are painted in
+    the points' order, later over earlier (only for tests: front points no longer hide
+    back ones)."""
+    image = np.full((size * size, 3), BACKGROUND, dtype=np.uint8)
+    finite = np.isfinite(points).all(axis=1)
+    points, colors = points[finite], colors[finite]
+    n = len(points)
+    if n == 0:
+        return image.reshape(size, size, 3)
+    x, y, depth = project(points, view, up, size)
+    offsets = splat_offsets(splat_radius(n, size))
+    px = (np.floor(x).astype(np.int64)[None, :] + offsets[:, :1]).ravel()
+    py = (np.floor(y).astype(np.int64)[None, :] + offsets[:, 1:]).ravel()
+    # One key per disc pixel: quantised depth above the point's index, so the smallest
+    # key of a pixel is its nearest point (ties: the earlier point), found in one pass.
+    if depth_test:
+        near = np.rint(np.clip(depth, 0, 1) * ((1 << 24) - 1)).astype(np.uint64) << np.uint64(32)
+        key = near | np.arange(n, dtype=np.uint64)
+    else:
+        key = np.arange(n - 1, -1, -1, dtype=np.uint64)  # the last point drawn wins
+    key = np.broadcast_to(key, (len(offsets), n)).ravel()
+    inside = (px >= 0) & (px < size) & (py >= 0) & (py < size)
+    nearest = np.full(size * size, np.iinfo(np.uint64).max, dtype=np.uint64)
+    np.minimum.at(nearest, py[inside] * size + px[inside], key[inside])
+    hit = nearest != np.iinfo(np.uint64).max
+    index = (nearest[hit] & np.uint64(0xFFFFFFFF)).astype(np.int64)
+    if not depth_test:
+        index = n - 1 - index
+    shade = NEAR_SHADE + (FAR_SHADE - NEAR_SHADE) * np.clip(depth[index], 0, 1)
+    image[hit] = np.rint(colors[index] * shade[:, None]).astype(np.uint8)
+    return image.reshape(size, size, 3)
