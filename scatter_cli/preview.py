@@ -94,11 +94,10 @@ def preview(inputs, output, *, size=256, columns=None, views=("iso",), per_page=
             except ScatterError as exc:
                 sheet.failed(slot, path, str(exc))
                 sheets.failed.append((path, str(exc)))
+                if warn:
+                    warn(str(exc))
             else:
                 sheet.put(slot, tile, [path, *lines])
-                continue
-            if warn:
-                warn(str(exc))
         name = page_name(output, page + 1)
         sheet.write(name)
         sheets.append(name)

@@ -25,8 +25,8 @@ VIEWS = ("iso", "front", "side", "top")
 BACKGROUND = 255
 MARGIN = 0.06  # of the side, left empty around the box
 NEAR_SHADE, FAR_SHADE = 1.0, 0.45  # brightness of the nearest and the farthest point
-MAX_SPLAT = 4.0  # largest disc radius in pixels (sparse sets are dots, not blobs)
-SPLAT_FILL = 0.6  # disc radius as a fraction of size / sqrt(n): discs of a surface's points close up
+MAX_SPLAT = 6.0  # largest disc radius in pixels (sparse sets are dots, not blobs)
+SPLAT_FILL = 1.2  # disc radius as a fraction of size / sqrt(n): about the spacing of the visible points of a surface
 # Colours of inside and outside points: vermillion and blue of the Okabe-Ito palette,
 # told apart with every common form of colour blindness.
 INSIDE_RGB, OUTSIDE_RGB = (213, 94, 0), (0, 114, 178)
@@ -65,9 +65,9 @@ def splat_offsets(radius):
 
 
 def splat_radius(n, size):
-    """Disc radius in pixels for ``n`` points in a ``size`` thumbnail: about half the
-    spacing of a surface's points on screen, at least one pixel's half, at most MAX_SPLAT."""
-    return float(np.clip(SPLAT_FILL * size / np.sqrt(max(n, 1)), 0.5, MAX_SPLAT))
+    """Disc radius in pixels for ``n`` points in a ``size`` thumbnail: about the
+    spacing of the visible points of a surface (so the discs close up), 1 to MAX_SPLAT."""
+    return float(np.clip(SPLAT_FILL * size / np.sqrt(max(n, 1)), 1.0, MAX_SPLAT))
 
 
 def point_colors(points, attributes, up="Z"):
