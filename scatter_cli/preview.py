@@ -14,6 +14,7 @@ import io
 import math
 import numbers
 import os
+from concurrent.futures import ThreadPoolExecutor
 
 from .batch import Inputs
 from .errors import ScatterError, ScatterUsageError
@@ -33,7 +34,7 @@ GAP = 8  # pixels between cells and around the sheet
 LINE = 12  # caption line height (Pillow's default bitmap font is 11 px high)
 CAPTION = 2 * LINE + 4  # under each thumbnail: the name, then the point count
 CHAR = 6  # width of a character of the default bitmap font
-PNG_OPTIONS = {"format": "PNG", "compress_level": 6, "optimize": False}  # fixed: same bytes every run
+PNG_OPTIONS = {"format": "PNG", "compress_level": 3, "optimize": False}  # fixed: same bytes every run
 TEXT_RGB, NOTE_RGB, FAILED_RGB, CROSS_RGB = (20, 20, 20), (90, 90, 90), (236, 236, 236), (200, 30, 30)
 
 
@@ -84,24 +85,37 @@ def preview(inputs, output, *, size=256, columns=None, views=("iso",), per_page=
     columns = columns or default_columns(min(per_page, len(found)), len(views))
     sheets = Sheets()
     sheets.failed, sheets.inputs = [], len(found)
-    for page in range(pages):
-        first = page * per_page
-        paths = found.paths[first : first + per_page]
-        sheet = Sheet(len(paths), columns, size, len(views))
-        for slot, path in enumerate(paths):
-            try:
-                tile, lines = draw_input(path, views, size, sample_options)
-            except ScatterError as exc:
-                sheet.failed(slot, path, str(exc))
-                sheets.failed.append((path, str(exc)))
-                if warn:
-                    warn(str(exc))
-            else:
-                sheet.put(slot, tile, [path, *lines])
-        name = page_name(output, page + 1)
-        sheet.write(name)
-        sheets.append(name)
+    # A page is encoded and written in a second thread while the next one is drawn (the
+    # PNG encoder releases the GIL): at most two pages in memory.
+    with ThreadPoolExecutor(max_workers=1) as writer:
+        pending = None
+        for page in range(pages):
+            first = page * per_page
+            sheet = draw_page(found.paths[first : first + per_page], columns, size, views, sample_options,
+                              sheets.failed, warn)
+            if pending is not None:
+                pending.result()
+            name = page_name(output, page + 1)
+            pending = writer.submit(sheet.write, name)
+            sheets.append(name)
+        pending.result()
     return sheets
+
+
+def draw_page(paths, columns, size, views, sample_options, failed, warn):
+    """The Sheet of ``paths``; inputs that fail are crossed out and added to ``failed``."""
+    sheet = Sheet(len(paths), columns, size, len(views))
+    for slot, path in enumerate(paths):
+        try:
+            tile, lines = draw_input(path, views, size, sample_options)
+        except ScatterError as exc:
+            sheet.failed(slot, path, str(exc))
+            failed.append((path, str(exc)))
+            if warn:
+                warn(str(exc))
+        else:
+            sheet.put(slot, tile, [path, *lines])
+    return sheet
 
 
 def check_options(output, size, columns, views, per_page):

@@ -31,6 +31,7 @@ SPLAT_FILL = 1.2  # disc radius as a fraction of size / sqrt(n): about the spaci
 # told apart with every common form of colour blindness.
 INSIDE_RGB, OUTSIDE_RGB = (213, 94, 0), (0, 114, 178)
 # Height colour ramp (low to high): viridis at five stops.
+EMPTY = np.uint64(np.iinfo(np.uint64).max)  # a depth-buffer pixel no disc covers
 HEIGHT_RAMP = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=np.float64)
 
 # Camera rows (right, screen up, toward the viewer) for Z-up points.
@@ -123,31 +124,35 @@ def thumbnail(points, colors, view="iso", up="Z", size=256, depth_test=True):
     (n, 3) uint8, seen from ``view``. Without ``depth_test`` the discs are painted in
     the points' order, later over earlier (only for tests: front points no longer hide
     back ones)."""
-    image = np.full((size * size, 3), BACKGROUND, dtype=np.uint8)
     finite = np.isfinite(points).all(axis=1)
     points, colors = points[finite], colors[finite]
     n = len(points)
     if n == 0:
-        return image.reshape(size, size, 3)
+        return np.full((size, size, 3), BACKGROUND, dtype=np.uint8)
     x, y, depth = project(points, view, up, size)
-    offsets = splat_offsets(splat_radius(n, size))
-    px = (np.floor(x).astype(np.int64)[None, :] + offsets[:, :1]).ravel()
-    py = (np.floor(y).astype(np.int64)[None, :] + offsets[:, 1:]).ravel()
-    # One key per disc pixel: quantised depth above the point's index, so the smallest
-    # key of a pixel is its nearest point (ties: the earlier point), found in one pass.
+    radius = splat_radius(n, size)
+    pad = int(np.floor(radius)) + 1
+    width = size + 2 * pad  # a padded buffer: discs need no bounds check (points are in the square)
+    ix = np.clip(np.floor(x).astype(np.int64), 0, size - 1) + pad
+    iy = np.clip(np.floor(y).astype(np.int64), 0, size - 1) + pad
+    base = iy * width + ix
+    # One key per point: quantised depth above the point's index, so the smallest key
+    # a pixel gets is its nearest point's (ties: the earlier point).
     if depth_test:
         near = np.rint(np.clip(depth, 0, 1) * ((1 << 24) - 1)).astype(np.uint64) << np.uint64(32)
         key = near | np.arange(n, dtype=np.uint64)
     else:
         key = np.arange(n - 1, -1, -1, dtype=np.uint64)  # the last point drawn wins
-    key = np.broadcast_to(key, (len(offsets), n)).ravel()
-    inside = (px >= 0) & (px < size) & (py >= 0) & (py < size)
-    nearest = np.full(size * size, np.iinfo(np.uint64).max, dtype=np.uint64)
-    np.minimum.at(nearest, py[inside] * size + px[inside], key[inside])
-    hit = nearest != np.iinfo(np.uint64).max
-    index = (nearest[hit] & np.uint64(0xFFFFFFFF)).astype(np.int64)
+    nearest = np.full(width * width, EMPTY, dtype=np.uint64)
+    for offset in (splat_offsets(radius) @ [1, width]).tolist():  # a pass per disc pixel: n keys stay in the cache
+        np.minimum.at(nearest, base + offset, key)
+    nearest = nearest.reshape(width, width)[pad : pad + size, pad : pad + size]
+    # The low 32 bits of a pixel's key: its point's rank in ``palette`` (n: the background).
+    rank = np.minimum(nearest & np.uint64(0xFFFFFFFF), np.uint64(n)).astype(np.intp)
+    shade = NEAR_SHADE + (FAR_SHADE - NEAR_SHADE) * np.clip(depth, 0, 1)
+    palette = np.empty((n + 1, 3), dtype=np.uint8)
+    palette[:n] = np.rint(colors * shade[:, None])
+    palette[n] = BACKGROUND
     if not depth_test:
-        index = n - 1 - index
-    shade = NEAR_SHADE + (FAR_SHADE - NEAR_SHADE) * np.clip(depth[index], 0, 1)
-    image[hit] = np.rint(colors[index] * shade[:, None]).astype(np.uint8)
-    return image.reshape(size, size, 3)
+        palette[:n] = palette[n - 1 :: -1].copy()
+    return palette[rank]
