@@ -6,7 +6,7 @@
 up axis ("Z" unless the file states one: a USD stage's ``upAxis``).
 
 A file with more points than ``limit`` is decimated without loading it whole: binary
-PLY, NPY and binary PCD are memory-mapped and every k-th row read; text formats (CSV,
+PLY, NPY and binary PCD keep every k-th row, read a few megabytes at a time; text formats (CSV,
 XYZ, ASCII PLY and PCD) and LAS/LAZ are read as ``SPANS`` runs of consecutive rows
 spread evenly through the file (a run of rows is a fair sample of a ``random`` run,
 whose every stretch is). USD stages are read whole (a stage cannot be streamed).
@@ -108,17 +108,28 @@ def from_columns(columns, total, up_axis="Z"):
     return PointSet(points, attributes, total, up_axis)
 
 
-# ---- binary rows: memory-mapped, every k-th row ----
+# ---- binary rows: every k-th row, read in blocks ----
 
-def _mapped(path, dtype, offset, total, limit):
-    """Every k-th of ``total`` records of ``dtype`` from byte ``offset``, as a structured array."""
-    if total == 0:
-        return np.empty(0, dtype)
-    need = offset + total * dtype.itemsize
-    if os.path.getsize(path) < need:
+BLOCK_ROWS = 8192  # rows kept per block read: a block is k * BLOCK_ROWS rows, a few MB
+
+
+def _every_kth(path, dtype, offset, total, limit):
+    """Every k-th of ``total`` records of ``dtype`` from byte ``offset`` (k from
+    ``limit``), as a structured array, reading the file in blocks of k * BLOCK_ROWS rows
+    so that memory stays at one block whatever the file's size."""
+    if os.path.getsize(path) < offset + total * dtype.itemsize:
         raise ScatterError(f"{path}: the file is shorter than its header says (truncated?)")
-    rows = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=(total,))
-    return np.array(rows[:: stride(total, limit)])
+    k = stride(total, limit)
+    out = np.empty(-(-total // k), dtype=dtype)
+    with _open(path) as f:
+        f.seek(offset)
+        done = 0
+        for start in range(0, total, k * BLOCK_ROWS):
+            rows = np.fromfile(f, dtype=dtype, count=min(k * BLOCK_ROWS, total - start))
+            kept = rows[::k]
+            out[done : done + len(kept)] = kept
+            done += len(kept)
+    return out
 
 
 def _structured_columns(rows):
@@ -167,7 +178,7 @@ def read_ply(path, limit):
         raise ScatterError(f"{path}: a PLY with faces is a mesh, not a point file")
     if fmt == "binary_little_endian":
         dtype = np.dtype([(name, PLY_DTYPES[kind]) for kind, name in props])
-        return from_columns(_structured_columns(_mapped(path, dtype, offset, total, limit)), total)
+        return from_columns(_structured_columns(_every_kth(path, dtype, offset, total, limit)), total)
     if fmt == "ascii":
         names = [name for _, name in props]
         return from_columns(_text_columns(path, offset, total, limit, None, names), total)
@@ -177,14 +188,18 @@ def read_ply(path, limit):
 # ---- NPY ----
 
 def read_npy(path, limit):
-    try:
-        rows = np.load(path, mmap_mode="r", allow_pickle=False)
-    except ValueError as exc:
-        raise ScatterError(f"{path}: not an NPY array of points ({_reason(exc)})") from None
-    if rows.ndim != 1 or rows.dtype.names is None:
+    fmt = np.lib.format
+    with _open(path) as f:
+        try:
+            version = fmt.read_magic(f)
+            read = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+            shape, fortran, dtype = read(f)
+        except ValueError as exc:
+            raise ScatterError(f"{path}: not an NPY file ({_reason(exc)})") from None
+        offset = f.tell()
+    if len(shape) != 1 or fortran or dtype.names is None:
         raise ScatterError(f"{path}: not an NPY array of points (one structured row a point)")
-    total = len(rows)
-    return from_columns(_structured_columns(np.array(rows[:: stride(total, limit)])), total)
+    return from_columns(_structured_columns(_every_kth(path, dtype, offset, shape[0], limit)), shape[0])
 
 
 # ---- PCD ----
@@ -214,7 +229,7 @@ def read_pcd(path, limit):
     data = keys["DATA"][0].lower()
     if data == "binary":
         dtype = np.dtype([(n, f"<{PCD_KINDS[t]}{s}") for n, s, t in zip(names, keys["SIZE"], keys["TYPE"])])
-        return from_columns(_structured_columns(_mapped(path, dtype, offset, total, limit)), total)
+        return from_columns(_structured_columns(_every_kth(path, dtype, offset, total, limit)), total)
     if data == "ascii":
         columns = _text_columns(path, offset, total, limit, None, names)
         if "rgb" in columns:  # scatter writes the packed colour as an integer in ASCII files

@@ -32,6 +32,9 @@ SPLAT_FILL = 1.2  # disc radius as a fraction of size / sqrt(n): about the spaci
 INSIDE_RGB, OUTSIDE_RGB = (213, 94, 0), (0, 114, 178)
 # Height colour ramp (low to high): viridis at five stops.
 EMPTY = np.uint64(np.iinfo(np.uint64).max)  # a depth-buffer pixel no disc covers
+DEPTH_STEPS = (1 << 24) - 1  # depth is quantised to this many steps over the bounding box
+HOLE_DEPTH, HOLE_NEIGHBOURS, HOLE_PASSES = 0.05, 5, 2  # see fill_holes
+HOLE_STEP = np.uint64(HOLE_DEPTH * DEPTH_STEPS)
 HEIGHT_RAMP = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=np.float64)
 
 # Camera rows (right, screen up, toward the viewer) for Z-up points.
@@ -119,6 +122,28 @@ def project(points, view, up, size):
     return x, y, depth
 
 
+def fill_holes(keys):
+    """Close the pinholes of a surface in the depth buffer ``keys`` (h, w) uint64, in place.
+
+    A pixel of which at least HOLE_NEIGHBOURS of its 8 neighbours are nearer by more than
+    HOLE_DEPTH of the depth range (or empty, and its neighbours drawn) sees through a gap
+    between the discs of a surface: it takes its nearest neighbour's point. Silhouettes
+    stay (a pixel at an edge has fewer nearer neighbours)."""
+    depth = keys >> np.uint64(32)
+    centre = depth[1:-1, 1:-1]
+    h, w = keys.shape
+    nearer = np.zeros(centre.shape, dtype=np.uint8)
+    best = np.full(centre.shape, EMPTY, dtype=np.uint64)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy or dx:
+                window = (slice(1 + dy, h - 1 + dy), slice(1 + dx, w - 1 + dx))
+                nearer += depth[window] + HOLE_STEP < centre
+                np.minimum(best, keys[window], out=best)
+    hole = nearer >= HOLE_NEIGHBOURS
+    keys[1:-1, 1:-1][hole] = best[hole]
+
+
 def thumbnail(points, colors, view="iso", up="Z", size=256, depth_test=True):
     """(size, size, 3) uint8 picture of ``points`` (n, 3) float64 coloured ``colors``
     (n, 3) uint8, seen from ``view``. Without ``depth_test`` the discs are painted in
@@ -139,13 +164,16 @@ def thumbnail(points, colors, view="iso", up="Z", size=256, depth_test=True):
     # One key per point: quantised depth above the point's index, so the smallest key
     # a pixel gets is its nearest point's (ties: the earlier point).
     if depth_test:
-        near = np.rint(np.clip(depth, 0, 1) * ((1 << 24) - 1)).astype(np.uint64) << np.uint64(32)
+        near = np.rint(np.clip(depth, 0, 1) * DEPTH_STEPS).astype(np.uint64) << np.uint64(32)
         key = near | np.arange(n, dtype=np.uint64)
     else:
         key = np.arange(n - 1, -1, -1, dtype=np.uint64)  # the last point drawn wins
     nearest = np.full(width * width, EMPTY, dtype=np.uint64)
     for offset in (splat_offsets(radius) @ [1, width]).tolist():  # a pass per disc pixel: n keys stay in the cache
         np.minimum.at(nearest, base + offset, key)
+    if depth_test:
+        for _ in range(HOLE_PASSES):
+            fill_holes(nearest.reshape(width, width))
     nearest = nearest.reshape(width, width)[pad : pad + size, pad : pad + size]
     # The low 32 bits of a pixel's key: its point's rank in ``palette`` (n: the background).
     rank = np.minimum(nearest & np.uint64(0xFFFFFFFF), np.uint64(n)).astype(np.intp)

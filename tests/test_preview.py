@@ -150,6 +150,20 @@ def test_without_the_depth_test_the_back_half_shows():
         assert_back_hidden(functools.partial(render.thumbnail, depth_test=False))
 
 
+def test_pinholes_close_and_silhouettes_stay():
+    near, far = np.uint64(10 << 32), np.uint64((render.DEPTH_STEPS - 5) << 32)
+    keys = np.full((9, 9), render.EMPTY, dtype=np.uint64)
+    keys[1:5, 1:8] = near + np.arange(28, dtype=np.uint64).reshape(4, 7)  # a near surface, top half
+    keys[3, 4] = far + np.uint64(99)  # a pinhole through which a far point shows
+    keys[2, 2] = render.EMPTY  # a pinhole onto the background
+    before = keys.copy()
+    render.fill_holes(keys)
+    assert keys[3, 4] == before[2, 3] and keys[2, 2] == before[1, 1]  # the nearest neighbour's point
+    changed = keys != before
+    changed[3, 4] = changed[2, 2] = False
+    assert not changed.any()  # the surface's edges and the background stay
+
+
 def test_views_follow_the_up_axis():
     for up in ("Z", "Y"):
         rows = {v: render.camera(v, up) for v in render.VIEWS}
