@@ -4,12 +4,14 @@
 
 1. 300 binary PLY files of 2,048 points with normals (samples of the repo's meshes) to
    three sheets of 100 thumbnails at 256 px: thumbnails a second, start-up included
-   (wall clock of the whole command, median of --repeats runs after a warm-up).
-2. Peak resident memory of the command for 100 and for 300 such inputs (flat: pages
-   are written as they fill).
+   (wall clock and CPU time of the whole command, medians of --repeats runs after a
+   warm-up; on a shared machine the CPU time tells what free cores would give).
+2. Peak resident memory of the command for 100, 200 and 300 such inputs (flat: pages
+   are written as they fill, one drawn while the one before is encoded).
 3. One file of 10^7 points (binary PLY with normals, and NPY): seconds to preview it.
 4. The peer: matplotlib's 3-D scatter (the Agg backend, no display), drawing the same
-   thumbnails one figure each, in this process: thumbnails a second, and the ratio.
+   thumbnails one figure each, in this process (no start-up): thumbnails a second of
+   wall clock and of CPU time, and scatter's ratio to it.
 
 Figures are printed as Markdown and written as JSON (--json).
 """
@@ -69,29 +71,31 @@ def make_big(folder, n=10_000_000):
 
 
 def run(args):
-    """(seconds, peak RSS in MB) of one `scatter ARGS` process. The memory is GNU time's
-    (%M): a child forked from this process would count this process's memory too."""
+    """(wall seconds, CPU seconds, peak RSS in MB) of one `scatter ARGS` process, from
+    GNU time (a child forked from this process would count this process's memory too)."""
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONUNBUFFERED", "CI")}
     env["PYTHONPATH"] = str(ROOT)
     with tempfile.NamedTemporaryFile("r", suffix=".rss") as rss:
         t = time.perf_counter()
-        proc = subprocess.run(["/usr/bin/time", "-f", "%M", "-o", rss.name, sys.executable, "-m", "scatter_cli",
+        proc = subprocess.run(["/usr/bin/time", "-f", "%U %S %M", "-o", rss.name, sys.executable, "-m", "scatter_cli",
                                *map(str, args)], env=env, stdin=subprocess.DEVNULL, stderr=subprocess.PIPE)
         seconds = time.perf_counter() - t
-        peak = int(rss.read().split()[-1]) / 1024
+        user, system, peak = rss.read().split()[-3:]
     if proc.returncode != 0:
         raise SystemExit(f"scatter {' '.join(map(str, args))} failed: {proc.stderr.decode()}")
-    return seconds, peak
+    return seconds, float(user) + float(system), int(peak) / 1024
 
 
 def median_run(args, repeats):
-    run(args)  # warm-up: the page cache, the imports
-    times, peaks = zip(*(run(args) for _ in range(repeats)))
-    return statistics.median(times), max(peaks)
+    """Medians of wall and CPU seconds, and the largest peak RSS, of ``repeats`` runs after
+    a warm-up (the page cache, the imports)."""
+    run(args)
+    walls, cpus, peaks = zip(*(run(args) for _ in range(repeats)))
+    return statistics.median(walls), statistics.median(cpus), max(peaks)
 
 
 def matplotlib_rate(folder, k=20, size=256):
-    """Thumbnails a second of matplotlib's 3-D scatter on the first ``k`` files."""
+    """Thumbnails a second (wall clock, CPU time) of matplotlib's 3-D scatter on the first ``k`` files."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -100,7 +104,7 @@ def matplotlib_rate(folder, k=20, size=256):
     from scatter_cli.pointfiles import read_points
 
     files = sorted(folder.iterdir())[:k]
-    t = time.perf_counter()
+    t, c = time.perf_counter(), time.process_time()
     for path in files:
         pts = read_points(path)
         fig = plt.figure(figsize=(size / 100, size / 100), dpi=100)
@@ -109,7 +113,7 @@ def matplotlib_rate(folder, k=20, size=256):
         ax.set_axis_off()
         fig.savefig(os.devnull, format="png")
         plt.close(fig)
-    return k / (time.perf_counter() - t)
+    return k / (time.perf_counter() - t), k / (time.process_time() - c)
 
 
 def main():
@@ -120,35 +124,39 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         make_collection(tmp / "c300", 300)
-        (tmp / "c100").mkdir()
-        for p in sorted((tmp / "c300").iterdir())[:100]:
-            os.link(p, tmp / "c100" / p.name)
+        for k in (100, 200):
+            (tmp / f"c{k}").mkdir()
+            for p in sorted((tmp / "c300").iterdir())[:k]:
+                os.link(p, tmp / f"c{k}" / p.name)
         make_big(tmp)
         sheets = ["--per-page", "100", "--size", "256", "-o"]
-        t300, rss300 = median_run(["preview", tmp / "c300", *sheets, tmp / "s300-{page}.png"], opts.repeats)
-        t100, rss100 = median_run(["preview", tmp / "c100", *sheets, tmp / "s100-{page}.png"], opts.repeats)
-        t_ply, rss_ply = median_run(["preview", tmp / "big.ply", "-o", tmp / "big-ply.png"], opts.repeats)
-        t_npy, _ = median_run(["preview", tmp / "big.npy", "-o", tmp / "big-npy.png"], opts.repeats)
-        t_one, _ = median_run(["preview", tmp / "c300" / "0000.ply", "-o", tmp / "one.png"], opts.repeats)
+        runs = {k: median_run(["preview", tmp / f"c{k}", *sheets, tmp / f"s{k}-{{page}}.png"], opts.repeats)
+                for k in (100, 200, 300)}
+        big_ply = median_run(["preview", tmp / "big.ply", "-o", tmp / "big-ply.png"], opts.repeats)
+        big_npy = median_run(["preview", tmp / "big.npy", "-o", tmp / "big-npy.png"], opts.repeats)
+        one = median_run(["preview", tmp / "c300" / "0000.ply", "-o", tmp / "one.png"], opts.repeats)
         peer = matplotlib_rate(tmp / "c300")
-    rate = 300 / t300
+    wall, cpu, _ = runs[300]
     figures = {
         "load": open("/proc/loadavg").read().split()[:3], "cpus": os.cpu_count(), "repeats": opts.repeats,
-        "collection_300_seconds": t300, "thumbnails_per_second": rate, "peak_rss_mb_100": rss100,
-        "peak_rss_mb_300": rss300, "collection_100_seconds": t100, "one_file_seconds": t_one,
-        "big_ply_seconds": t_ply, "big_ply_peak_rss_mb": rss_ply, "big_npy_seconds": t_npy,
-        "matplotlib_thumbnails_per_second": peer, "ratio_to_matplotlib": rate / peer,
+        "runs": {f"collection_{k}": dict(zip(("wall_s", "cpu_s", "peak_rss_mb"), v)) for k, v in runs.items()},
+        "thumbnails_per_wall_second": 300 / wall, "thumbnails_per_cpu_second": 300 / cpu,
+        "one_file": dict(zip(("wall_s", "cpu_s", "peak_rss_mb"), one)),
+        "big_ply": dict(zip(("wall_s", "cpu_s", "peak_rss_mb"), big_ply)),
+        "big_npy": dict(zip(("wall_s", "cpu_s", "peak_rss_mb"), big_npy)),
+        "matplotlib_thumbnails_per_wall_second": peer[0], "matplotlib_thumbnails_per_cpu_second": peer[1],
     }
-    print(f"""| what | figure |
-|---|---|
-| 300 files of 2,048 points, 3 sheets of 100 at 256 px | {t300:.2f} s: {rate:.0f} thumbnails/s (goal >= 50) |
-| same, 100 files, 1 sheet | {t100:.2f} s |
-| one file, one thumbnail (mostly start-up) | {t_one:.2f} s |
-| peak RSS, 100 / 300 inputs | {rss100:.0f} / {rss300:.0f} MB |
-| 10^7-point binary PLY (240 MB) | {t_ply:.2f} s, peak RSS {rss_ply:.0f} MB (goal < 2 s) |
-| 10^7-point NPY | {t_npy:.2f} s |
-| matplotlib 3-D scatter, same thumbnails | {peer:.1f} thumbnails/s: scatter is {rate / peer:.0f}x faster |
-| load (1, 5, 15 min) | {' '.join(figures['load'])} on {os.cpu_count()} CPUs |""")
+    rss = " / ".join(f"{runs[k][2]:.0f}" for k in (100, 200, 300))
+    print(f"""| what | wall s | CPU s | figure |
+|---|---|---|---|
+| 300 files of 2,048 points, 3 sheets of 100 at 256 px | {wall:.2f} | {cpu:.2f} | {300 / wall:.0f} thumbnails/s of wall clock, {300 / cpu:.0f} per CPU second (goal >= 50) |
+| 100 / 200 files | {runs[100][0]:.2f} / {runs[200][0]:.2f} | {runs[100][1]:.2f} / {runs[200][1]:.2f} | |
+| peak RSS at 100 / 200 / 300 inputs | | | {rss} MB |
+| one file, one thumbnail (start-up) | {one[0]:.2f} | {one[1]:.2f} | |
+| 10^7-point binary PLY (240 MB) | {big_ply[0]:.2f} | {big_ply[1]:.2f} | peak RSS {big_ply[2]:.0f} MB (goal < 2 s) |
+| 10^7-point NPY | {big_npy[0]:.2f} | {big_npy[1]:.2f} | peak RSS {big_npy[2]:.0f} MB |
+| matplotlib 3-D scatter, same thumbnails, in-process | | | {peer[0]:.1f} thumbnails/s of wall clock, {peer[1]:.1f} per CPU second; scatter {300 / wall / peer[0]:.1f}x and {300 / cpu / peer[1]:.1f}x that |
+| load (1, 5, 15 min) at the end | | | {' '.join(figures['load'])} on {os.cpu_count()} CPUs |""")
     if opts.json:
         Path(opts.json).write_text(json.dumps(figures, indent=2) + "\n")
 

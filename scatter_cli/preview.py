@@ -242,7 +242,8 @@ def draw_input(path, views, size, sample_options):
     if len(points) == 0:
         raise ScatterError(f"{path}: no points")
     colors = point_colors(points, attributes, up)
-    tile = np.concatenate([thumbnail(points, colors, v, up, size) for v in views], axis=1)
+    cut = "color" not in attributes and ("inside" in attributes or "sdf" in attributes)
+    tile = np.concatenate([thumbnail(points, colors, v, up, size, cut=cut) for v in views], axis=1)
     return tile, [note]
 
 

@@ -144,17 +144,24 @@ def fill_holes(keys):
     keys[1:-1, 1:-1][hole] = best[hole]
 
 
-def thumbnail(points, colors, view="iso", up="Z", size=256, depth_test=True):
+def thumbnail(points, colors, view="iso", up="Z", size=256, depth_test=True, cut=False):
     """(size, size, 3) uint8 picture of ``points`` (n, 3) float64 coloured ``colors``
-    (n, 3) uint8, seen from ``view``. Without ``depth_test`` the discs are painted in
-    the points' order, later over earlier (only for tests: front points no longer hide
-    back ones)."""
+    (n, 3) uint8, seen from ``view``. ``cut``: leave out the points in the near half of
+    the bounding box, so that the section through its middle shows (for volumes of
+    inside and outside points). Without ``depth_test`` the discs are painted in the
+    points' order, later over earlier (only for tests: front points no longer hide back
+    ones)."""
     finite = np.isfinite(points).all(axis=1)
     points, colors = points[finite], colors[finite]
-    n = len(points)
-    if n == 0:
+    if len(points) == 0:
         return np.full((size, size, 3), BACKGROUND, dtype=np.uint8)
     x, y, depth = project(points, view, up, size)
+    if cut:
+        far = depth >= 0.5
+        x, y, depth, colors = x[far], y[far], 2 * depth[far] - 1, colors[far]  # shaded over the far half
+    n = len(x)
+    if n == 0:
+        return np.full((size, size, 3), BACKGROUND, dtype=np.uint8)
     radius = splat_radius(n, size)
     pad = int(np.floor(radius)) + 1
     width = size + 2 * pad  # a padded buffer: discs need no bounds check (points are in the square)

@@ -150,6 +150,29 @@ def test_without_the_depth_test_the_back_half_shows():
         assert_back_hidden(functools.partial(render.thumbnail, depth_test=False))
 
 
+def test_a_volume_is_cut_open_to_show_its_inside():
+    rng = np.random.default_rng(4)
+    volume = rng.uniform(-1, 1, (40000, 3))
+    inside = (np.linalg.norm(volume, axis=1) < 0.6).astype(float)
+    colors = render.point_colors(volume, {"inside": inside})
+    for cut, seen in ((True, render.INSIDE_RGB), (False, render.OUTSIDE_RGB)):  # uncut: the outer points hide it
+        centre = render.thumbnail(volume, colors, "front", "Z", 96, cut=cut)[40:56, 40:56].reshape(-1, 3)
+        hue = np.array(seen) / np.linalg.norm(seen)
+        cosine = centre @ hue / np.maximum(np.linalg.norm(centre, axis=1), 1)
+        assert np.mean(cosine > 0.99) > 0.9, cut
+
+
+
+def test_preview_cuts_open_files_with_inside_or_sdf(tmp_path):
+    rng = np.random.default_rng(5)
+    volume = rng.uniform(-1, 1, (20000, 3))
+    sdf = np.linalg.norm(volume, axis=1) - 0.6
+    np.savetxt(tmp_path / "v.csv", np.column_stack([volume, sdf]), delimiter=",", header="x,y,z,sdf", comments="")
+    tile, _ = PREVIEW.draw_input(str(tmp_path / "v.csv"), ("front",), 96, {})
+    centre = tile[40:56, 40:56].reshape(-1, 3).astype(int)
+    assert np.mean(centre[:, 0] > centre[:, 2]) > 0.9  # vermillion (inside), not blue
+
+
 def test_pinholes_close_and_silhouettes_stay():
     near, far = np.uint64(10 << 32), np.uint64((render.DEPTH_STEPS - 5) << 32)
     keys = np.full((9, 9), render.EMPTY, dtype=np.uint64)
