@@ -141,7 +141,9 @@ def _structured_columns(rows):
 def _ply_header(path):
     """(format, vertex count, [(type, name)] of the vertex properties, data offset, elements)."""
     with _open(path) as f:
-        head = f.read(1 << 16)
+        head = f.read(4096)
+        if b"end_header" not in head:
+            head += f.read((1 << 16) - len(head))
     end = head.find(b"end_header")
     if not head.startswith(b"ply") or end < 0:
         raise ScatterError(f"{path}: not a PLY file")

@@ -129,19 +129,22 @@ def fill_holes(keys):
     HOLE_DEPTH of the depth range (or empty, and its neighbours drawn) sees through a gap
     between the discs of a surface: it takes its nearest neighbour's point. Silhouettes
     stay (a pixel at an edge has fewer nearer neighbours)."""
-    depth = keys >> np.uint64(32)
-    centre = depth[1:-1, 1:-1]
     h, w = keys.shape
-    nearer = np.zeros(centre.shape, dtype=np.uint8)
-    best = np.full(centre.shape, EMPTY, dtype=np.uint64)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            if dy or dx:
-                window = (slice(1 + dy, h - 1 + dy), slice(1 + dx, w - 1 + dx))
-                nearer += depth[window] + HOLE_STEP < centre
-                np.minimum(best, keys[window], out=best)
-    hole = nearer >= HOLE_NEIGHBOURS
-    keys[1:-1, 1:-1][hole] = best[hole]
+    # depth as int32 (empty: beyond every drawn depth), compared once per neighbour
+    depth = np.minimum(keys >> np.uint64(32), np.uint64(2 * DEPTH_STEPS)).astype(np.int32)
+    limit = depth[1:-1, 1:-1] - np.int32(HOLE_STEP)
+    windows = [(slice(1 + dy, h - 1 + dy), slice(1 + dx, w - 1 + dx))
+               for dy in (-1, 0, 1) for dx in (-1, 0, 1) if dy or dx]
+    nearer = np.zeros(limit.shape, dtype=np.uint8)
+    for window in windows:
+        nearer += depth[window] < limit
+    rows, cols = np.nonzero(nearer >= HOLE_NEIGHBOURS)
+    if len(rows) == 0:
+        return
+    best = np.full(len(rows), EMPTY, dtype=np.uint64)
+    for window in windows:
+        np.minimum(best, keys[rows + window[0].start, cols + window[1].start], out=best)
+    keys[rows + 1, cols + 1] = best
 
 
 def thumbnail(points, colors, view="iso", up="Z", size=256, depth_test=True, cut=False):
