@@ -82,6 +82,9 @@ def preview(inputs, output, *, size=256, columns=None, views=("iso",), per_page=
     if pages > 1 and not _has_page_field(output):
         raise ScatterUsageError(f"{len(found)} inputs make {pages} sheets of {per_page}: put {{page}} in the output "
                                 f"name ({output})")
+    folder = os.path.dirname(os.path.abspath(page_name(output, 1)))
+    if not os.path.isdir(folder):
+        raise ScatterError(f"{output}: cannot write: folder '{os.path.dirname(os.fspath(output)) or '.'}' does not exist")
     columns = columns or default_columns(min(per_page, len(found)), len(views))
     sheets = Sheets()
     sheets.failed, sheets.inputs = [], len(found)
@@ -239,8 +242,12 @@ def draw_input(path, views, size, sample_options):
     except Exception as exc:  # a reader's or loader's own error type: one line, this input only
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ScatterError(f"{path}: {reason}") from None
+    finite = np.isfinite(points).all(axis=1)
+    if not finite.all():  # said in the caption, not dropped silently
+        note += f", {int((~finite).sum()):,} not finite (not drawn)"
+        points, attributes = points[finite], {k: v[finite] for k, v in attributes.items()}
     if len(points) == 0:
-        raise ScatterError(f"{path}: no points")
+        raise ScatterError(f"{path}: no points" + (" with finite coordinates" if not finite.all() else ""))
     colors = point_colors(points, attributes, up)
     cut = "color" not in attributes and ("inside" in attributes or "sdf" in attributes)
     tile = np.concatenate([thumbnail(points, colors, v, up, size, cut=cut) for v in views], axis=1)

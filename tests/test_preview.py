@@ -427,6 +427,18 @@ def test_usage_errors(tmp_path, args, message):
     assert not list(tmp_path.glob("s.*"))
 
 
+def test_non_finite_points_are_counted_and_a_missing_folder_is_an_error_before_work(tmp_path):
+    points = sphere(400)
+    points[:3] = np.nan
+    write_ply(tmp_path / "nan.ply", points)
+    _, lines = PREVIEW.draw_input(str(tmp_path / "nan.ply"), ("iso",), 32, {})
+    assert lines == ["400 points, 3 not finite (not drawn)"]
+    proc = run_scatter("preview", tmp_path / "nan.ply", "-o", tmp_path / "no" / "s.png")
+    assert proc.returncode == 1
+    assert proc.stderr.decode().splitlines() == [f"error: {tmp_path / 'no' / 's.png'}: cannot write: folder "
+                                                 f"'{tmp_path / 'no'}' does not exist"]
+
+
 def test_missing_pillow_is_named(tmp_path, monkeypatch):
     src = small_files(tmp_path / "in", 1)
     monkeypatch.setitem(sys.modules, "PIL", None)
