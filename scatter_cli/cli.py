@@ -309,16 +309,15 @@ def preview(
                    attributes=attributes, weight=weight, objects=objects, poisson=poisson or None, radius=radius,
                    exterior=exterior or None, stable=stable or None)
     options = {k: v for k, v in options.items() if v is not None}
+    def error_line(message):
+        print(f"error: {message}", file=sys.stderr, flush=True)
+
     sheets = draw_sheets(inputs or [], output, size=size, columns=columns, views=views or ("iso",),
-                         per_page=per_page, from_list=from_list, warn=None if quiet else _error_line, **options)
+                         per_page=per_page, from_list=from_list, warn=None if quiet else error_line, **options)
     if sheets.failed:
         if not quiet:
             print(summary(sheets), file=sys.stderr)
         raise typer.Exit(1)
-
-
-def _error_line(message):
-    print(f"error: {message}", file=sys.stderr, flush=True)
 
 
 def _print_version(value: bool):

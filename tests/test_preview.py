@@ -254,8 +254,9 @@ def point_files(tmp_path_factory):
     for fmt in ("ply", "pcd"):
         run_scatter("sample", SAMPLES / "spot_triangulated.obj", "-n", "3000", "-a", "normal", "--ascii", "-o",
                     folder / f"spot-ascii.{fmt}", check=True)
-    run_scatter("sample", SAMPLES / "boxvertexcolors.glb", "-n", "3000", "-a", "color", "-o", folder / "box.pcd",
-                check=True)
+    for fmt in ("pcd", "las", "usda"):
+        run_scatter("sample", SAMPLES / "boxvertexcolors.glb", "-n", "3000", "-a", "color", "-o",
+                    folder / f"box.{fmt}", check=True)
     return folder
 
 
@@ -271,11 +272,13 @@ def test_every_format_scatter_writes_reads_back(point_files):
         assert got.up_axis == ("Y" if path.suffix.startswith(".usd") else "Z")  # the USD writer's default
 
 
-def test_pcd_colour_reads_back(point_files):
+def test_colour_reads_back(point_files):
     from scatter_cli import sample
 
     expected = sample(SAMPLES / "boxvertexcolors.glb", 3000, attributes="color").color[:, :3]
-    assert (read_points(point_files / "box.pcd").attributes["color"] == expected).all()
+    assert len(np.unique(expected, axis=0)) > 10
+    for fmt in ("pcd", "las", "usda"):  # packed rgb, 16-bit channels, displayColor floats
+        assert (read_points(point_files / f"box.{fmt}").attributes["color"] == expected).all(), fmt
 
 
 def test_large_files_are_decimated_evenly(point_files):
