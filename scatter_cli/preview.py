@@ -144,9 +144,16 @@ def check_sample_options(options):
     """Usage errors in the sample options before any work (not once per mesh)."""
     if not options:
         return
+    import inspect
+
     from .api import check_options as check
+    from .api import prepare
     from .samples import parse_attributes
 
+    allowed = set(inspect.signature(prepare).parameters) - {"mesh", "warn"}
+    unknown = sorted(set(options) - allowed)
+    if unknown:
+        raise TypeError(f"preview() got unknown sample options: {', '.join(unknown)}")
     parse_attributes(options.get("attributes"))
     known = ("count", "density", "seed", "method", "precision", "chunk_size", "radius", "poisson", "weight",
              "oversampling", "exterior", "stable")

@@ -1,8 +1,9 @@
 """Draw a point set as a small picture on the CPU with NumPy: no display, no GPU.
 
 Orthographic projection along one of four views, each point splatted as a small disc,
-a depth buffer so that front points hide back points, and depth shading (nearer is
-brighter) so that shapes read as shapes.
+a depth buffer so that front points hide back points (and the pinholes between a
+surface's discs closed), and depth shading (nearer is brighter) so that shapes read as
+shapes. A volume can be cut open: the near half of its box left out.
 
 Views are taken in the points' frame, whose up axis is +Z or +Y (``up``):
 
@@ -30,11 +31,11 @@ SPLAT_FILL = 1.2  # disc radius as a fraction of size / sqrt(n): about the spaci
 # Colours of inside and outside points: vermillion and blue of the Okabe-Ito palette,
 # told apart with every common form of colour blindness.
 INSIDE_RGB, OUTSIDE_RGB = (213, 94, 0), (0, 114, 178)
-# Height colour ramp (low to high): viridis at five stops.
 EMPTY = np.uint64(np.iinfo(np.uint64).max)  # a depth-buffer pixel no disc covers
 DEPTH_STEPS = (1 << 24) - 1  # depth is quantised to this many steps over the bounding box
 HOLE_DEPTH, HOLE_NEIGHBOURS, HOLE_PASSES = 0.05, 5, 2  # see fill_holes
 HOLE_STEP = np.uint64(HOLE_DEPTH * DEPTH_STEPS)
+# Height colour ramp (low to high): viridis at five stops.
 HEIGHT_RAMP = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=np.float64)
 
 # Camera rows (right, screen up, toward the viewer) for Z-up points.

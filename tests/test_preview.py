@@ -456,6 +456,9 @@ def test_python_api_returns_the_sheets(tmp_path):
     src = small_files(tmp_path / "in", 5)
     sheets = scatter_cli.preview([src], tmp_path / "p{page:02d}.png", size=32, per_page=2)
     assert sheets == [str(tmp_path / f"p{i:02d}.png") for i in (1, 2, 3)] and sheets.failed == []
+    with pytest.raises(TypeError, match="colour"):
+        scatter_cli.preview([src], tmp_path / "q{page}.png", colour="red")
+    assert not list(tmp_path.glob("q*.png"))
 
 
 def test_help_imports_neither_numpy_nor_pillow():
