@@ -6,10 +6,11 @@
     ((1000, 3), (1000, 3))
 """
 
-__all__ = ["sample", "prepare", "batch", "load_surface", "Samples", "ScatterError", "version"]
+__all__ = ["sample", "prepare", "batch", "preview", "load_surface", "Samples", "ScatterError", "version"]
 
 # The function, not the module of the same name (which imports only the standard library).
 from .batch import batch  # noqa: E402
+from .preview import preview  # noqa: E402
 
 
 def version() -> str:

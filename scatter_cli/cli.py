@@ -284,6 +284,57 @@ def merge(
     join(parts, output, fmt)
 
 
+@app.command(no_args_is_help=True)
+def preview(
+    inputs: Annotated[Optional[List[str]], typer.Argument(metavar="INPUT...", help="Point files, meshes and folders (searched recursively).", show_default=False)] = None,
+    output: Annotated[str, typer.Option("-o", "--output", metavar="SHEET.png", help="The contact sheet; with {page} in the name, one sheet per --per-page inputs.")] = ...,
+    from_list: Annotated[Optional[str], typer.Option("--from-list", metavar="FILE", help="Read input paths, one a line, from FILE ('-': standard input).")] = None,
+    size: Annotated[int, typer.Option("--size", metavar="PX", help="Thumbnail side in pixels.")] = 256,
+    columns: Annotated[Optional[int], typer.Option("--columns", metavar="C", help="Cells per row [default: a square sheet].")] = None,
+    views: Annotated[Optional[List[str]], typer.Option("--view", metavar="VIEW", help="iso | front | side | top (repeatable: views side by side) [default: iso].")] = None,
+    per_page: Annotated[int, typer.Option("--per-page", metavar="K", help="Inputs per sheet.")] = 100,
+    count: Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", help="Points sampled per mesh [default: 20000].")] = None,
+    density: Annotated[Optional[float], typer.Option("--density", metavar="D", help="Points per unit of surface area, instead of -n.")] = None,
+    seed: Seed = 0,
+    attributes: Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help=f"Attributes sampled on meshes ({', '.join(ATTRIBUTES)}) [default: normal].")] = None,
+    weight: Annotated[Optional[str], typer.Option("--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a.")] = None,
+    objects: Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable).")] = None,
+    poisson: Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points.")] = False,
+    radius: Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance.")] = None,
+    method: Annotated[str, typer.Option("--method", metavar="METHOD", help="random | stratified | sobol.")] = "random",
+    exterior: Exterior = False,
+    stable: Stable = False,
+    quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No error line per failed input (the exit status and the sheet still tell).")] = False,
+):
+    """Contact sheets: one captioned thumbnail per point file or mesh, drawn on the CPU.
+
+    Each input is seen from a three-quarter view of its bounding box (or --view), its
+    points coloured by colour, inside/sdf, normals or height. A bad input gets a
+    crossed-out cell with its error; the sheet is still written and the exit is 1.
+
+      scatter preview points/ -o sheet.png
+
+      scatter preview meshes/ -n 5000 --view front --view top -o sheets/page-{page}.png
+    """
+    process.lean_trimesh()
+    from .preview import preview as draw_sheets
+    from .preview import summary
+
+    options = dict(count=count, density=density, seed=seed or None, method=None if method == "random" else method,
+                   attributes=attributes, weight=weight, objects=objects, poisson=poisson or None, radius=radius,
+                   exterior=exterior or None, stable=stable or None)
+    options = {k: v for k, v in options.items() if v is not None}
+    def error_line(message):
+        print(f"error: {message}", file=sys.stderr, flush=True)
+
+    sheets = draw_sheets(inputs or [], output, size=size, columns=columns, views=views or ("iso",),
+                         per_page=per_page, from_list=from_list, warn=None if quiet else error_line, **options)
+    if sheets.failed:
+        if not quiet:
+            print(summary(sheets), file=sys.stderr)
+        raise typer.Exit(1)
+
+
 def _print_version(value: bool):
     if value:
         from . import version
