@@ -15,7 +15,8 @@ from tests.golden import COMMANDS, DIGESTS
 
 @pytest.mark.parametrize("numpy_path", [False, True], ids=["kernels", "numpy"])
 def test_every_command_writes_its_pinned_bytes(numpy_path, tmp_path):
-    env = {"SCATTER_NUMPY": "1"} if numpy_path else {"SCATTER_NUMPY": "0"}
+    # this tree's package, whatever PYTHONPATH or the installed copy say (the child runs elsewhere)
+    env = {"SCATTER_NUMPY": "1" if numpy_path else "0", "PYTHONPATH": str(ROOT)}
     proc = run_user([sys.executable, str(ROOT / "tests" / "golden.py")], env=env, cwd=tmp_path, timeout=600)
     assert proc.returncode == 0, proc.stderr.decode()
     got = json.loads(proc.stdout)
