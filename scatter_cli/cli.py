@@ -293,17 +293,18 @@ def preview(
     columns: Annotated[Optional[int], typer.Option("--columns", metavar="C", help="Cells per row [default: a square sheet].")] = None,
     views: Annotated[Optional[List[str]], typer.Option("--view", metavar="VIEW", help="iso | front | side | top (repeatable: views side by side) [default: iso].")] = None,
     per_page: Annotated[int, typer.Option("--per-page", metavar="K", help="Inputs per sheet.")] = 100,
-    count: Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", help="Points sampled per mesh [default: 20000].")] = None,
-    density: Annotated[Optional[float], typer.Option("--density", metavar="D", help="Points per unit of surface area, instead of -n.")] = None,
-    seed: Seed = 0,
-    attributes: Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help=f"Attributes sampled on meshes ({', '.join(ATTRIBUTES)}) [default: normal].")] = None,
-    weight: Annotated[Optional[str], typer.Option("--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a.")] = None,
-    objects: Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable).")] = None,
-    poisson: Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points.")] = False,
-    radius: Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance.")] = None,
-    method: Annotated[str, typer.Option("--method", metavar="METHOD", help="random | stratified | sobol.")] = "random",
-    exterior: Exterior = False,
-    stable: Stable = False,
+    count: Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", parser=_count, help="Points sampled per mesh [default: 20000].")] = None,
+    density: Density = D.density,
+    seed: Seed = D.seed,
+    attributes: Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help="Attributes sampled on meshes, which colour them [default: normal; inside with --volume].")] = None,
+    weight: Weight = D.weight,
+    objects: Objects = D.objects,
+    poisson: Poisson = D.poisson,
+    radius: Radius = D.radius,
+    method: Method = D.method,
+    exterior: Exterior = D.exterior,
+    stable: Stable = D.stable,
+    normalize: Normalize = D.normalize,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No error line per failed input (the exit status and the sheet still tell).")] = False,
 ):
     """Contact sheets: one captioned thumbnail per point file or mesh, drawn on the CPU.
@@ -320,10 +321,7 @@ def preview(
     from .preview import preview as draw_sheets
     from .preview import summary
 
-    options = dict(count=count, density=density, seed=seed or None, method=None if method == "random" else method,
-                   attributes=attributes, weight=weight, objects=objects, poisson=poisson or None, radius=radius,
-                   exterior=exterior or None, stable=stable or None)
-    options = {k: v for k, v in options.items() if v is not None}
+    options = SampleOptions.of(locals()).as_dict()
     def error_line(message):
         print(f"error: {message}", file=sys.stderr, flush=True)
 

@@ -10,6 +10,7 @@ full, so memory does not grow with the number of inputs.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import numbers
@@ -69,13 +70,13 @@ def preview(inputs, output, *, size=256, columns=None, views=("iso",), per_page=
     ``size``: thumbnail side in pixels; ``columns``: cells per row (default: a square
     page); ``views``: one or more of iso, front, side, top, drawn side by side;
     ``per_page``: inputs per sheet; ``from_list``: a file of paths, one a line ('-':
-    standard input). ``sample_options`` go to :func:`scatter_cli.api.prepare` for meshes
+    standard input). ``sample_options`` (those of :func:`scatter_cli.sample`) are for meshes
     (``count`` default 20000, ``attributes`` default normal). ``warn(message)`` is
     called with each failed input's error. Returns :class:`Sheets`, a list of the
     sheets written with ``.failed``, the inputs that could not be drawn.
     """
     views = check_options(output, size, columns, views, per_page)
-    check_sample_options(sample_options)
+    sample_options = mesh_options(sample_options)
     image_module()
     found = collect(inputs, from_list)
     pages = math.ceil(len(found) / per_page)
@@ -140,24 +141,19 @@ def check_options(output, size, columns, views, per_page):
     return views
 
 
-def check_sample_options(options):
-    """Usage errors in the sample options before any work (not once per mesh)."""
-    if not options:
-        return
-    import inspect
+def mesh_options(options: dict):
+    """The :class:`~scatter_cli.options.SampleOptions` of meshes sampled on the fly
+    (``count`` 20,000 and ``attributes`` normal, or inside for volume runs, unless
+    given), checked before any work: usage errors once, not once per mesh."""
+    from .options import SampleOptions
 
-    from .api import check_options as check
-    from .api import prepare
-    from .samples import parse_attributes
-
-    allowed = set(inspect.signature(prepare).parameters) - {"mesh", "warn"}
-    unknown = sorted(set(options) - allowed)
-    if unknown:
-        raise TypeError(f"preview() got unknown sample options: {', '.join(unknown)}")
-    parse_attributes(options.get("attributes"))
-    known = ("count", "density", "seed", "method", "precision", "chunk_size", "radius", "poisson", "weight",
-             "oversampling", "exterior", "stable")
-    check(**{k: options[k] for k in known if options.get(k) is not None})
+    options = dict(options)
+    if options.get("count") is None and options.get("density") is None:
+        options["count"] = DEFAULT_COUNT
+    o = SampleOptions(**options)  # an unknown option is a TypeError, as for a function
+    if not o.attributes:
+        o = dataclasses.replace(o, attributes=("inside",) if o.volume_run else ("normal",))
+    return o.check()
 
 
 def page_name(output, page):
@@ -200,7 +196,8 @@ def image_module():
 # ---- one input ----
 
 def load(path, sample_options):
-    """(points (m, 3) float64, attributes, up axis, caption) of a point file or a mesh."""
+    """(points (m, 3) float64, attributes, up axis, caption) of a point file or a mesh
+    (sampled with ``sample_options``, a :class:`~scatter_cli.options.SampleOptions`)."""
     from .pointfiles import is_point_file, read_points
 
     if os.path.isdir(path):
@@ -220,12 +217,7 @@ def sample_mesh(path, options):
     from . import api
     from .pointfiles import stride
 
-    options = dict(options)
-    count = options.pop("count", None)
-    if count is None and options.get("density") is None:
-        count = DEFAULT_COUNT
-    options.setdefault("attributes", ("normal",))
-    run = api.prepare(path, count, **options)
+    run = api.prepare(path, options=options)
     samples = run.collect()
     n = len(samples)
     every = stride(n, MAX_DRAWN)

@@ -374,9 +374,10 @@ def test_captions_name_and_count(tmp_path):
 
 
 def test_meshes_are_sampled_and_the_count_shown(tmp_path):
-    _, lines = PREVIEW.draw_input(str(SAMPLES / "icosahedron_binary.stl"), ("iso",), 32, {"count": 1234})
+    _, lines = PREVIEW.draw_input(str(SAMPLES / "icosahedron_binary.stl"), ("iso",), 32,
+                                  PREVIEW.mesh_options({"count": 1234}))
     assert lines == ["1,234 points sampled"]
-    pts, _, up, _ = PREVIEW.load(str(SAMPLES / "boxtextured.glb"), {"count": 100})
+    pts, _, up, _ = PREVIEW.load(str(SAMPLES / "boxtextured.glb"), PREVIEW.mesh_options({"count": 100}))
     assert up == "Y" and len(pts) == 100  # glTF is Y up
 
 
