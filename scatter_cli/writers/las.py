@@ -253,7 +253,10 @@ VLR_HEADER_SIZE = 54
 
 
 def file_size(fmt, layout, count, bounds=None, wkt=None, **options):
-    """Bytes of an (uncompressed) LAS file of ``count`` points of ``layout``."""
+    """Bytes of an (uncompressed) LAS file of ``count`` points of ``layout`` (None without
+    ``bounds``: the writer says what is missing)."""
+    if bounds is None:
+        return None
     header = make_header(layout, bounds, wkt)[0]
     vlrs = sum(VLR_HEADER_SIZE + len(vlr.record_data_bytes()) for vlr in header.vlrs)
     return HEADER_SIZE + vlrs + count * header.point_format.size
