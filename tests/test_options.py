@@ -120,3 +120,13 @@ def test_the_command_line_and_the_options_share_their_defaults():
     assert shared["sample"] - {"input_format"} == shared["batch"]  # batch reads no standard input
     # what the command line does not offer: the API's oversampling, and the volume options (not yet built)
     assert set(fields) - shared["sample"] == {"oversampling", "volume", "near", "box_share", "padding", "sign"}
+
+
+def test_whole_numbers_as_users_type_them():
+    from scatter_cli.options import whole_number
+
+    assert [whole_number(t) for t in ("100", "1e6", "2.5e3", "1E3", "1_000", "100000000000000000001")] == \
+        [100, 10**6, 2500, 1000, 1000, 10**20 + 1]  # exact, not through a float
+    for text in ("1.5", "1e-3", "inf", "nan", "ten", ""):
+        with pytest.raises(ValueError):
+            whole_number(text)
