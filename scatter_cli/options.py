@@ -70,8 +70,8 @@ class SampleOptions:
             object.__setattr__(self, name, value)
 
         set_("attributes", attribute_names(self.attributes))
-        if self.objects is not None:
-            set_("objects", tuple(self.objects) or None)
+        if self.objects is not None:  # one name, or a sequence of them
+            set_("objects", (self.objects,) if isinstance(self.objects, str) else tuple(self.objects) or None)
         if self.shard is not None:
             set_("shard", _shard_pair(self.shard))
         if self.near is not None:

@@ -92,6 +92,7 @@ def test_options_travel_as_json_and_come_back_equal():
     o = SampleOptions(count=5, attributes="Normal, face", objects=["a", "b"], shard="1/3", near="0.1,0.02")
     assert o.attributes == ("normal", "face") and o.shard == (1, 3) and o.near == (0.1, 0.02)
     assert SampleOptions(**json.loads(json.dumps(o.as_dict()))) == o
+    assert SampleOptions(objects="Cube.001").objects == ("Cube.001",)  # one name is not its letters
     assert SampleOptions.of({"count": 5, "quiet": True, "output": "x.ply"}) == SampleOptions(count=5)
     with pytest.raises(TypeError):
         SampleOptions(colour=True)  # an unknown keyword is a programming error, not an option
