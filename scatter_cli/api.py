@@ -205,15 +205,17 @@ def sample_to(mesh, options: SampleOptions, path, format=None, ascii=False, *, c
     return run
 
 
-def write(run: Run, path, format, ascii=False, *, crs=None, progress=False):
-    """Write the points of ``run`` to ``path`` in ``format`` (a name, as :func:`output_format`
-    gives), streamed chunk by chunk; ``progress``: a progress line on standard error.
-    Returns the writer's report (also in ``run.info["output"]`` when not empty)."""
+def write(run: Run, path, format=None, ascii=False, *, crs=None, progress=False):
+    """Write the points of ``run`` to ``path`` (``None`` or ``-``: standard output) in
+    ``format`` (default: from the suffix of ``path``), streamed chunk by chunk;
+    ``crs``: LAS/LAZ's coordinate system; ``progress``: a progress line on standard
+    error. Returns the writer's report (also in ``run.info["output"]`` when not empty)."""
     from .progress import with_progress
     from .writers import write_samples
 
-    report = write_samples(with_progress(run.chunks(), run.size, progress), path, format, run.layout, run.size,
-                           ascii, crs=crs, **output_options(run, format))
+    fmt = output_format(path, format, ascii, crs)
+    report = write_samples(with_progress(run.chunks(), run.size, progress), path, fmt, run.layout, run.size,
+                           ascii, crs=crs, **output_options(run, fmt))
     if report:
         run.info["output"] = report
     return report

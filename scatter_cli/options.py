@@ -14,7 +14,6 @@ Standard library only: the command line imports this module for its defaults and
 from __future__ import annotations
 
 import dataclasses
-import decimal
 import math
 import numbers
 from dataclasses import dataclass
@@ -71,8 +70,8 @@ class SampleOptions:
             object.__setattr__(self, name, value)
 
         set_("attributes", attribute_names(self.attributes))
-        if self.objects is not None:
-            set_("objects", tuple(self.objects) or None)
+        if self.objects is not None:  # one name, or a sequence of them
+            set_("objects", (self.objects,) if isinstance(self.objects, str) else tuple(self.objects) or None)
         if self.shard is not None:
             set_("shard", _shard_pair(self.shard))
         if self.near is not None:
@@ -209,6 +208,10 @@ def attribute_names(text_or_list) -> tuple:
 
 def whole_number(text: str) -> int:
     """A count as a user types it: ``1000``, ``1e6``, ``2.5e3``; ValueError for ``1.5``."""
+    if text.strip().isdigit():
+        return int(text)
+    import decimal  # exact: 1e20 is a whole number, 1.0000000000000001e3 is not
+
     try:
         value = decimal.Decimal(text.strip().replace("_", ""))
     except decimal.InvalidOperation:

@@ -16,7 +16,6 @@ from .errors import ScatterError
 from .options import DEFAULT_COUNT, SampleOptions, check_sobol_count
 from .sampling import SamplePlan
 from .sources import make_source
-from .thinning import MAX_CANDIDATES, candidate_count, dart_thrown, thinned
 
 
 def surface_source(surface, o: SampleOptions, want_bary: bool, info: dict, warn=None):
@@ -24,16 +23,18 @@ def surface_source(surface, o: SampleOptions, want_bary: bool, info: dict, warn=
     reports (count, area, faces, exterior statistics, thinning, timings)."""
     base = StableBase(surface, o, want_bary, info, warn) if o.stable else MethodBase(surface, o, want_bary, info, warn)
     stage = ExteriorStage(base, surface, o, info) if o.exterior else base
-    if o.stable and o.radius is not None:
+    if not o.thinned:
+        return stage.natural(), base.plan
+    from .thinning import candidate_count, dart_thrown, thinned  # (a plain run does not load the thinning)
+
+    if o.stable:
         source = dart_thrown(stage.natural(), o.radius)
         info.update(radius=o.radius, count=source.count)
-    elif o.thinned:
+    else:
         n = candidate_count(base.area, stage.count, o.radius, surface.source, o.oversampling)
         source, thinning = thinned(stage.source_of(n), stage.count, o.radius)
         info["timings"].update(thinning.pop("timings"))
         info.update(thinning)
-    else:
-        source = stage.natural()
     return source, base.plan
 
 
@@ -70,6 +71,7 @@ class StableBase:
     def __init__(self, surface, o: SampleOptions, want_bary, info, warn):
         from .stable import StableSource
         from .stable_weights import stable_weight
+        from .thinning import MAX_CANDIDATES
 
         t = time.perf_counter()
         self.fixed = o.density is None and o.radius is None

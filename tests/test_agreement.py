@@ -103,3 +103,15 @@ def test_the_python_batch_and_sample_agree_too(meshes, tmp_path):
     np.testing.assert_array_equal(written["object_index"], direct.object)
     failed = scatter_cli.batch([meshes[CUBES]], str(tmp_path / "f-{stem}.npy"), count=10, objects=["Nope"])
     assert failed[0]["status"] == "failed" and "Nope" in failed[0]["error"]
+
+
+@pytest.mark.parametrize("suffix", ["ply", "las"])
+def test_api_write_writes_what_the_command_writes(meshes, tmp_path, suffix):
+    from scatter_cli import api
+    from scatter_cli.writers import run_precision
+
+    run_scatter("sample", meshes[CUBES], "-n", "500", "-a", "normal,object", "-o", tmp_path / f"cli.{suffix}",
+                check=True)
+    run = api.prepare(meshes[CUBES], 500, attributes="normal,object", precision=run_precision(suffix, "auto"))
+    api.write(run, tmp_path / f"api.{suffix}")
+    assert (tmp_path / f"api.{suffix}").read_bytes() == (tmp_path / f"cli.{suffix}").read_bytes()

@@ -92,6 +92,7 @@ def test_options_travel_as_json_and_come_back_equal():
     o = SampleOptions(count=5, attributes="Normal, face", objects=["a", "b"], shard="1/3", near="0.1,0.02")
     assert o.attributes == ("normal", "face") and o.shard == (1, 3) and o.near == (0.1, 0.02)
     assert SampleOptions(**json.loads(json.dumps(o.as_dict()))) == o
+    assert SampleOptions(objects="Cube.001").objects == ("Cube.001",)  # one name is not its letters
     assert SampleOptions.of({"count": 5, "quiet": True, "output": "x.ply"}) == SampleOptions(count=5)
     with pytest.raises(TypeError):
         SampleOptions(colour=True)  # an unknown keyword is a programming error, not an option
@@ -120,3 +121,13 @@ def test_the_command_line_and_the_options_share_their_defaults():
     assert shared["sample"] - {"input_format"} == shared["batch"]  # batch reads no standard input
     # what the command line does not offer: the API's oversampling, and the volume options (not yet built)
     assert set(fields) - shared["sample"] == {"oversampling", "volume", "near", "box_share", "padding", "sign"}
+
+
+def test_whole_numbers_as_users_type_them():
+    from scatter_cli.options import whole_number
+
+    assert [whole_number(t) for t in ("100", "1e6", "2.5e3", "1E3", "1_000", "100000000000000000001")] == \
+        [100, 10**6, 2500, 1000, 1000, 10**20 + 1]  # exact, not through a float
+    for text in ("1.5", "1e-3", "inf", "nan", "ten", ""):
+        with pytest.raises(ValueError):
+            whole_number(text)
