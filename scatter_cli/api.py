@@ -42,7 +42,7 @@ class Run:
     """
 
     def __init__(self, source: Source, maker: AttributeMaker, dtype, chunk_size: int, info: dict, plan,
-                 shard=None):
+                 shard=None, frame=None):
         self.source = source
         self.maker = maker
         self.dtype = np.dtype(dtype)
@@ -52,6 +52,7 @@ class Run:
         self.plan = plan  # the used faces: bounds for LAS, the surface for USD
         self.surface = plan.surface
         self.shard = shard  # (K, M): the run writes only that part of its points
+        self.frame = frame  # --normalize: the output frame (None: world space)
 
     @property
     def span(self):
@@ -78,7 +79,9 @@ class Run:
 
     def _job(self, start, stop):
         raw = self.source.draw(start, stop)
-        return Samples(raw.points.astype(self.dtype, copy=False), self.maker.make(raw, self.dtype))
+        attributes = self.maker.make(raw, self.dtype)
+        points = raw.points if self.frame is None else self.frame.to_output(raw.points)
+        return Samples(points.astype(self.dtype, copy=False), attributes)
 
     def chunks(self, start=None, stop=None, *, threads=None):
         """Samples chunks of points ``start .. stop - 1`` (default: the run's span, all its
@@ -123,7 +126,8 @@ class Run:
 
 def prepare(mesh, count=None, *, density=None, seed=0, method="random", attributes=(), poisson=False,
             radius=None, weight=None, objects=None, precision="auto", chunk_size=None, input_format=None,
-            warn=None, oversampling=None, exterior=False, stable=False, shard=None) -> Run:
+            warn=None, oversampling=None, exterior=False, stable=False, shard=None, volume=False, near=None,
+            box_share=None, padding=0.1, sign="winding", normalize="none") -> Run:
     """Check the options, load ``mesh`` (if a path) and prepare its run; see :func:`sample`.
 
     ``shard``: ``(K, M)``, the run keeps points floor(K*N/M) .. floor((K+1)*N/M) - 1 of
@@ -145,6 +149,11 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
     t1 = time.perf_counter()
     for message in surface._cache.pop("warnings", ()) if warn else ():
         warn(message)
+    if volume or near:
+        run = _volume_run(surface, names, count, density, seed, weight, precision, chunk_size, near, box_share,
+                          padding, sign, normalize, warn, shard)
+        run.info["timings"] = {"load": t1 - t0, "plan": time.perf_counter() - t1}
+        return run
     maker = AttributeMaker(surface, names, seed)
     if stable:
         source, plan, dtype, info = _stable_source(surface, count, density, radius, weight, seed, maker, precision,
@@ -298,7 +307,8 @@ def candidate_count(area, count, radius, source, oversampling=None):
 
 def sample(mesh, count=10000, *, density=None, seed=0, method="random", attributes=(), poisson=False,
            radius=None, weight=None, objects=None, precision="auto", chunk_size=None, exterior=False,
-           stable=False, shard=None) -> Samples:
+           stable=False, shard=None, volume=False, near=None, box_share=None, padding=0.1, sign="winding",
+           normalize="none") -> Samples:
     """Sample points uniformly over the surface of ``mesh``.
 
     mesh: a path, a ``trimesh.Trimesh`` or a ``trimesh.Scene``. ``exterior``: only the
@@ -308,7 +318,8 @@ def sample(mesh, count=10000, *, density=None, seed=0, method="random", attribut
     """
     run = prepare(mesh, count, density=density, seed=seed, method=method, attributes=attributes,
                   poisson=poisson, radius=radius, weight=weight, objects=objects, precision=precision,
-                  chunk_size=chunk_size, exterior=exterior, stable=stable, shard=shard)
+                  chunk_size=chunk_size, exterior=exterior, stable=stable, shard=shard, volume=volume, near=near,
+                  box_share=box_share, padding=padding, sign=sign, normalize=normalize)
     t = time.perf_counter()
     samples = run.collect()
     samples.info["timings"]["sample"] = time.perf_counter() - t
@@ -460,5 +471,48 @@ def choose_precision(plan, precision, warn=None):
         if warn:
             warn(f"writing float64 coordinates: float32 would move points by up to {err:.3g}, "
                  f"more than 1e-6 of the bounding-box diagonal ({diag:.6g})")
+        return np.dtype(np.float64)
+    return np.dtype(np.float32)
+
+
+def _volume_run(surface, names, count, density, seed, weight, precision, chunk_size, near, box_share, padding,
+                sign, normalize, warn, shard):
+    """The Run of ``--volume`` / ``--near``: points in the padded box and near the surface,
+    labelled against the sampled surface (:mod:`scatter_cli.volume`)."""
+    from .volume import VolumeLabels, VolumeSource, normalization, sampling_box, world_triangles
+
+    plan, weighting, area = plan_surface(surface, weight, warn)
+    triangles, instance, face = world_triangles(plan if weighting is None else SamplePlan(surface))
+    frame = normalization(triangles, normalize)
+    box = sampling_box(triangles, padding)
+    sigmas = [s / frame.scale for s in (near or ())]
+    share = (0.0 if near else 1.0) if box_share is None else float(box_share)
+    if density is not None:
+        count = int(round(density * float(np.prod(box[1] - box[0])) * frame.scale**3))
+    count = 10000 if count is None else count
+    surface_points = make_source(plan, count, seed, False, weighting=weighting, area=area)
+    source = VolumeSource(surface_points, count, seed, box, sigmas, share)
+    labels = VolumeLabels(triangles, instance, face, names, sign, frame)
+    dtype = _volume_precision(frame.to_output(box.copy()), precision, warn)
+    info = {"source": surface.source, "count": count, "area": area, "faces": surface.face_count,
+            "faces_used": len(triangles), "seed": seed, "volume": True, "box": box.tolist(),
+            "box_share": share, "near": list(near or ()), "sign": sign, "precision": dtype.name}
+    if normalize != "none":
+        info["normalize"] = {"mode": normalize, **frame.stats()}
+    return Run(source, labels, dtype, chunk_size or plan.default_chunk, info, plan, shard,
+               None if frame.identity else frame)
+
+
+def _volume_precision(bounds, precision, warn=None):
+    """float32 unless it would move a point of the output box ``bounds`` (2, 3) by more
+    than 1e-6 of its diagonal (or ``precision`` says which)."""
+    if precision != "auto":
+        return np.dtype(precision)
+    diag = float(np.linalg.norm(bounds[1] - bounds[0]))
+    err = float32_error_bound(bounds)
+    if math.isinf(err) or err > AUTO_PRECISION_TOLERANCE * diag:
+        if warn:
+            warn(f"writing float64 coordinates: float32 would move points by up to {err:.3g}, "
+                 f"more than 1e-6 of the sampling box's diagonal ({diag:.6g})")
         return np.dtype(np.float64)
     return np.dtype(np.float32)

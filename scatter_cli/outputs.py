@@ -22,6 +22,13 @@ ATTRIBUTES = {
     "uv": ("uv", ("u", "v"), "real"),
     "object": ("object", ("object_index",), "<i4"),
     "orient": ("orient", ("qx", "qy", "qz", "qw"), "real"),
+    "sdf": ("sdf", ("sdf",), "<f8"),
+    "inside": ("inside", ("inside",), "u1"),
+    "winding": ("winding", ("winding",), "<f8"),
+    "closest": ("closest", ("cx", "cy", "cz"), "real"),
 }
+# Attributes of volume runs (--volume, --near) only, and those of surface runs only.
+VOLUME_ATTRIBUTES = ("sdf", "inside", "winding", "closest", "face", "object")
+SURFACE_ONLY = ("normal", "smooth-normal", "bary", "color", "uv", "orient")
 # Columns always come in this order, whatever the order of -a.
-KEY_ORDER = ("normal", "orient", "face", "bary", "color", "uv", "object")
+KEY_ORDER = ("normal", "orient", "sdf", "inside", "winding", "closest", "face", "bary", "color", "uv", "object")
