@@ -98,7 +98,8 @@ class AttributeMaker:
         return raw.face.astype(np.int32)
 
     def _make_object(self, raw, real_dtype, groups):
-        return raw.instance.astype(np.int32)
+        index = self.surface.object_index  # the whole file's numbering, under --object too
+        return (raw.instance if index is None else index[raw.instance]).astype(np.int32)
 
     def _make_bary(self, raw, real_dtype, groups):
         return raw.bary.astype(real_dtype)

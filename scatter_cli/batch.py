@@ -16,12 +16,10 @@ import time
 
 from .errors import ScatterUsageError
 from .inputs import MESH_SUFFIXES
+from .options import SampleOptions, check_ascii
 
 TEMPLATE_FIELDS = ("stem", "name", "rel", "index")
 ENGINES = ("local", "dask")
-# sample options that a batch passes to api.prepare as they are
-SAMPLE_OPTIONS = ("count", "density", "seed", "method", "attributes", "poisson", "radius", "weight", "objects",
-                  "precision", "chunk_size", "shard", "oversampling", "exterior", "stable")
 
 
 class Inputs:
@@ -138,33 +136,6 @@ def _same_output(a, b):
     return os.path.normpath(os.path.abspath(a)) == os.path.normpath(os.path.abspath(b))
 
 
-def check_sample_options(options, fmt, ascii):
-    """The sample options' checks that need no mesh, once for the batch: usage errors (exit 2)."""
-    from . import api
-    from .samples import parse_attributes
-
-    unknown = set(options) - set(SAMPLE_OPTIONS)
-    if unknown:
-        raise TypeError(f"batch() got unexpected keyword arguments: {', '.join(sorted(unknown))}")
-    api.check_options(options.get("count"), options.get("density"), options.get("seed", 0),
-                      options.get("method", "random"), options.get("precision", "auto"), options.get("chunk_size"),
-                      options.get("radius"), options.get("poisson", False), options.get("weight"),
-                      options.get("oversampling"), options.get("exterior", False), options.get("stable", False))
-    parse_attributes(options.get("attributes"))
-    if options.get("shard") is not None:
-        options["shard"] = list(api.check_shard(options["shard"], options.get("poisson"), options.get("radius")))
-    if options.get("poisson") and options.get("radius") is not None:
-        raise ScatterUsageError("give either --poisson (an exact count) or --radius, not both")
-    if options.get("weight"):
-        from .weighting import parse_weight
-
-        parse_weight(options["weight"])
-    if ascii and fmt not in (None, "ply"):
-        raise ScatterUsageError("--ascii applies to PLY output only")
-    if isinstance(options.get("attributes"), tuple):
-        options["attributes"] = list(options["attributes"])
-
-
 def _check_batch_options(jobs, timeout, max_memory, engine):
     if jobs is not None and (not isinstance(jobs, int) or jobs < 1):
         raise ScatterUsageError(f"--jobs must be a positive integer, not {jobs!r}")
@@ -190,13 +161,14 @@ def batch(inputs, output, *, jobs=None, skip_existing=False, timeout=None, max_m
     ascii = sample_options.pop("ascii", False)
     return run_batch(inputs, output, jobs=jobs, skip_existing=skip_existing, timeout=timeout,
                      max_memory=max_memory, report=report, client=client, fmt=fmt, ascii=ascii,
-                     options=sample_options, quiet=True, collect=True)["records"]
+                     options=SampleOptions(**sample_options), quiet=True, collect=True)["records"]
 
 
 def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False, timeout=None, max_memory=None,
               report=None, engine="local", scheduler=None, client=None, fmt=None, ascii=False, options=None,
               quiet=False, progress=False, collect=False):
-    """The batch behind both the command and :func:`batch`.
+    """The batch behind both the command and :func:`batch`; ``options``: the
+    :class:`~scatter_cli.options.SampleOptions` of every mesh.
 
     Returns ``{"written", "skipped", "failed", "seconds", "records"}`` (records only
     with ``collect``). KeyboardInterrupt and other exceptions stop the workers, remove
@@ -205,19 +177,18 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
     from .writers import infer_format
 
     started = time.monotonic()
-    options = dict(options or {})
     if client is not None:
         engine = "dask"
     _check_batch_options(jobs, timeout, max_memory, engine)
+    options = (options or SampleOptions()).check()
     if fmt is not None:
         fmt = infer_format(None, fmt)
-    check_sample_options(options, fmt, ascii)
+        check_ascii(fmt, ascii)
     template = Template(output)
     found = collect_inputs(inputs, from_list)
     plan_outputs(found, template, fmt)
-    if ascii and infer_format(template.fill(found.fields(0)), fmt) != "ply":
-        raise ScatterUsageError("--ascii applies to PLY output only")
-    setup = {"options": options, "ascii": ascii, "quiet": quiet}
+    check_ascii(infer_format(template.fill(found.fields(0)), fmt), ascii)
+    setup = {"options": options.as_dict(), "ascii": ascii, "quiet": quiet}
     tally = Tally(len(found), report, collect, progress and not quiet, quiet)
     jobs_iter = ((i, found.paths[i], template.fill(found.fields(i))) for i in range(len(found)))
     try:

@@ -15,11 +15,12 @@ import typer
 from . import process
 from .errors import ScatterUsageError
 from .inputs import INPUT_FORMATS
+from .options import DEFAULT_COUNT, SampleOptions, whole_number
 from .outputs import ASCII_FORMATS, ATTRIBUTES, FORMATS
 
 app = typer.Typer(
     add_completion=False,
-    no_args_is_help=True,
+    invoke_without_command=True,  # `scatter` alone: the usage line and a hint (_root)
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
     context_settings={"help_option_names": ["-h", "--help"]},
@@ -38,37 +39,76 @@ def _warner(quiet):
 
 MeshArg = Annotated[str, typer.Argument(metavar="MESH", help="Mesh file (PLY, OBJ, STL, OFF, GLB/GLTF, ...); '-' reads standard input.")]
 InputFormat = Annotated[Optional[str], typer.Option("--input-format", metavar="FORMAT", help=f"Mesh format when reading standard input or a pipe ({', '.join(INPUT_FORMATS)}).")]
+
+
+def _count(text):
+    """A count as a user types it: 1000, 1e6, 2.5e3 (a whole number); 1.5 is refused."""
+    if isinstance(text, int):
+        return text
+    try:
+        return whole_number(text)
+    except ValueError as exc:
+        raise typer.BadParameter(f"{exc} (a count is a whole number, such as 1000 or 1e6)") from None
+
+
+# The sample options, declared once for `sample` and `batch`; each parameter is named as
+# its SampleOptions field, and its default is that field's (D).
+D = SampleOptions()
+Count = Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", parser=_count, help=f"Number of points (per mesh) [default: {DEFAULT_COUNT}]; 1e6 is a count too.")]
+Density = Annotated[Optional[float], typer.Option("--density", metavar="D", help="Points per unit of surface area, instead of -n.")]
+Format = Annotated[Optional[str], typer.Option("-f", "--format", metavar="FORMAT", help=f"{'|'.join(FORMATS)} [default: from the suffix of the output; CSV on standard output].")]
+Ascii = Annotated[bool, typer.Option("--ascii", help=f"ASCII instead of binary ({' or '.join(f.upper() for f in ASCII_FORMATS)}).")]
 Seed = Annotated[int, typer.Option("--seed", metavar="S", help="Random seed: same input, options and seed give the same bytes.")]
+Attributes = Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help=f"Comma list of extra columns: {', '.join(ATTRIBUTES)}.")]
+Weight = Annotated[Optional[str], typer.Option("--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a.")]
+Objects = Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable); for a USD stage, a prim path: the meshes at or below it.")]
+Poisson = Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached.")]
+Radius = Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance.")]
 Exterior = Annotated[bool, typer.Option("--exterior", help="Only the exterior surface: what can be seen from outside the mesh (needs embreex).")]
+Method = Annotated[str, typer.Option("--method", metavar="METHOD", help="random (i.i.d., square-root warp) | stratified | sobol.")]
+Precision = Annotated[str, typer.Option("--precision", metavar="PRECISION", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal.")]
+ChunkSize = Annotated[Optional[int], typer.Option("--chunk-size", metavar="K", help="Points generated per chunk (memory/speed knob; never changes the output).")]
 Stable = Annotated[bool, typer.Option("--stable", help="Placement keyed to the faces themselves: points stay put when the mesh is edited elsewhere, renumbered or re-exported.")]
 Shard = Annotated[Optional[str], typer.Option("--shard", metavar="K/M", help="Write only shard K (0-based) of M of the run's points; join shards with 'scatter merge'.")]
+Normalize = Annotated[str, typer.Option("--normalize", metavar="MODE", help="none | unit-cube | unit-sphere: points centred on the surface's box, scaled to fit [-1, 1] or the unit sphere.")]
+Volume = Annotated[bool, typer.Option("--volume", help="Points in space around the mesh, not on it: uniform in the padded box (labels: -a sdf,inside,winding,closest).")]
+Near = Annotated[Optional[str], typer.Option("--near", metavar="SIGMA[,SIGMA...]", help="Near-surface points: a surface point plus a Gaussian offset of standard deviation SIGMA (implies --volume).")]
+BoxShare = Annotated[Optional[float], typer.Option("--box-share", metavar="F", help="Share of the points uniform in the box, the rest near [default: 1 with --volume, 0 with --near].")]
+Padding = Annotated[float, typer.Option("--padding", metavar="P", help="The box: the surface's bounding box grown by P times its largest side.")]
+Sign = Annotated[str, typer.Option("--sign", metavar="winding|parity", help="Inside when the generalized winding number is >= 0.5 (robust on open meshes), or by a majority of ray parities.")]
 
 
-@app.command(no_args_is_help=True)
+@app.command()
 def sample(
     mesh: MeshArg,
-    count: Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", help="Number of points [default: 10000].")] = None,
-    density: Annotated[Optional[float], typer.Option("--density", metavar="D", help="Points per unit of surface area, instead of -n.")] = None,
+    count: Count = D.count,
+    density: Density = D.density,
     output: Annotated[Optional[str], typer.Option("-o", "--output", metavar="PATH", help="Output file; '-' or absent: standard output.")] = None,
-    fmt: Annotated[Optional[str], typer.Option("-f", "--format", metavar="FORMAT", help=f"{'|'.join(FORMATS)} [default: from the suffix of -o; CSV on standard output].")] = None,
-    ascii: Annotated[bool, typer.Option("--ascii", help="ASCII PLY or PCD instead of binary.")] = False,
-    seed: Seed = 0,
-    attributes: Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help=f"Comma list of extra columns: {', '.join(ATTRIBUTES)}.")] = None,
-    weight: Annotated[Optional[str], typer.Option("--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a.")] = None,
-    objects: Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable); for a USD stage, a prim path: the meshes at or below it.")] = None,
-    poisson: Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached.")] = False,
-    radius: Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance.")] = None,
-    exterior: Exterior = False,
-    method: Annotated[str, typer.Option("--method", metavar="METHOD", help="random (i.i.d., square-root warp) | stratified | sobol.")] = "random",
-    precision: Annotated[str, typer.Option("--precision", metavar="PRECISION", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal.")] = "auto",
+    fmt: Format = None,
+    ascii: Ascii = False,
+    seed: Seed = D.seed,
+    attributes: Attributes = None,
+    weight: Weight = D.weight,
+    objects: Objects = D.objects,
+    poisson: Poisson = D.poisson,
+    radius: Radius = D.radius,
+    exterior: Exterior = D.exterior,
+    method: Method = D.method,
+    precision: Precision = D.precision,
     stats: Annotated[Optional[str], typer.Option("--stats", metavar="PATH", help="Write a JSON summary to this file ('-': standard error).")] = None,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress and no warnings.")] = False,
-    chunk_size: Annotated[Optional[int], typer.Option("--chunk-size", metavar="K", help="Points generated per chunk (memory/speed knob; never changes the output).")] = None,
-    input_format: InputFormat = None,
-    stable: Stable = False,
+    chunk_size: ChunkSize = D.chunk_size,
+    input_format: InputFormat = D.input_format,
+    stable: Stable = D.stable,
     shard: Shard = None,
+    normalize: Normalize = D.normalize,
+    volume: Volume = D.volume,
+    near: Near = None,
+    box_share: BoxShare = D.box_share,
+    padding: Padding = D.padding,
+    sign: Sign = D.sign,
 ):
-    """Sample points on the surface of MESH.
+    """Sample points on the surface of MESH (or, with --volume or --near, in the space around it).
 
     Faces are chosen with probability proportional to their area and the point inside
     a face comes from the square-root warp, so the points are uniform over the surface.
@@ -83,30 +123,16 @@ def sample(
 
       cat mesh.ply | scatter sample - --input-format ply -n 1000 -f xyz
 
-      scatter sample terrain.ply -n 1000000000 --shard 3/8 -o part-3.ply
+      scatter sample terrain.ply -n 1e9 --shard 3/8 -o part-3.ply
+
+      scatter sample chair.obj --normalize unit-sphere --near 0.0707,0.0224 --box-share 0.06 -a sdf -o chair.npy
     """
     process.lean_trimesh()
     from . import api
-    from .progress import with_progress
-    from .writers import infer_format, run_precision, write_samples
 
     started = time.perf_counter()
-    out_format = infer_format(output, fmt)
-    if ascii and out_format not in ASCII_FORMATS:
-        raise ScatterUsageError(f"--ascii applies to {' and '.join(f.upper() for f in ASCII_FORMATS)} output only")
-    run = api.prepare(
-        mesh, count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,
-        radius=radius, weight=weight, objects=objects, precision=run_precision(out_format, precision),
-        chunk_size=chunk_size, input_format=input_format, warn=_warner(quiet), exterior=exterior, stable=stable,
-        shard=shard,
-    )
-    t = time.perf_counter()
-    show = not quiet and sys.stderr.isatty()
-    report = write_samples(with_progress(run.chunks(), run.size, show), output, out_format, run.layout, run.size,
-                           ascii, **api.output_options(run, out_format))
-    if report:
-        run.info["output"] = report
-    run.info["timings"]["sample_and_write"] = time.perf_counter() - t
+    options = SampleOptions.of(locals())
+    run = api.sample_to(mesh, options, output, fmt, ascii, warn=_warner(quiet), progress=not quiet and sys.stderr.isatty())
     run.info["timings"]["total"] = time.perf_counter() - started
     if stats and run.kept is not None:
         run.info.update(run.spacing())
@@ -194,7 +220,7 @@ def bench(
     process.echo(report["markdown"])
 
 
-@app.command(no_args_is_help=True)
+@app.command()
 def batch(
     inputs: Annotated[Optional[List[str]], typer.Argument(metavar="INPUT...", help="Mesh files and folders (searched recursively for mesh suffixes).", show_default=False)] = None,
     output: Annotated[str, typer.Option("-o", "--output", metavar="TEMPLATE", help="Output path per mesh, with {stem} {name} {rel} {index}.")] = ...,
@@ -206,22 +232,28 @@ def batch(
     report: Annotated[Optional[str], typer.Option("--report", metavar="PATH", help="JSON Lines report, one object per mesh, in input order.")] = None,
     engine: Annotated[str, typer.Option("--engine", metavar="ENGINE", help="local | dask.")] = "local",
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRESS", help="Dask scheduler (tcp://host:8786) [default: DASK_SCHEDULER_ADDRESS].")] = None,
-    count: Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", help="Points per mesh [default: 10000].")] = None,
-    density: Annotated[Optional[float], typer.Option("--density", metavar="D", help="Points per unit of surface area, instead of -n.")] = None,
-    fmt: Annotated[Optional[str], typer.Option("-f", "--format", metavar="FORMAT", help=f"{'|'.join(FORMATS)} [default: from the suffix of the template].")] = None,
-    ascii: Annotated[bool, typer.Option("--ascii", help="ASCII PLY instead of binary little-endian.")] = False,
-    seed: Seed = 0,
-    attributes: Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help=f"Comma list of extra columns: {', '.join(ATTRIBUTES)}.")] = None,
-    weight: Annotated[Optional[str], typer.Option("--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a.")] = None,
-    objects: Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable).")] = None,
-    poisson: Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points.")] = False,
-    radius: Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance.")] = None,
-    method: Annotated[str, typer.Option("--method", metavar="METHOD", help="random | stratified | sobol.")] = "random",
-    precision: Annotated[str, typer.Option("--precision", metavar="PRECISION", help="auto|float32|float64.")] = "auto",
-    chunk_size: Annotated[Optional[int], typer.Option("--chunk-size", metavar="K", help="Points generated per chunk (never changes the output).")] = None,
-    exterior: Exterior = False,
-    stable: Stable = False,
+    count: Count = D.count,
+    density: Density = D.density,
+    fmt: Format = None,
+    ascii: Ascii = False,
+    seed: Seed = D.seed,
+    attributes: Attributes = None,
+    weight: Weight = D.weight,
+    objects: Objects = D.objects,
+    poisson: Poisson = D.poisson,
+    radius: Radius = D.radius,
+    method: Method = D.method,
+    precision: Precision = D.precision,
+    chunk_size: ChunkSize = D.chunk_size,
+    exterior: Exterior = D.exterior,
+    stable: Stable = D.stable,
     shard: Shard = None,
+    normalize: Normalize = D.normalize,
+    volume: Volume = D.volume,
+    near: Near = None,
+    box_share: BoxShare = D.box_share,
+    padding: Padding = D.padding,
+    sign: Sign = D.sign,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress, warnings, error lines or summary (the exit status and report still tell).")] = False,
 ):
     """Sample many meshes: for each, what 'scatter sample MESH -o OUTPUT' writes.
@@ -239,13 +271,10 @@ def batch(
     """
     from .batch import run_batch
 
-    options = dict(count=count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,
-                   radius=radius, weight=weight, objects=objects, precision=precision, chunk_size=chunk_size,
-                   exterior=exterior or None, stable=stable or None, shard=shard)
-    options = {k: v for k, v in options.items() if v is not None}
     result = run_batch(inputs or [], output, from_list=from_list, jobs=jobs, skip_existing=skip_existing,
                        timeout=timeout, max_memory=max_memory, report=report, engine=engine, scheduler=scheduler,
-                       fmt=fmt, ascii=ascii, options=options, quiet=quiet, progress=sys.stderr.isatty())
+                       fmt=fmt, ascii=ascii, options=SampleOptions.of(locals()), quiet=quiet,
+                       progress=sys.stderr.isatty())
     if result["failed"]:
         raise typer.Exit(1)
 
@@ -284,12 +313,27 @@ def _root(
     version: Annotated[bool, typer.Option("--version", is_eager=True, callback=_print_version, help="Print the version and exit.")] = False,
 ):
     ctx.ensure_object(process.Options).debug = debug
+    if ctx.invoked_subcommand is None:  # no command: say how to ask for help, exit 2
+        typer.echo(ctx.get_usage(), err=True)
+        typer.echo(f"Try '{ctx.command_path} --help' for the commands.", err=True)
+        raise typer.Exit(2)
+
+
+def command():
+    """The click command of ``scatter``, with usage lines as a user reads them: a required
+    argument is written ``MESH``, not ``{MESH}``."""
+    root = typer.main.get_command(app)
+    for cmd in [root, *getattr(root, "commands", {}).values()]:
+        for param in cmd.params:
+            if param.param_type_name == "argument" and param.required and param.metavar:
+                param.get_usage_pieces = lambda ctx, name=param.metavar: [name]
+    return root
 
 
 def main(argv=None) -> int:
     """Run ``scatter`` on ``argv`` (default: the process's arguments); returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    return process.run_command(typer.main.get_command(app), argv)
+    return process.run_command(command(), argv)
 
 
 def run():

@@ -80,6 +80,8 @@ class ExteriorSource:
     ``area`` is the estimated exterior area, ``stats`` what the pass found.
     """
 
+    kept = None  # (the Source protocol: filtered, not thinned)
+
     def __init__(self, base, occluder, seed, total_area, count=None, candidates=None, threads=None):
         self.base, self.occluder, self.seed = base, occluder, seed
         t = time.perf_counter()
@@ -249,6 +251,8 @@ class ExteriorSubset:
     grown by the fraction found, plus 2 %), then ``count`` of them chosen uniformly at
     random without replacement (keyed by the seed), kept in stream order.
     """
+
+    kept = None
 
     def __init__(self, source_of, occluder, seed, total_area, count, threads=None):
         m, passes = max(count, 1), 0

@@ -27,8 +27,5 @@ ATTRIBUTES = {
     "winding": ("winding", ("winding",), "<f8"),
     "closest": ("closest", ("cx", "cy", "cz"), "real"),
 }
-# Attributes of volume runs (--volume, --near) only, and those of surface runs only.
-VOLUME_ATTRIBUTES = ("sdf", "inside", "winding", "closest", "face", "object")
-SURFACE_ONLY = ("normal", "smooth-normal", "bary", "color", "uv", "orient")
 # Columns always come in this order, whatever the order of -a.
 KEY_ORDER = ("normal", "orient", "sdf", "inside", "winding", "closest", "face", "bary", "color", "uv", "object")

@@ -7,6 +7,8 @@ candidates it thins) and then answers one question, "points ``start .. stop - 1`
     class Source(Protocol):
         count: int     # N: the source gives points 0 .. N - 1
         area: float    # area of the surface the points lie on (unweighted, world space)
+        kept: RawChunk | None  # a thinned source's points, held whole (None: drawn on demand)
+        stats: dict | None     # what a filter found (the exterior filter's areas), or None
         def draw(self, start: int, stop: int) -> RawChunk: ...
 
 What ``draw(start, stop)`` must guarantee, for ``0 <= start <= stop <= count``:
@@ -26,23 +28,23 @@ What ``draw(start, stop)`` must guarantee, for ``0 <= start <= stop <= count``:
   it). The thinned source is the one exception: its candidates are drawn and thinned
   once, when it is built.
 
-A source that filters or reorders another one (thinning, and next ``--exterior``) is
-built from that source by a function returning a new source; nothing is changed in
-place. The sources here: :class:`RandomSource`, :class:`StratifiedSource`,
-:class:`SobolSource`, :class:`ThinnedSource` (from :func:`thinned`); the weighted ones,
-:class:`~scatter_cli.weighting.VertexColorSource` and
-:class:`~scatter_cli.weighting.TextureSource`, live with their weighting.
+A source that filters or reorders another one (``--exterior``, thinning) is built from
+that source as a new source; nothing is changed in place. :mod:`scatter_cli.pipeline`
+composes them. The sources here: :class:`RandomSource`, :class:`StratifiedSource`,
+:class:`SobolSource`; the weighted ones, :class:`~scatter_cli.weighting.VertexColorSource`
+and :class:`~scatter_cli.weighting.TextureSource`, live with their weighting; the
+stable one in :mod:`scatter_cli.stable`, the exterior ones in :mod:`scatter_cli.exterior`,
+the thinned one (:class:`~scatter_cli.thinning.ThinnedSource`) in :mod:`scatter_cli.thinning`.
 """
 
 from __future__ import annotations
 
-import time
 from typing import Protocol
 
 import numpy as np
 
 from .methods import SOBOL_MAX_COUNT, sobol_draws, stratified_draws
-from .sampling import RawChunk, SamplePlan, in_blocks
+from .sampling import RawChunk, SamplePlan
 
 
 class Source(Protocol):
@@ -50,6 +52,8 @@ class Source(Protocol):
 
     count: int
     area: float
+    kept: RawChunk | None
+    stats: dict | None
 
     def draw(self, start: int, stop: int) -> RawChunk: ...
 
@@ -57,6 +61,8 @@ class Source(Protocol):
 class RandomSource:
     """The random method: i.i.d. points, point i from draws 3 i .. 3 i + 2 of the seed's
     stream (:meth:`SamplePlan.draw`), uniform over the plan's (area-weighted) faces."""
+
+    kept = stats = None
 
     def __init__(self, plan: SamplePlan, count: int, seed: int, want_bary: bool = False):
         self.plan, self.count, self.seed, self.want_bary = plan, int(count), seed, want_bary
@@ -68,6 +74,8 @@ class RandomSource:
 
 class _PlacedSource:
     """A method that maps point indices to (used faces, barycentrics), placed by the plan."""
+
+    kept = stats = None
 
     def __init__(self, plan: SamplePlan, count: int, seed: int, want_bary: bool = False):
         self.plan, self.count, self.seed, self.want_bary = plan, int(count), seed, want_bary
@@ -110,50 +118,3 @@ def make_source(plan: SamplePlan, count: int, seed: int, want_bary: bool = False
 
         return weighted_source(plan, weighting, count, seed, want_bary, area)
     return METHOD_SOURCES[method](plan, count, seed, want_bary)
-
-
-class ThinnedSource:
-    """The points of ``kept`` (a RawChunk starting at 0), chosen out of ``candidates``."""
-
-    def __init__(self, kept: RawChunk, candidates: Source):
-        self.kept, self.candidates = kept, candidates
-        self.count = len(kept.points)
-        self.area = candidates.area
-
-    def draw(self, start: int, stop: int) -> RawChunk:
-        return self.kept.slice(start, stop)
-
-
-def thinned(candidates: Source, count: int | None = None, radius: float | None = None):
-    """A Poisson-disk subset of all the points of ``candidates``: (ThinnedSource, info).
-
-    ``radius`` given: a maximal set with no two points closer than it; else exactly
-    ``count`` points, spaced as far apart as the search reaches. ``info`` holds
-    ``count``, ``candidates``, ``radius``, (exact count) ``d_min`` and ``rho``, and the
-    ``timings`` of drawing and of thinning.
-    """
-    from . import thinning
-    from .spacing import relative_radius
-
-    t = time.perf_counter()
-    blocks = in_blocks(candidates.draw, candidates.count)
-    points = np.concatenate([b.points for b in blocks]) if len(blocks) > 1 else blocks[0].points
-    t1 = time.perf_counter()
-    if radius is not None:
-        index, d_min = thinning.thin_by_radius(points, radius), None
-    else:
-        index, d_min = thinning.thin_to_count(points, count, candidates.area)
-    source = ThinnedSource(_take(blocks, index), candidates)
-    info = {"count": source.count, "candidates": candidates.count, "radius": radius}
-    if d_min is not None:
-        info.update(d_min=d_min, rho=relative_radius(d_min, candidates.area, source.count))
-    info["timings"] = {"candidates": t1 - t, "thinning": time.perf_counter() - t1}
-    return source, info
-
-
-def _take(blocks, index):
-    """Rows ``index`` (k,) ascending of the chunks ``blocks`` end to end, as one chunk."""
-    ends = np.cumsum([len(b.points) for b in blocks])
-    cuts = np.searchsorted(index, ends)
-    return RawChunk.join([b.take(part - (end - len(b.points)))
-                          for b, part, end in zip(blocks, np.split(index, cuts[:-1]), ends)])

@@ -581,7 +581,7 @@ class StableSource:
 
     At most one of ``count`` (the N earliest arrivals), ``density`` (every arrival before
     time D), ``radius`` (every arrival before the candidate horizon of ``--radius R``:
-    :func:`dart_thrown` keeps the set) and ``stream=True`` (every arrival, without end:
+    :func:`scatter_cli.thinning.dart_thrown` keeps the set) and ``stream=True`` (every arrival, without end:
     ``count`` is None and the arrivals are found as far as ``draw`` asks; what the
     exterior filter reads). ``weight``: an object with ``face_weights_of(k, inst)`` and
     ``barycentric(w, u)`` (vertex colours) or with ``accept(raw, u)`` (textures: arrivals
@@ -590,6 +590,8 @@ class StableSource:
     An arrival is held as one word, ``id = used face << bits | counter`` (``bits`` from
     :func:`counter_bits`): 8 bytes a point.
     """
+
+    kept = stats = None  # (the Source protocol: neither thinned nor filtered)
 
     def __init__(self, surface, seed, *, count=None, density=None, radius=None, stream=False, want_bary=False,
                  weight=None, max_candidates=None):
@@ -667,7 +669,7 @@ class StableSource:
         raise ScatterError(f"{self.surface.source}: --stable found fewer than {n:,} arrivals")
 
     def _select_radius(self, radius, max_candidates):
-        from .api import RADIUS_OVERSAMPLING
+        from .thinning import RADIUS_OVERSAMPLING
 
         # candidates at RADIUS_OVERSAMPLING times the hexagonal density of spacing R: a
         # time per unit area, the same for every face, so an edit moves only nearby points
@@ -801,19 +803,6 @@ def pack(used, ctr, bits):
 def unpack(ids, bits):
     """(used face (n,) int64, counter (n,) uint64) of arrival ids."""
     return (ids >> np.uint64(bits)).astype(np.int64), ids & np.uint64((1 << bits) - 1)
-
-
-def dart_thrown(source, radius):
-    """A :class:`~scatter_cli.sources.ThinnedSource` of ``source``'s points, each kept in
-    order when no point kept before it lies within ``radius``: every kept pair at least R
-    apart, every point within R of a kept one, and the kept set is as local as the order."""
-    from . import greedy, pairs
-    from .sources import ThinnedSource
-
-    raw = source.draw(0, source.count)
-    i, j, _ = pairs.all_pairs(raw.points, radius)
-    kept = np.flatnonzero(greedy.in_priority_order(len(raw.points), i, j, np.arange(len(raw.points))))
-    return ThinnedSource(raw.take(kept), source)
 
 
 class VertexColorRates:

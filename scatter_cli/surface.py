@@ -63,11 +63,19 @@ class Surface:
     # (USD stages; glTF by its specification); None where it does not.
     up_axis: str | None = None
     meters_per_unit: float | None = None
+    # (n_instances,) int64: the index `scatter info` lists each instance under in the
+    # whole file (what `-a object` writes); None: its position in ``instances``.
+    object_index: np.ndarray | None = None
 
     def keeping(self, instances) -> "Surface":
-        """The same scene with only ``instances`` (a list of this surface's instances)."""
+        """The same scene with only ``instances`` (a list of this surface's instances),
+        each keeping its object index."""
+        position = {id(inst): k for k, inst in enumerate(self.instances)}
+        index = np.array([position[id(inst)] for inst in instances], dtype=np.int64)
+        if self.object_index is not None:
+            index = self.object_index[index]
         return Surface(self.geometries, instances, self.source, self.is_scene, up_axis=self.up_axis,
-                       meters_per_unit=self.meters_per_unit)
+                       meters_per_unit=self.meters_per_unit, object_index=index)
 
     @property
     def face_count(self) -> int:
@@ -289,8 +297,8 @@ def select_objects(surface: Surface, names) -> Surface:
     wanted = set(names)
     known = {i.name for i in surface.instances} | {g.name for g in surface.geometries}
     missing = sorted(wanted - known)
-    if missing:
-        raise ScatterUsageError(
+    if missing:  # a failure of this mesh (another may have them), not a usage error
+        raise ScatterError(
             f"{surface.source}: no object named {', '.join(map(repr, missing))} "
             f"(objects: {', '.join(sorted(known)) or 'none'})"
         )

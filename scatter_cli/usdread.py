@@ -543,7 +543,7 @@ def select_paths(surface: Surface, paths, aliases) -> Surface:
     if missing:
         names = [i.name for i in surface.instances]
         shown = ", ".join(names[:20]) + (f", ... ({len(names)} in all)" if len(names) > 20 else "")
-        raise ScatterUsageError(f"{surface.source}: no mesh at or under {', '.join(map(repr, missing))} "
+        raise ScatterError(f"{surface.source}: no mesh at or under {', '.join(map(repr, missing))} "
                                 f"(meshes: {shown or 'none'})")
     kept = sorted(set().union(*hits.values()))
     return surface.keeping([surface.instances[k] for k in kept])

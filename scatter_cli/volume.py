@@ -18,8 +18,6 @@ by ray parity. Only what the asked-for attributes need is computed.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-
 import numpy as np
 
 from .errors import ScatterError
@@ -29,46 +27,6 @@ VOLUME_DRAWS = 8  # part, 3 box coordinates, 4 uniforms for 3 Gaussians (Box-Mul
 STREAM_KEY = 0x766F6C756D65  # "volume": keys the volume stream apart from the surface one
 LABELS = ("sdf", "inside", "winding", "closest", "face", "object")
 PARITY_RAYS = 5
-
-
-@dataclass(frozen=True)
-class Frame:
-    """The output frame: ``output = (world - center) * scale``."""
-
-    center: np.ndarray  # (3,) float64
-    scale: float
-
-    @property
-    def identity(self) -> bool:
-        return self.scale == 1.0 and not self.center.any()
-
-    def to_output(self, p):
-        """World points ``p`` (n, 3) float64 -> output frame, in place when not identity."""
-        if self.identity:
-            return p
-        p -= self.center
-        p *= self.scale
-        return p
-
-    def stats(self) -> dict:
-        return {"center": self.center.tolist(), "scale": self.scale}
-
-
-def normalization(triangles, mode: str) -> Frame:
-    """The frame of ``--normalize mode`` for the sampled surface's world triangles (T, 3, 3).
-
-    unit-cube: centred on the bounding box, its largest side 2; unit-sphere: the same
-    centre, the farthest used vertex at distance 1."""
-    if mode == "none":
-        return Frame(np.zeros(3), 1.0)
-    corners = triangles.reshape(-1, 3)
-    lo, hi = corners.min(axis=0), corners.max(axis=0)
-    center = (lo + hi) / 2
-    if mode == "unit-cube":
-        size = float((hi - lo).max())
-        return Frame(center, 2.0 / size if size > 0 else 1.0)
-    reach = float(np.sqrt(((corners - center) ** 2).sum(axis=1)).max())
-    return Frame(center, 1.0 / reach if reach > 0 else 1.0)
 
 
 def sampling_box(triangles, padding: float):
@@ -158,11 +116,11 @@ class VolumeLabels:
 
     needs_bary = False
 
-    def __init__(self, triangles, instance, face, names, sign="winding", frame: Frame | None = None):
+    def __init__(self, triangles, instance, face, names, sign="winding", frame=None):
         self.triangles, self.instance, self.face = triangles, instance, face
         self.names = tuple(names)
         self.sign = sign
-        self.frame = frame or Frame(np.zeros(3), 1.0)
+        self.frame = frame  # (offset (3,), scale) of the output's frame, or None
         wanted = set(self.names)
         self.needs_distance = bool(wanted & {"sdf", "closest", "face", "object"})
         self.needs_winding = "winding" in wanted or ("inside" in wanted or "sdf" in wanted) and sign == "winding"
@@ -196,16 +154,18 @@ class VolumeLabels:
             inside = parity_inside(self._distance_tree, p, rays=PARITY_RAYS)
         elif winding is not None:
             inside = winding >= 0.5
-        scale = self.frame.scale
+        scale = 1.0 if self.frame is None else self.frame[1]
         for name in self.names:
             if name == "sdf":
-                out["sdf"] = np.where(inside, -distance, distance) * scale
+                sdf = np.where(inside, -distance, distance)
+                out["sdf"] = sdf if self.frame is None else sdf * scale
             elif name == "inside":
                 out["inside"] = inside.astype(np.uint8)
             elif name == "winding":
                 out["winding"] = winding
             elif name == "closest":
-                out["closest"] = self.frame.to_output(closest).astype(real_dtype, copy=False)
+                moved = closest if self.frame is None else (closest - self.frame[0]) * scale
+                out["closest"] = moved.astype(real_dtype, copy=False)
             elif name == "face":
                 out["face"] = self.face[face].astype(np.int32)
             elif name == "object":

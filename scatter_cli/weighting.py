@@ -144,6 +144,8 @@ class TextureWeight(_Weight):
 
 
 class _WeightedSource:
+    kept = stats = None  # (the Source protocol: neither thinned nor filtered)
+
     def __init__(self, plan, weight, count, seed, want_bary, area):
         self.plan, self.weight, self.count, self.seed, self.want_bary = plan, weight, int(count), seed, want_bary
         self.area = area

@@ -60,23 +60,19 @@ def serve():
 def sample_file(input, output, fmt, setup, warn=None):
     """Sample ``input`` to ``output`` in format ``fmt`` as ``scatter sample INPUT -o OUTPUT`` does.
 
-    ``setup``: ``{"options": keyword arguments of api.prepare, "ascii": bool}``.
+    ``setup``: ``{"options": SampleOptions.as_dict(), "ascii": bool}``.
 
     Returns ``{"error": None or one line, "count", "faces", "area"}``.
     """
     from . import api
     from .errors import ScatterError
-    from .writers import run_precision, write_samples
+    from .options import SampleOptions
 
     try:
         folder = os.path.dirname(output)
         if folder:
             os.makedirs(folder, exist_ok=True)
-        options = dict(setup["options"])
-        options["precision"] = run_precision(fmt, options.get("precision", "auto"))  # as sample sets it
-        run = api.prepare(input, warn=warn, **options)
-        write_samples(run.chunks(), output, fmt, run.layout, run.size, setup.get("ascii", False),
-                      **api.output_options(run, fmt))
+        run = api.sample_to(input, SampleOptions(**setup["options"]), output, fmt, setup.get("ascii", False), warn=warn)
         return {"error": None, "count": run.size, "faces": int(run.info["faces"]), "area": float(run.info["area"])}
     except ScatterError as exc:
         message = str(exc)

@@ -203,11 +203,6 @@ def test_help_teaches():
         assert word in out
 
 
-def test_python_dash_m_and_no_args():
-    proc = run_scatter()
-    assert proc.returncode in (0, 2) and b"sample" in proc.stdout + proc.stderr
-
-
 def test_closed_pipe_is_quiet(sample_mesh):
     import subprocess
 
@@ -326,3 +321,44 @@ def test_debug_shows_the_traceback_of_an_internal_error(sample_mesh):
 def test_bad_thread_count_is_a_usage_error(sample_mesh, threads):
     proc = run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-n", 10, env={"SCATTER_THREADS": threads})
     assert_one_line_error(proc, 2, "SCATTER_THREADS", threads)
+
+
+# ---------------------------------------------------------------------------
+# usage lines and counts as users type them
+
+
+def test_scatter_alone_prints_the_usage_line_and_a_hint(tmp_path):
+    proc = run_scatter()
+    err = proc.stderr.decode().splitlines()
+    assert proc.returncode == 2 and proc.stdout == b""
+    assert err[0] == "Usage: scatter [OPTIONS] COMMAND [ARGS]..." and "scatter --help" in err[1]
+    assert len(err) == 2  # not the whole help: no option or command list
+
+
+@pytest.mark.parametrize("command", ["sample", "info", "check", "bench", "batch", "merge"])
+def test_usage_lines_have_no_braces(command):
+    usage = run_scatter(command, "--help", check=True).stdout.decode().splitlines()[0]
+    assert usage.startswith(f"Usage: scatter {command} ") and "{" not in usage and "}" not in usage, usage
+
+
+def test_a_missing_mesh_is_one_line_naming_it():
+    assert_one_line_error(run_scatter("sample"), 2, "MESH", "--help")
+
+
+@pytest.mark.parametrize("command", ["sample", "batch"])
+def test_counts_and_densities_in_scientific_notation(sample_mesh, tmp_path, command):
+    mesh = sample_mesh("icosahedron_binary.stl")
+
+    def written(*options):
+        out = tmp_path / f"{command}-{len(list(tmp_path.iterdir()))}"
+        out.mkdir()
+        target = out / "p.npy" if command == "sample" else out / "{stem}.npy"
+        run_scatter(command, mesh, *options, "-o", target, check=True)
+        return next(out.iterdir()).read_bytes()  # its only file
+
+    assert written("-n", "1e3") == written("-n", "1000") == written("-n", "1.0e3")
+    assert len(written("-n", "1e3")) > len(written("-n", "999"))
+    assert written("--density", "2.5e1") == written("--density", "25")
+    proc = run_scatter(command, mesh, "-n", "1.5", "-o", tmp_path / ("x.npy" if command == "sample" else "{stem}.npy"))
+    assert_one_line_error(proc, 2, "'1.5' is not a whole number", "--count")
+    assert not (tmp_path / "x.npy").exists()

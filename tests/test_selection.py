@@ -127,3 +127,57 @@ def test_zero_area_faces_are_never_chosen():
     u = np.concatenate([adversarial_u(plan), [np.nextafter(1.0, 0)] * 3])
     faces = plan.place(0, plan.select(u), np.full((len(u), 2), 0.25)).face
     assert not np.isin(faces, [0, 3, 6]).any()
+
+
+# ---------------------------------------------------------------------------
+# --object and object_index: the index is the one `scatter info` lists, under --object too
+
+
+def three_cubes(path, instanced=False):
+    """A GLB of three unit cubes 3 apart, nodes node0..node2 (one mesh each, or one mesh
+    placed three times)."""
+    import trimesh
+
+    from .gltfwrite import glb_bytes
+
+    box = trimesh.creation.box()
+    meshes = [(box.vertices, box.faces)] * (1 if instanced else 3)
+    nodes = []
+    for k in range(3):
+        matrix = np.eye(4)
+        matrix[0, 3] = 3 * k
+        nodes.append((0 if instanced else k, matrix))
+    path.write_bytes(glb_bytes(meshes, nodes))
+    return path
+
+
+def info_indices(path):
+    import json
+
+    from .conftest import run_scatter
+
+    objects = json.loads(run_scatter("info", path, "--json", check=True).stdout)["objects"]
+    return {o["name"]: o["index"] for o in objects}
+
+
+@pytest.mark.parametrize("instanced", [False, True])
+def test_object_index_under_object_is_the_index_info_lists(tmp_path, instanced):
+    import scatter_cli
+
+    from .conftest import run_scatter
+
+    path = three_cubes(tmp_path / "three_cubes.glb", instanced)
+    listed = info_indices(path)
+    assert sorted(listed.values()) == [0, 1, 2] and listed["node0"] != 0  # the case main got wrong
+    for name, index in listed.items():
+        out = tmp_path / f"{name}.csv"
+        run_scatter("sample", path, "--object", name, "-a", "object", "-n", "200", "-o", out, check=True)
+        written = np.loadtxt(out, delimiter=",", skiprows=1)[:, 3]
+        assert set(written.tolist()) == {index}, name
+    both = scatter_cli.sample(path, 2000, objects=["node0", "node2"], attributes=["object"])
+    assert set(both.object.tolist()) == {listed["node0"], listed["node2"]}
+    # the points of each index lie on that node's cube (x in 3k +- 0.5)
+    for name in ("node0", "node2"):
+        x = both.points[both.object == listed[name], 0]
+        centre = 3 * int(name[-1])
+        assert np.all(np.abs(x - centre) <= 0.5 + 1e-6), name

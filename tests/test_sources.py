@@ -12,7 +12,9 @@ from hypothesis import strategies as st
 
 from scatter_cli import api
 from scatter_cli.sampling import SamplePlan
-from scatter_cli.sources import METHOD_SOURCES, ThinnedSource, make_source, thinned
+from scatter_cli.pipeline import plan_surface
+from scatter_cli.sources import METHOD_SOURCES, make_source
+from scatter_cli.thinning import ThinnedSource, thinned
 from scatter_cli.surface import load_surface
 
 from .conftest import SAMPLES
@@ -29,7 +31,7 @@ def surface(name):
 
 def _weighted(name, spec, want_bary):
     surface = load_surface(SAMPLES / name)  # its own: a weighting reads the file's colours
-    plan, weighting, area = api.plan_surface(surface, spec)
+    plan, weighting, area = plan_surface(surface, spec)
     return make_source(plan, N, 4, want_bary, weighting=weighting, area=area)
 
 

@@ -187,12 +187,13 @@ def test_object_by_prim_path(files):
     assert names("/W/trees[1]") == [NAMES[4]]
     assert names("/W/rock_b", "/W/cube") == [NAMES[0], NAMES[2]]  # instance order kept
     assert names("/W/") == NAMES
-    with pytest.raises(ScatterUsageError, match="/W/nothing"):
+    with pytest.raises(ScatterError, match="/W/nothing") as refused:  # a failure of this mesh, not a usage error
         load_surface(files["usd"], objects=["/W/nothing"])
-    with pytest.raises(ScatterUsageError):
+    assert not isinstance(refused.value, ScatterUsageError)
+    with pytest.raises(ScatterError):
         load_surface(files["usd"], objects=["/W/cub"])  # a prefix of a name is not a path
     s = scatter_cli.sample(files["usd"], 2_000, objects=["/W/rock_a"], attributes=["object"])
-    assert set(s.object.tolist()) == {0}
+    assert set(s.object.tolist()) == {NAMES.index("/W/rock_a/geo")}  # the index `scatter info` lists
     box = np.array(world_matrices()[1])[:3, 3]
     assert np.abs(s.points - box).max() <= 1.0 + 1e-6  # on the unit icosphere at rock_a
 

@@ -189,7 +189,7 @@ def test_normalized_frames():
     sphere = scatter_cli.sample(mesh, 10, volume=True, normalize="unit-sphere", attributes=("sdf",),
                                 precision="float64")
     scale = sphere.info["normalize"]["scale"]
-    center = np.asarray(sphere.info["normalize"]["center"])
+    center = np.asarray(sphere.info["normalize"]["offset"])
     assert np.isclose(np.linalg.norm((corners - center) * scale, axis=1).max(), 1.0)
     world = scatter_cli.sample(mesh, 10, volume=True, attributes=("sdf",), precision="float64")
     assert np.allclose((world.points - center) * scale, sphere.points)

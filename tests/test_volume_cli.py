@@ -92,6 +92,6 @@ def test_stats_record_the_frame(tmp_path):
                 "-o", tmp_path / "o.npy", "--stats", stats, check=True)
     info = json.loads(stats.read_text())
     frame = info["normalize"]
-    assert frame["mode"] == "unit-sphere" and len(frame["center"]) == 3 and frame["scale"] > 0
+    assert frame["mode"] == "unit-sphere" and len(frame["offset"]) == 3 and frame["scale"] > 0
     data = np.load(tmp_path / "o.npy")
     assert np.abs(np.stack([data["x"], data["y"], data["z"]], 1)).max() <= 1.0 + 2 * 0.1 * 2
