@@ -50,6 +50,3 @@ def closest_points(tree, points):
     return dist, cl, face
 
 
-def parity_inside(tree, points, rays=5):
-    from .winding import WindingTree, winding_numbers
-    return winding_numbers(WindingTree.from_triangles(tree.triangles), points) >= 0.5

@@ -12,7 +12,7 @@ fair subsample and a run of K points is the first K points of a longer run.
 :class:`VolumeLabels` then labels each chunk against the sampled surface (world-space
 triangles in float64): the exact closest point and distance (:mod:`scatter_cli.distance`),
 and inside or outside by the generalized winding number (:mod:`scatter_cli.winding`) or
-by ray parity. Only what the asked-for attributes need is computed.
+by a majority of ray parities (:mod:`scatter_cli.parity`). Only what the asked-for attributes need is computed.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from .sampling import RawChunk, SamplePlan, apply_matrix
 VOLUME_DRAWS = 8  # part, 3 box coordinates, 4 uniforms for 3 Gaussians (Box-Muller)
 STREAM_KEY = 0x766F6C756D65  # "volume": keys the volume stream apart from the surface one
 LABELS = ("sdf", "inside", "winding", "closest", "face", "object")
-PARITY_RAYS = 5
+PARITY_RAYS = 5  # rays a point for --sign parity: the majority outvotes two grazing rays
 
 
 def sampling_box(triangles, padding: float):
@@ -133,7 +133,7 @@ class VolumeLabels:
         if self.needs_winding:
             from .winding import WindingTree
 
-            self._winding_tree = WindingTree.from_triangles(triangles)
+            self._winding_tree = WindingTree(triangles)
 
     def make(self, raw: RawChunk, real_dtype) -> dict:
         """dict key -> array for the asked-for names; ``raw.points`` are world points."""
@@ -149,7 +149,7 @@ class VolumeLabels:
 
             winding = winding_numbers(self._winding_tree, p)
         if self.needs_parity:
-            from .distance import parity_inside
+            from .parity import parity_inside
 
             inside = parity_inside(self._distance_tree, p, rays=PARITY_RAYS)
         elif winding is not None:

@@ -6,10 +6,6 @@ class WindingTree:
     def __init__(self, triangles):
         self.triangles = np.ascontiguousarray(triangles, dtype=np.float64)
 
-    @classmethod
-    def from_triangles(cls, triangles):
-        return cls(triangles)
-
 
 def winding_numbers(tree, points):
     t = tree.triangles
