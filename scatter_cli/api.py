@@ -16,10 +16,9 @@ import time
 import numpy as np
 
 from .attributes import AttributeMaker
-from .bounds import choose_precision, normal_frame, output_bounds, sampled_bounds  # noqa: F401 (api.sampled_bounds: the LAS box)
-from .errors import ScatterUsageError
+from .bounds import choose_precision, in_frame, normal_frame, sampled_bounds
 from .options import SampleOptions
-from .pipeline import surface_source
+from .pipeline import surface_source, volume_source
 from .samples import ATTRIBUTES, Samples, column_layout
 from .sampling import chunk_ranges, run_chunks
 from .sources import Source
@@ -37,7 +36,7 @@ class Run:
     """
 
     def __init__(self, source: Source, maker: AttributeMaker, dtype, chunk_size: int, info: dict, plan,
-                 shard=None, frame=None):
+                 shard=None, frame=None, box=None):
         self.source = source
         self.maker = maker
         self.dtype = np.dtype(dtype)
@@ -48,11 +47,12 @@ class Run:
         self.surface = plan.surface
         self.shard = shard  # (K, M): the run writes only that part of its points
         self.frame = frame  # (offset (3,), scale): points written as (p - offset) * scale (--normalize)
+        self.box = box  # (2, 3) world-space box of the points: the used faces' vertices, or the sampling box
 
     @property
     def bounds(self):
-        """(2, 3) float64 box of the used faces' vertices in the output's frame."""
-        return output_bounds(self.plan, self.frame)
+        """(2, 3) float64 box the points lie in, in the output's frame."""
+        return in_frame(self.box, self.frame)
 
     @property
     def span(self):
@@ -138,8 +138,6 @@ def prepare(mesh, count=None, *, options: SampleOptions | None = None, warn=None
     elif count is not None or keywords:
         raise TypeError("give either options or keyword arguments, not both")
     o = options.check()
-    if o.volume_run:
-        raise ScatterUsageError("--volume and --near: volume samples are not in this version of scatter")
     t0 = time.perf_counter()
     # the fast readers may load it (smooth normals, colours and UVs too, where they read
     # them as trimesh does; else they hand the file to trimesh)
@@ -150,16 +148,19 @@ def prepare(mesh, count=None, *, options: SampleOptions | None = None, warn=None
     info = {"timings": {"load": time.perf_counter() - t0}}
     for message in surface._cache.pop("warnings", ()) if warn else ():
         warn(message)
-    maker = AttributeMaker(surface, o.attributes, o.seed)
-    source, plan = surface_source(surface, o, maker.needs_bary, info, warn)
-    frame = normal_frame(plan, o.normalize)
+    if o.volume_run:
+        source, maker, plan, frame, box = volume_source(surface, o, info, warn)
+    else:
+        maker = AttributeMaker(surface, o.attributes, o.seed)
+        source, plan = surface_source(surface, o, maker.needs_bary, info, warn)
+        frame, box = normal_frame(plan, o.normalize), sampled_bounds(plan)
     if frame is not None:
         info["normalize"] = {"mode": o.normalize, "offset": frame[0].tolist(), "scale": frame[1]}
-    dtype = choose_precision(output_bounds(plan, frame), o.precision, surface.source, warn)
+    dtype = choose_precision(in_frame(box, frame), o.precision, surface.source, warn)
     info["precision"] = dtype.name
     if o.shard is not None:
         info["shard"] = list(o.shard)
-    return Run(source, maker, dtype, o.chunk_size or plan.default_chunk, info, plan, o.shard, frame)
+    return Run(source, maker, dtype, o.chunk_size or plan.default_chunk, info, plan, o.shard, frame, box)
 
 
 def sample(mesh, count=None, **options) -> Samples:

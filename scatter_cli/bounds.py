@@ -109,10 +109,9 @@ def normal_frame(plan, mode):
     return centre, 1.0 / size
 
 
-def output_bounds(plan, frame=None):
-    """(2, 3) float64 box of the used faces' vertices in the output's frame (``frame``:
-    (offset, scale) of :func:`normal_frame`, or None for world space)."""
-    box = sampled_bounds(plan)
+def in_frame(box, frame=None):
+    """(2, 3) float64 world-space ``box`` in the output's frame (``frame``: (offset,
+    scale) of :func:`normal_frame`, or None for world space)."""
     return box if frame is None else (box - frame[0]) * frame[1]
 
 

@@ -72,6 +72,11 @@ Stable = Annotated[bool, typer.Option("--stable", help="Placement keyed to the f
 Shard = Annotated[Optional[str], typer.Option("--shard", metavar="K/M", help="Write only shard K (0-based) of M of the run's points; join shards with 'scatter merge'.")]
 Normalize = Annotated[str, typer.Option("--normalize", metavar="MODE", help="none | unit-cube | unit-sphere: points centred on the surface's box, scaled to fit [-1, 1] or the unit sphere.")]
 Crs = Annotated[Optional[str], typer.Option("--crs", metavar="EPSG:N|WKT", help="LAS/LAZ only: the coordinate system to record (an EPSG code needs pyproj).")]
+Volume = Annotated[bool, typer.Option("--volume", help="Points in space around the mesh, not on it: uniform in the padded box (labels: -a sdf,inside,winding,closest).")]
+Near = Annotated[Optional[str], typer.Option("--near", metavar="SIGMA[,SIGMA...]", help="Near-surface points: a surface point plus a Gaussian offset of standard deviation SIGMA (implies --volume).")]
+BoxShare = Annotated[Optional[float], typer.Option("--box-share", metavar="F", help="Share of the points uniform in the box, the rest near [default: 1 with --volume, 0 with --near].")]
+Padding = Annotated[float, typer.Option("--padding", metavar="P", help="The box: the surface's bounding box grown by P times its largest side.")]
+Sign = Annotated[str, typer.Option("--sign", metavar="winding|parity", help="Inside when the generalized winding number is >= 0.5 (robust on open meshes), or by a majority of ray parities.")]
 
 
 @app.command()
@@ -99,8 +104,13 @@ def sample(
     shard: Shard = None,
     normalize: Normalize = D.normalize,
     crs: Crs = None,
+    volume: Volume = D.volume,
+    near: Near = None,
+    box_share: BoxShare = D.box_share,
+    padding: Padding = D.padding,
+    sign: Sign = D.sign,
 ):
-    """Sample points on the surface of MESH.
+    """Sample points on the surface of MESH (or, with --volume or --near, in the space around it).
 
     Faces are chosen with probability proportional to their area and the point inside
     a face comes from the square-root warp, so the points are uniform over the surface.
@@ -116,6 +126,8 @@ def sample(
       cat mesh.ply | scatter sample - --input-format ply -n 1000 -f xyz
 
       scatter sample terrain.ply -n 1e9 --shard 3/8 -o part-3.ply
+
+      scatter sample chair.obj --normalize unit-sphere --near 0.0707,0.0224 --box-share 0.06 -a sdf -o chair.npy
     """
     process.lean_trimesh()
     from . import api
@@ -240,6 +252,11 @@ def batch(
     shard: Shard = None,
     normalize: Normalize = D.normalize,
     crs: Crs = None,
+    volume: Volume = D.volume,
+    near: Near = None,
+    box_share: BoxShare = D.box_share,
+    padding: Padding = D.padding,
+    sign: Sign = D.sign,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress, warnings, error lines or summary (the exit status and report still tell).")] = False,
 ):
     """Sample many meshes: for each, what 'scatter sample MESH -o OUTPUT' writes.

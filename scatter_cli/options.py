@@ -176,8 +176,7 @@ def _check_volume(o: SampleOptions):
 def check_attributes(names, volume=False):
     """Raise ScatterUsageError for unknown names, both normals, or names of the other kind
     of run (surface-only attributes with ``--volume``, volume-only without)."""
-    known = tuple(ATTRIBUTES) + tuple(n for n in VOLUME_ONLY if n not in ATTRIBUTES)
-    unknown = [n for n in names if n not in known]
+    unknown = [n for n in names if n not in ATTRIBUTES]
     if unknown:
         raise ScatterUsageError(f"unknown attribute {', '.join(map(repr, unknown))} (choose from: {', '.join(ATTRIBUTES)})")
     if "normal" in names and "smooth-normal" in names:

@@ -20,6 +20,10 @@ ATTRIBUTES = {
     "uv": ("uv", ("u", "v"), "real"),
     "object": ("object", ("object_index",), "<i4"),
     "orient": ("orient", ("qx", "qy", "qz", "qw"), "real"),
+    "sdf": ("sdf", ("sdf",), "<f8"),
+    "inside": ("inside", ("inside",), "u1"),
+    "winding": ("winding", ("winding",), "<f8"),
+    "closest": ("closest", ("cx", "cy", "cz"), "real"),
 }
 # Columns always come in this order, whatever the order of -a.
-KEY_ORDER = ("normal", "orient", "face", "bary", "color", "uv", "object")
+KEY_ORDER = ("normal", "orient", "sdf", "inside", "winding", "closest", "face", "bary", "color", "uv", "object")

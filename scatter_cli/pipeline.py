@@ -12,10 +12,41 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from .errors import ScatterError
 from .options import DEFAULT_COUNT, SampleOptions, check_sobol_count
 from .sampling import SamplePlan
 from .sources import make_source
+
+
+def volume_source(surface, o: SampleOptions, info: dict, warn=None):
+    """(source, labels, plan, frame, box) of the volume run of options ``o``
+    (:mod:`scatter_cli.volume`): near points from the surface source of ``o`` (its faces,
+    weight and objects), box points in the padded box, labelled against the unweighted
+    sampled surface; sigmas, padding and density in the output's frame."""
+    from .bounds import normal_frame
+    from .volume import VolumeLabels, VolumeSource, sampling_box, world_triangles
+
+    t = time.perf_counter()
+    plan, weighting, area = plan_surface(surface, o.weight, warn)
+    shape = plan if weighting is None else SamplePlan(surface)  # a weight changes the points, not the shape
+    triangles, instance, face = world_triangles(shape)
+    frame = normal_frame(shape, o.normalize)
+    scale = 1.0 if frame is None else frame[1]
+    box = sampling_box(triangles, o.padding)
+    share = (0.0 if o.near else 1.0) if o.box_share is None else o.box_share
+    count = DEFAULT_COUNT if o.count is None else o.count
+    if o.density is not None:
+        count = int(round(o.density * float(np.prod(box[1] - box[0])) * scale**3))
+    near = make_source(plan, count, o.seed, False, weighting=weighting, area=area)
+    source = VolumeSource(near, count, o.seed, box, [s / scale for s in o.near or ()], share)
+    labels = VolumeLabels(triangles, instance, face, o.attributes, o.sign, frame)
+    info.update(source=surface.source, count=count, area=area, faces=surface.face_count, faces_used=len(triangles),
+                seed=o.seed, volume={"box": box.tolist(), "box_share": share, "near": list(o.near or ()),
+                                     "sign": o.sign})
+    info["timings"]["plan"] = time.perf_counter() - t
+    return source, labels, plan, frame, box
 
 
 def surface_source(surface, o: SampleOptions, want_bary: bool, info: dict, warn=None):
