@@ -18,7 +18,8 @@ from .methods import SOBOL_MAX_COUNT
 from .samples import ATTRIBUTES, Samples, column_layout, parse_attributes
 from .sampling import SamplePlan, chunk_ranges, run_chunks
 from .sources import Source, StratifiedSource, ThinnedSource, make_source, thinned
-from .surface import Surface, column_bounds, load_surface, transformed_columns
+from .loaders import load_surface
+from .surface import Surface, column_bounds, transformed_columns
 
 METHODS = ("random", "stratified", "sobol")
 PLAIN_ATTRIBUTES = {"face", "bary", "normal", "object", "orient"}
@@ -143,7 +144,7 @@ def prepare(mesh, count=None, *, density=None, seed=0, method="random", attribut
                                                                   plain=plain, smooth="smooth-normal" in names,
                                                                   color="color" in names, uv="uv" in names)
     t1 = time.perf_counter()
-    for message in surface._cache.pop("warnings", ()) if warn else ():
+    for message in surface.warnings if warn else ():
         warn(message)
     maker = AttributeMaker(surface, names, seed)
     if stable:

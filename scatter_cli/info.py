@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .surface import corners, doubled_areas, load_surface
+from .loaders import load_surface
+from .surface import corners, doubled_areas
 
 
 def describe(mesh, input_format=None, exterior=False) -> dict:

@@ -34,7 +34,8 @@ import tempfile
 import numpy as np
 
 from .errors import ScatterError, ScatterUsageError
-from .surface import Geometry, Instance, Surface, _check_readable, _is_stream
+from .sourcefile import check_readable, is_stream, stream_bytes
+from .surface import Geometry, Instance, Surface
 from .visuals import VertexTables
 
 INSTALL_HINT = "pip install 'scatter-cli[usd]'"
@@ -51,10 +52,8 @@ def load_usd(path: str, input_format=None, *, objects=None, plain=False) -> Surf
     name = "<stdin>" if path == "-" else path
     _import_pxr(name)
     with _diagnostics() as printed:
-        if _is_stream(path):  # USD reads files by name: a pipe's bytes go to a file first
-            data = sys.stdin.buffer.read() if path == "-" else open(path, "rb").read()
-            if not data:
-                raise ScatterError(f"{name}: no data to read")
+        if is_stream(path):  # USD reads files by name: a pipe's bytes go to a file first
+            data = stream_bytes(path, f"{name}: no data to read")
             suffix = (input_format or os.path.splitext(path)[1].lstrip(".") or "usd").lower()
             with tempfile.TemporaryDirectory() as tmp:
                 copy = os.path.join(tmp, "stage." + suffix)
@@ -62,10 +61,10 @@ def load_usd(path: str, input_format=None, *, objects=None, plain=False) -> Surf
                     f.write(data)
                 surface, aliases = _StageReader(_open(copy, name), name, plain).surface()
         else:
-            _check_readable(path)
+            check_readable(path)
             surface, aliases = _StageReader(_open(path, name), name, plain).surface()
     # USD's own warnings (a reference that does not resolve, ...) as the run's warnings
-    surface._cache["warnings"] = [f"{name}: {m}" for m in map(_diagnostic, printed) if m]
+    surface.warnings += [f"{name}: {m}" for m in map(_diagnostic, printed) if m]
     if objects:
         surface = select_paths(surface, objects, aliases)
     if surface.face_count == 0:

@@ -14,7 +14,8 @@ import trimesh
 
 import scatter_cli
 from scatter_cli import greedy, native, pairs, sampling, thinning
-from scatter_cli.surface import Geometry, Instance, Surface, load_surface
+from scatter_cli.loaders import load_surface
+from scatter_cli.surface import Geometry, Instance, Surface
 
 from .conftest import SAMPLES, run_user, spread_triangles, triangles_mesh
 

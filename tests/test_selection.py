@@ -11,7 +11,7 @@ from scipy import stats
 
 from scatter_cli.sampling import SamplePlan
 from scatter_cli.sources import RandomSource
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from .conftest import spread_triangles, triangles_mesh
 from .doubles import UnweightedSource

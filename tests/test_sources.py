@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from scatter_cli import api
 from scatter_cli.sampling import SamplePlan
 from scatter_cli.sources import METHOD_SOURCES, ThinnedSource, make_source, thinned
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from .conftest import SAMPLES
 from .doubles import RestartingSource

@@ -14,7 +14,7 @@ from scipy import stats
 
 from scatter_cli import stable
 from scatter_cli.stable import StableSource
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from .conftest import SAMPLES, spread_triangles, triangles_mesh
 

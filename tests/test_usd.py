@@ -17,7 +17,7 @@ from scipy import stats
 import scatter_cli
 from scatter_cli.errors import ScatterError, ScatterUsageError
 from scatter_cli.info import describe
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from .conftest import run_scatter
 from .gltfwrite import glb_bytes
