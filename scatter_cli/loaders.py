@@ -62,7 +62,8 @@ class Loader:
 
 def load_surface(source, *, input_format: str | None = None, objects=None, plain=False, smooth=False,
                  color=False, uv=False) -> Surface:
-    """Load ``source`` (path, ``'-'`` for standard input, trimesh.Trimesh or trimesh.Scene).
+    """Load ``source`` (path, ``'-'`` for standard input, trimesh.Trimesh or trimesh.Scene;
+    a Surface is taken as it is).
 
     ``plain``: only vertices and faces are wanted (no colours, UVs or normals from the
     file), so the fast readers (readers.py) may read it without importing trimesh.
@@ -74,6 +75,8 @@ def load_surface(source, *, input_format: str | None = None, objects=None, plain
 
     The surface's ``warnings`` (lines naming the file) are for the caller to print.
     """
+    if isinstance(source, Surface):
+        return _finished(source, source.source, objects)
     if not isinstance(source, (str, os.PathLike)):
         return _finished(_from_trimesh(source, "<mesh>"), "<mesh>", objects)
     path = os.fspath(source)
