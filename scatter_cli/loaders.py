@@ -23,7 +23,7 @@ from . import readers
 from .errors import ScatterError, ScatterUsageError
 from .inputs import INPUT_FORMATS, STDIN_FORMATS
 from .sourcefile import check_readable, is_stream, stream_bytes
-from .surface import Geometry, Instance, Surface, select_objects
+from .surface import Geometry, Instance, Surface, Unsampled, select_objects
 
 # Called before trimesh is first imported, when set: the command line imports it with
 # SciPy hidden (process.lean_trimesh). Nothing imports trimesh before a mesh needs it.
@@ -285,21 +285,22 @@ def checked_geometry(name, vertices, faces, source, mesh=None) -> Geometry:
 def _from_scene(scene, source) -> Surface:
     import trimesh
 
-    geometries, index, instances = [], {}, []
+    geometries, index, instances, unsampled = [], {}, [], []
     for node in scene.graph.nodes_geometry:
         try:
             matrix, geom_name = scene.graph[node]
         except (ValueError, KeyError, AssertionError) as exc:  # a graph trimesh cannot walk, e.g. a cycle
             raise ScatterError(f"{source}: malformed scene graph at node '{node}' ({str(exc).strip()[:200]})") from None
         mesh = scene.geometry.get(geom_name)
-        if not isinstance(mesh, trimesh.Trimesh):
+        if not isinstance(mesh, trimesh.Trimesh):  # points, lines: no surface
+            unsampled.append(Unsampled(str(node), f"a {type(mesh).__name__}, not a mesh"))
             continue
         if geom_name not in index:
             index[geom_name] = len(geometries)
             geometries.append(_geometry(geom_name, mesh, source))
         matrix = np.asarray(matrix, dtype=np.float64)
         instances.append(Instance(str(node), index[geom_name], None if np.array_equal(matrix, np.eye(4)) else matrix))
-    return Surface(geometries, instances, source, is_scene=True)
+    return Surface(geometries, instances, source, is_scene=True, unsampled=unsampled)
 
 
 # -- USD -----------------------------------------------------------------------------------

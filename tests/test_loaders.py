@@ -4,6 +4,7 @@ says about a file (warnings, a missing material library) instead of a puzzle."""
 import ast
 from pathlib import Path
 
+import numpy as np
 import pytest
 import trimesh
 
@@ -158,3 +159,16 @@ def test_a_loader_hands_its_warnings_out_on_the_surface(tmp_path):
     assert surface.keeping(surface.instances).warnings == surface.warnings
     clean = loaders.load_surface(str(SAMPLES / "hemisphere.off"))
     assert clean.warnings == []
+
+
+def test_a_scene_s_geometry_without_faces_is_listed_as_not_sampled(tmp_path):
+    scene = trimesh.Scene()
+    scene.add_geometry(trimesh.creation.box(), node_name="box")
+    alone = tmp_path / "box.glb"
+    alone.write_bytes(scene.export(file_type="glb"))
+    scene.add_geometry(trimesh.PointCloud(np.arange(30.0).reshape(10, 3)), node_name="cloud")
+    mixed = tmp_path / "mixed.glb"
+    mixed.write_bytes(scene.export(file_type="glb"))
+    assert [(u.path, u.reason) for u in loaders.load_surface(str(mixed)).unsampled] == [
+        ("cloud", "a PointCloud, not a mesh")]
+    assert loaders.load_surface(str(alone)).unsampled == []
