@@ -221,14 +221,16 @@ def _trimesh_file(job):
 
 
 def _gltf_kind(file_obj, file_type):
-    """"glb" when the bytes are a binary glTF (they start with its magic), whatever the
-    suffix or --input-format said; else ``file_type``."""
+    """What the bytes are, whatever the suffix or --input-format said: "glb" when they
+    start with the binary glTF magic, "gltf" when with a JSON object; else ``file_type``."""
     if isinstance(file_obj, io.BytesIO):
-        head = file_obj.getbuffer()[:4].tobytes()
+        head = file_obj.getbuffer()[:64].tobytes()
     else:
         with open(file_obj, "rb") as f:
-            head = f.read(4)
-    return "glb" if head == b"glTF" else file_type
+            head = f.read(64)
+    if head[:4] == b"glTF":
+        return "glb"
+    return "gltf" if head.lstrip(b" \t\r\n\xef\xbb\xbf").startswith(b"{") else file_type
 
 
 def _check_self_contained(name, file_obj):

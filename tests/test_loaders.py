@@ -78,6 +78,16 @@ def test_glb_bytes_on_stdin_read_as_gltf_are_the_glb(tmp_path):
         assert piped.stdout == by_path.stdout
 
 
+def test_gltf_json_on_stdin_read_as_glb_is_the_gltf(tmp_path):
+    """The other way round: JSON glTF (buffers embedded) with `--input-format glb`."""
+    data = trimesh.Scene(trimesh.creation.box()).export(file_type="gltf", embed_buffers=True)["model.gltf"]
+    (tmp_path / "box.gltf").write_bytes(data)
+    by_path = run_scatter("sample", tmp_path / "box.gltf", "-n", 100, check=True)
+    piped = run_scatter("sample", "-", "--input-format", "glb", "-n", 100, input=data)
+    assert piped.returncode == 0, piped.stderr.decode()
+    assert piped.stdout == by_path.stdout
+
+
 def test_stdin_without_a_format_lists_every_format_it_can_carry():
     proc = run_scatter("sample", "-", "-n", 5, input=(SAMPLES / "hemisphere.off").read_bytes())
     assert_one_line_error(proc, 2, "--input-format", *(f" {k}" for k in inputs.STDIN_FORMATS[1:]))
