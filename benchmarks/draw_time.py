@@ -21,7 +21,7 @@ import trimesh  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from scatter_cli import sampling  # noqa: E402
-from scatter_cli.surface import load_surface  # noqa: E402
+from scatter_cli.loaders import load_surface  # noqa: E402
 
 POINTS = 6 << 20  # per timing, whatever the chunk
 

@@ -43,7 +43,7 @@ def __getattr__(name):
 
         return getattr(api, name)
     if name == "load_surface":
-        from .surface import load_surface
+        from .loaders import load_surface
 
         return load_surface
     if name == "Samples":

@@ -139,14 +139,10 @@ static PyObject *buffers(PyObject *self, PyObject *args)
 {
     PyObject *vo, *co, *fo;
     PyArrayObject *v, *c, *f;
-    if (!PyArg_ParseTuple(args, "OOO", &vo, &co, &fo) || !get(vo, NPY_FLOAT64, -1, &v, "vertices") ||
-        !get(co, NPY_FLOAT64, 3, &c, "center") || !get(fo, NPY_INT64, -1, &f, "faces"))
+    npy_intp n, m;
+    if (!PyArg_ParseTuple(args, "OOO", &vo, &co, &fo) || !get_rows(vo, NPY_FLOAT64, 3, &v, &n, "vertices") ||
+        !get(co, NPY_FLOAT64, 3, &c, "center") || !get_rows(fo, NPY_INT64, 3, &f, &m, "faces"))
         return NULL;
-    if (PyArray_NDIM(v) != 2 || PyArray_DIM(v, 1) != 3 || PyArray_NDIM(f) != 2 || PyArray_DIM(f, 1) != 3) {
-        PyErr_SetString(PyExc_ValueError, "vertices (n, 3) and faces (m, 3)");
-        return NULL;
-    }
-    npy_intp n = PyArray_DIM(v, 0), m = PyArray_DIM(f, 0);
     if (n > INT32_MAX) {
         PyErr_SetString(PyExc_ValueError, "more than 2**31 - 1 vertices");
         return NULL;
@@ -191,13 +187,9 @@ static PyObject *add(PyObject *self, PyObject *args)
     if (!PyArg_ParseTuple(args, "OOO", &cap, &vo, &fo))
         return NULL;
     RTCScene scene = scene_of(cap);
-    if (!scene || !get(vo, NPY_FLOAT32, -1, &v, "vertices") || !get(fo, NPY_INT32, -1, &f, "faces"))
+    npy_intp n, m;
+    if (!scene || !get_rows(vo, NPY_FLOAT32, 4, &v, &n, "vertices") || !get_rows(fo, NPY_INT32, 3, &f, &m, "faces"))
         return NULL;
-    if (PyArray_NDIM(v) != 2 || PyArray_DIM(v, 1) != 4 || PyArray_NDIM(f) != 2 || PyArray_DIM(f, 1) != 3) {
-        PyErr_SetString(PyExc_ValueError, "vertices (n, 4) and faces (m, 3)");
-        return NULL;
-    }
-    npy_intp n = PyArray_DIM(v, 0), m = PyArray_DIM(f, 0);
     const int32_t *idx = PyArray_DATA(f);
     for (npy_intp i = 0; i < 3 * m; i++)
         if (idx[i] < 0 || idx[i] >= n) {

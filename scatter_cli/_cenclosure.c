@@ -25,16 +25,11 @@
 
 
 
-/* get() for an (n, 3) array */
+/* get_rows() for an (n, 3) array */
 static int get3(PyObject *obj, int type, PyArrayObject **out, const char *name)
 {
-    if (!get(obj, type, -1, out, name))
-        return 0;
-    if (PyArray_NDIM(*out) != 2 || PyArray_DIM(*out, 1) != 3) {
-        PyErr_Format(PyExc_ValueError, "%s: not (n, 3)", name);
-        return 0;
-    }
-    return 1;
+    npy_intp rows;
+    return get_rows(obj, type, 3, out, &rows, name);
 }
 
 /* (int64)x as NumPy's astype gives it on x86-64: the minimum int64 when x is NaN or out of range. */

@@ -21,6 +21,7 @@
 #include <Python.h>
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
 #include <numpy/arrayobject.h>
+#include "_ckernel.h"
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -320,25 +321,23 @@ static int get_grid(PyObject *args, Grid *g, double *reach, double *radius, PyOb
     if (!PyArg_ParseTuple(args, okept ? "OOOOddOnni" : "OOOOd", &o[0], &o[1], &o[2], &o[3], reach, radius, okept,
                           share, least, threads))
         return 0;
-    int types[4] = {NPY_INT64, NPY_FLOAT64, NPY_UINT64, NPY_INT64};
-    for (int k = 0; k < 4; k++)
-        if (!PyArray_Check(o[k]) || PyArray_TYPE((PyArrayObject *)o[k]) != types[k] ||
-            !PyArray_IS_C_CONTIGUOUS((PyArrayObject *)o[k])) {
-            PyErr_Format(PyExc_TypeError, "grid array %d has the wrong dtype or order", k + 1);
-            return 0;
-        }
-    g->order = PyArray_DATA((PyArrayObject *)o[0]);
-    g->x = PyArray_DATA((PyArrayObject *)o[1]);
-    g->ukey = PyArray_DATA((PyArrayObject *)o[2]);
-    g->cell_start = PyArray_DATA((PyArrayObject *)o[3]);
-    g->a = PyArray_SIZE((PyArrayObject *)o[0]);
+    PyArrayObject *a[4], *kept;
+    if (!get(o[0], NPY_INT64, -1, &a[0], "grid order"))
+        return 0;
+    g->a = PyArray_SIZE(a[0]);
+    if (!get(o[2], NPY_UINT64, -1, &a[2], "grid ukey"))
+        return 0;
+    g->cells = PyArray_SIZE(a[2]);
+    if (!get(o[1], NPY_FLOAT64, 3 * g->a, &a[1], "grid xyz") || !get(o[3], NPY_INT64, g->cells + 1, &a[3], "grid cell_start") ||
+        (okept && !get(*okept, NPY_BOOL, g->a, &kept, "kept")))
+        return 0;
+    g->order = PyArray_DATA(a[0]);
+    g->x = PyArray_DATA(a[1]);
+    g->ukey = PyArray_DATA(a[2]);
+    g->cell_start = PyArray_DATA(a[3]);
     g->y = g->x + g->a;
     g->z = g->y + g->a;
-    g->cells = PyArray_SIZE((PyArrayObject *)o[2]);
-    if (PyArray_SIZE((PyArrayObject *)o[1]) != 3 * g->a || PyArray_SIZE((PyArrayObject *)o[3]) != g->cells + 1 ||
-        g->cell_start[g->cells] != g->a || g->a >= INT32_MAX ||
-        (okept && (!PyArray_Check(*okept) || PyArray_TYPE((PyArrayObject *)*okept) != NPY_BOOL ||
-                   PyArray_SIZE((PyArrayObject *)*okept) != g->a))) {
+    if (g->cell_start[g->cells] != g->a || g->a >= INT32_MAX) {
         PyErr_Format(PyExc_ValueError, "grid arrays do not match");
         return 0;
     }
@@ -371,16 +370,13 @@ static PyObject *grid(PyObject *self, PyObject *args)
     int cap;
     if (!PyArg_ParseTuple(args, "OOdi", &opts, &olo, &size, &cap))
         return NULL;
-    if (!PyArray_Check(opts) || PyArray_TYPE((PyArrayObject *)opts) != NPY_FLOAT64 ||
-        !PyArray_IS_C_CONTIGUOUS((PyArrayObject *)opts) || PyArray_NDIM((PyArrayObject *)opts) != 2 ||
-        PyArray_DIM((PyArrayObject *)opts, 1) != 3)
-        return PyErr_Format(PyExc_TypeError, "points must be (n, 3) float64, C order");
-    if (!PyArray_Check(olo) || PyArray_TYPE((PyArrayObject *)olo) != NPY_FLOAT64 ||
-        !PyArray_IS_C_CONTIGUOUS((PyArrayObject *)olo) || PyArray_SIZE((PyArrayObject *)olo) != 3)
-        return PyErr_Format(PyExc_TypeError, "lo must be (3,) float64");
-    const double *pts = PyArray_DATA((PyArrayObject *)opts);
-    const double *lo = PyArray_DATA((PyArrayObject *)olo);
-    int64_t n = PyArray_DIM((PyArrayObject *)opts, 0), m = n ? n : 1;
+    PyArrayObject *apts, *alo;
+    npy_intp rows;
+    if (!get_rows(opts, NPY_FLOAT64, 3, &apts, &rows, "points") || !get(olo, NPY_FLOAT64, 3, &alo, "lo"))
+        return NULL;
+    const double *pts = PyArray_DATA(apts);
+    const double *lo = PyArray_DATA(alo);
+    int64_t n = rows, m = n ? n : 1;
     if (n >= INT32_MAX)
         return PyErr_Format(PyExc_ValueError, "too many points for the compiled grid");
 
@@ -1160,7 +1156,26 @@ static PyObject *greedy(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+PyDoc_STRVAR(use_avx512_doc,
+"use_avx512(wanted) -> bool\n\n"
+"Whether the distance loops use AVX-512 from now on: wanted and the CPU has it (the\n"
+"same hits either way). native.kernel() passes SCATTER_NO_AVX512's choice.");
+
+static PyObject *use_avx512(PyObject *self, PyObject *args)
+{
+    int wanted;
+    if (!PyArg_ParseTuple(args, "p", &wanted))
+        return NULL;
+    find_hits = hits_in;
+#if defined(__x86_64__) && defined(__GNUC__)
+    if (wanted && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl"))
+        find_hits = hits_in_avx512;
+#endif
+    return PyBool_FromLong(find_hits != hits_in);
+}
+
 static PyMethodDef methods[] = {
+    {"use_avx512", use_avx512, METH_VARARGS, use_avx512_doc},
     {"grid", grid, METH_VARARGS, grid_doc},
     {"pairs", pairs, METH_VARARGS, pairs_doc},
     {"greedy", greedy, METH_VARARGS, greedy_doc},
@@ -1178,9 +1193,7 @@ PyMODINIT_FUNC PyInit__cthinning(void)
     import_array();
 #if defined(__x86_64__) && defined(__GNUC__)
     __builtin_cpu_init();
-    const char *plain = getenv("SCATTER_NO_AVX512"); /* set and not "0": the plain loops */
-    if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-        !(plain && *plain && strcmp(plain, "0") != 0))
+    if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl"))
         find_hits = hits_in_avx512;
 #endif
     PyObject *m = PyModule_Create(&module);

@@ -22,7 +22,8 @@ from .pipeline import surface_source, volume_source
 from .samples import ATTRIBUTES, Samples, column_layout
 from .sampling import chunk_ranges, run_chunks
 from .sources import Source
-from .surface import Surface, load_surface
+from .loaders import load_surface
+from .surface import Surface
 
 # attributes the fast readers give as trimesh would (else the file goes to trimesh)
 FAST_READER_ATTRIBUTES = {"face", "bary", "normal", "object", "orient", "smooth-normal", "color", "uv"}
@@ -146,7 +147,7 @@ def prepare(mesh, count=None, *, options: SampleOptions | None = None, warn=None
         mesh, input_format=o.input_format, objects=o.objects, plain=plain, smooth="smooth-normal" in o.attributes,
         color="color" in o.attributes, uv="uv" in o.attributes)
     info = {"timings": {"load": time.perf_counter() - t0}}
-    for message in surface._cache.pop("warnings", ()) if warn else ():
+    for message in surface.warnings if warn else ():
         warn(message)
     if o.volume_run:
         source, maker, plan, frame, box = volume_source(surface, o, info, warn)

@@ -377,7 +377,7 @@ def run_bench(meshes=None, out="bench-out", quick=False, counts=None, repeats=No
               want_plot=True, log=None) -> dict:
     """Run the bench and write bench.md, bench.json and bench.png to ``out``."""
     from .check import world_triangles
-    from .surface import load_surface
+    from .loaders import load_surface
 
     log = log or (lambda msg: print(msg, file=sys.stderr))
     if want_plot:

@@ -14,7 +14,8 @@ import time
 import numpy as np
 
 from .errors import ScatterError
-from .surface import Surface, corners, doubled_areas, load_surface
+from .loaders import load_surface
+from .surface import Surface, corners, doubled_areas
 
 ALPHA = 1e-3
 INSTALL_HINT = "scatter check needs pymeshlab and scipy: pip install 'scatter-cli[check]' (or: pip install pymeshlab scipy)"

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .surface import corners, doubled_areas, load_surface
+from .loaders import load_surface
+from .surface import corners, doubled_areas
+from .topology import edges
 
 
 def describe(mesh, input_format=None, exterior=False) -> dict:
@@ -25,6 +27,7 @@ def describe(mesh, input_format=None, exterior=False) -> dict:
     areas, finite = np.concatenate(areas), np.concatenate(finite)
     good = finite & np.isfinite(areas)
     positive = areas[good & (areas > 0)]
+    closed = closedness(surface, np.where(good, areas, 0.0))
     report = {
         "file": surface.source,
         "faces": int(len(areas)),
@@ -43,9 +46,31 @@ def describe(mesh, input_format=None, exterior=False) -> dict:
             for k, inst in enumerate(surface.instances)
         ],
     }
+    report.update(closed)
+    report["unsampled"] = [{"path": u.path, "reason": u.reason, "area": u.area} for u in surface.unsampled]
     if exterior:
         report["exterior"] = exterior_report(surface)
     return report
+
+
+def closedness(surface, areas) -> dict:
+    """Whether every geometry the surface places is closed (topology.py), and else its
+    boundary, non-manifold and inconsistently oriented edges and the area (world space,
+    ``areas`` (F,) per face of every instance in order) of the faces at the boundary;
+    instances counted."""
+    found = {}
+    counts = np.zeros(3, np.int64)
+    at_boundary = []
+    for inst in surface.instances:
+        if inst.geometry not in found:
+            g = surface.geometries[inst.geometry]
+            found[inst.geometry] = edges(g.vertices, g.faces)
+        e = found[inst.geometry]
+        counts += (e.boundary, e.non_manifold, e.inconsistent)
+        at_boundary.append(e.at_boundary)
+    boundary_area = float(areas[np.concatenate(at_boundary)].sum()) if at_boundary else 0.0
+    return {"closed": bool(not counts.any()), "boundary_edges": int(counts[0]), "non_manifold_edges": int(counts[1]),
+            "inconsistent_edges": int(counts[2]), "boundary_area": boundary_area}
 
 
 # Uniform candidates behind the exterior-area estimate of ``scatter info --exterior``
@@ -145,7 +170,11 @@ def format_text(report) -> str:
         if report["area_ratio"] else "area ratio     -",
         f"attributes     {', '.join(attrs) or 'none'}",
         f"objects        {report['instances']} instance(s) of {report['geometries']} geometry(ies)",
+        _closed_line(report),
     ]
+    for u in report["unsampled"]:
+        area = f", area {u['area']:.6g}" if u["area"] else ""
+        lines.append(f"not sampled    {u['path']} ({u['reason']}{area})")
     ext = report.get("exterior")
     if ext:
         lines += [
@@ -157,3 +186,12 @@ def format_text(report) -> str:
     if report["instances"] > 1 or report["geometries"] > 1:
         lines += [f"  [{o['index']}] {o['name']} ({o['geometry']}, {o['faces']:,} faces)" for o in report["objects"]]
     return "\n".join(lines)
+
+
+def _closed_line(report) -> str:
+    if report["closed"]:
+        return "closed         yes (every edge shared by two faces, consistently oriented): both --sign modes hold"
+    share = report["boundary_area"] / report["area"] if report["area"] else 0.0
+    return (f"closed         no: {report['boundary_edges']:,} boundary, {report['non_manifold_edges']:,} non-manifold, "
+            f"{report['inconsistent_edges']:,} inconsistently oriented edges; {report['boundary_area']:.6g} of the "
+            f"area ({100 * share:.3g} %) on faces at the boundary: --sign winding is the one to trust")

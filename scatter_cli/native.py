@@ -1,22 +1,36 @@
 """The optional compiled kernels (C extensions built at install), and the worker count.
 
 Each kernel does the float64 operations of the NumPy code it stands in for, in the same
-order, so it changes the time a job takes, never its output (tests/test_native.py holds
-them to that). Set SCATTER_NUMPY=1 to run the NumPy path even when they are built.
+order, so it changes the time a job takes, never its output (tests/test_kernel_parity.py
+holds them to that). Each module that uses one looks it up once, at import, through
+:func:`kernel`. The environment is read here, never by the compiled code:
+SCATTER_NUMPY=1 runs the NumPy path even when they are built; SCATTER_NO_AVX512=1 gives
+the thinning kernel its plain distance loops instead of its AVX-512 ones.
 """
 
 import importlib
 import os
 
+# Every compiled kernel, by module name (setup.py builds these).
+KERNELS = ("_csampling", "_cthinning", "_cstable", "_creaders", "_cenclosure", "_cembree")
+
 
 def kernel(name):
     """The compiled module ``scatter_cli.<name>``, or None when absent or turned off."""
-    if os.environ.get("SCATTER_NUMPY", "") not in ("", "0"):
+    if _flag("SCATTER_NUMPY"):
         return None
     try:
-        return importlib.import_module(f"scatter_cli.{name}")
+        module = importlib.import_module(f"scatter_cli.{name}")
     except ImportError:
         return None
+    if name == "_cthinning":
+        module.use_avx512(not _flag("SCATTER_NO_AVX512"))
+    return module
+
+
+def _flag(variable):
+    """Whether an environment switch is on: set to anything but empty or 0."""
+    return os.environ.get(variable, "") not in ("", "0")
 
 
 def worker_count() -> int:

@@ -50,9 +50,9 @@ def import_trimesh_lean():
 
 def lean_trimesh():
     """Have the mesh loader import trimesh without SciPy, when a mesh needs it (not before)."""
-    from . import surface
+    from . import loaders
 
-    surface.import_trimesh = import_trimesh_lean
+    loaders.import_trimesh = import_trimesh_lean
 
 
 # glibc's mallopt parameters, and what scatter sets them to: blocks under 32 MB come from

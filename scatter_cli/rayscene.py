@@ -13,8 +13,8 @@ import os
 
 import numpy as np
 
+from . import native
 from .errors import ScatterError
-from .native import kernel
 
 INSTALL_HINT = "--exterior needs Embree: pip install 'scatter-cli[exterior]'"
 # Where the embreex wheels keep their Embree library: Linux (auditwheel), macOS (delocate).
@@ -35,9 +35,12 @@ def embree_library() -> str | None:
     return None
 
 
+_kernel = native.kernel("_cembree")
+
+
 def _compiled():
     """``_cembree`` with the library loaded, or None (not built, turned off, not found)."""
-    module = kernel("_cembree")
+    module = _kernel
     path = embree_library() if module is not None else None
     if path is None:
         return None

@@ -14,44 +14,38 @@ import os
 
 import numpy as np
 
-from .native import kernel, worker_count
+from . import native
+from .native import worker_count
 from .plyread import _TYPES, _contents
 
 _STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
 _MAX_HEADER = 1 << 16
+_kernel = native.kernel("_creaders")  # the text parsers; None: trimesh reads those files
 
 
-def read_mesh(path, file_type, smooth=False, color=False, uv=False):
-    """A list of (vertices (V, 3) float64, faces (F, 3) int64), one per geometry in
-    trimesh's order; for a GLB, a scene: (geometries [(name, vertices, faces)], instances
-    [(name, geometry index, (4, 4) matrix or None)]) (gltfread.py); or None (hand the
-    file to trimesh). ``smooth``: smooth normals are wanted: a PLY's own normals come as
-    a third item of its geometry, a dict (plyread.vertex_tables); other files with
-    normals or UVs of their own are handed over (the caller computes smooth normals from
-    the faces, as trimesh does for the others). ``color``: vertex colours are wanted:
-    only PLY is read (its colours in that dict), every other format handed over.
-    ``uv``: texture coordinates are wanted: only OBJ is read. An OBJ read for ``smooth``
-    or ``uv`` has the geometries trimesh makes of groups with ``vt`` or ``vn`` refs (its
-    vertex split, objsplit.py) and their UVs and normals in that dict.
+def read_file(path, read, smooth=False, color=False, uv=False):
+    """``read`` (one of the ``read_*`` functions below, as loaders.LOADERS names them) of
+    the bytes of the file at ``path``: a list of (vertices (V, 3) float64, faces (F, 3)
+    int64), one per geometry in trimesh's order; for a GLB, a scene: (geometries [(name,
+    vertices, faces)], instances [(name, geometry index, (4, 4) matrix or None)])
+    (gltfread.py); or None (hand the file to trimesh).
+
+    ``smooth``: smooth normals are wanted: a PLY's own normals come as a third item of its
+    geometry, a dict (plyread.vertex_tables); other files with normals or UVs of their
+    own are handed over (the caller computes smooth normals from the faces, as trimesh
+    does for the others). ``color``: vertex colours are wanted: only PLY is read (its
+    colours in that dict), every other format handed over. ``uv``: texture coordinates
+    are wanted: only OBJ is read. An OBJ read for ``smooth`` or ``uv`` has the geometries
+    trimesh makes of groups with ``vt`` or ``vn`` refs (its vertex split, objsplit.py)
+    and their UVs and normals in that dict.
     """
-    reader = _READERS.get(file_type)
-    if reader is None or (color and file_type != "ply") or (uv and file_type != "obj"):
-        return None
     try:
         with open(path, "rb") as f:
             data = _contents(f)
     except OSError:
         return None
     try:
-        if file_type == "ply":
-            return reader(data, smooth, color)
-        if file_type == "obj" and _materials_resolve(data, path):
-            return None
-        if file_type == "obj" and (smooth or uv):
-            return _obj(data, tables=True)
-        if smooth and not _normals_from_faces(data, file_type):
-            return None
-        return reader(data, smooth) if file_type == "glb" else reader(data)
+        return read(data, path, smooth, color, uv)
     finally:
         if hasattr(data, "close"):
             try:
@@ -60,29 +54,71 @@ def read_mesh(path, file_type, smooth=False, color=False, uv=False):
                 pass
 
 
+def read_ply(data, path, smooth, color, uv):
+    return None if uv else _ply(data, smooth, color)
+
+
+def read_obj(data, path, smooth, color, uv):
+    if color or _materials_resolve(data, path):
+        return None
+    return _obj(data, tables=smooth or uv)
+
+
+def read_stl(data, path, smooth, color, uv):
+    return None if color or uv else _stl(data)  # smooth: normals from the faces, as trimesh
+
+
+def read_off(data, path, smooth, color, uv):
+    return None if color or uv else _off(data)
+
+
+def read_glb(data, path, smooth, color, uv):
+    from .gltfread import read_glb as glb
+
+    return None if color or uv else glb(data, without_normals=smooth)  # it looks for NORMAL attributes
+
+
 def _materials_resolve(data, path):
     """Whether trimesh would find the material library an OBJ names (its first
     ``mtllib``, even in a comment): then it names the geometries by material (with more
     than one) and gives them material visuals, which the fast reader does not."""
+    name = _material_library(data)
+    return name is not None and _resolves(name, path)
+
+
+def missing_material_library(path):
+    """The material library the OBJ at ``path`` names (its first ``mtllib``) when trimesh
+    would not find it beside the file; None when it names none or it is there."""
+    try:
+        with open(path, "rb") as f:
+            data = _contents(f)
+    except OSError:
+        return None
+    try:
+        name = _material_library(data)
+    finally:
+        if hasattr(data, "close"):
+            data.close()
+    return name if name is not None and not _resolves(name, path) else None
+
+
+def _material_library(data):
     at = data.find(b"mtllib")
     if at < 0:
-        return False
+        return None
     end = data.find(b"\n", at)
-    name = bytes(data[at + 6 : end if end >= 0 else len(data)]).decode("utf-8", "replace").strip()
+    return bytes(data[at + 6 : end if end >= 0 else len(data)]).decode("utf-8", "replace").strip()
+
+
+def _resolves(name, path):
     folder = os.path.dirname(os.path.abspath(path))
     return any(os.path.exists(os.path.join(folder, c)) for c in (name, name.lstrip("/"), os.path.split(name)[-1]) if c)
-
-
-def _normals_from_faces(data, file_type):
-    """Whether trimesh's mesh of this file has its vertex normals computed from the faces
-    (no normals or UVs of the file's own); OBJ and PLY read theirs."""
-    return file_type in ("stl", "off", "glb")  # GLB: the reader looks for NORMAL attributes
 
 
 def _obj(data, tables=False):
     """``tables``: with the UVs and normals of groups whose refs carry them (a third
     item, a dict), their vertices split as trimesh splits them."""
-    c = kernel("_creaders")
+    c = _kernel
     got = c and c.read_obj(data, tables)
     if not got:
         return None
@@ -107,7 +143,7 @@ def _obj(data, tables=False):
 
 
 def _off(data):
-    c = kernel("_creaders")
+    c = _kernel
     got = c and c.read_off(data)
     return [got] if got else None
 
@@ -123,7 +159,7 @@ def _stl(data):
             vertices = np.empty((3 * count, 3))
             vertices.reshape(count, 3, 3)[...] = corners  # one pass from the strided records
             return [(vertices, np.arange(3 * count, dtype=np.int64).reshape(-1, 3))]
-    c = kernel("_creaders")
+    c = _kernel
     vertices = c and c.read_stl_ascii(data, worker_count())  # large files: parts on several threads
     if vertices is None or vertices is False:
         return None
@@ -137,7 +173,7 @@ def _ply(data, smooth=False, color=False):
     if got is not None:
         return [got]
     layout = _ascii_layout(bytes(data[:_MAX_HEADER]))
-    c = kernel("_creaders")
+    c = _kernel
     if layout is None or not c:
         return None
     if smooth or color:
@@ -222,12 +258,3 @@ def _ascii_layout(head):
         return None
     args = (end + len(b"end_header\n"), n_vertex, n_face, len(vprops), *columns, *(int(t == "f4") for t in kinds))
     return args, [(name, _TYPES[p[0]]) for name, p in zip(names, vprops)]
-
-
-def _glb(data, smooth=False):
-    from .gltfread import read_glb
-
-    return read_glb(data, without_normals=smooth)
-
-
-_READERS = {"obj": _obj, "off": _off, "stl": _stl, "ply": _ply, "glb": _glb}

@@ -1,4 +1,4 @@
-"""Loading a surface: a mesh file, a trimesh object or a scene -> float64 arrays.
+"""The surface model: float64 arrays, no I/O (loaders.py fills it from files).
 
 A :class:`Surface` is a list of geometries (local vertices and triangles) and a list
 of instances, each placing one geometry in world space with a 4x4 matrix. An
@@ -7,22 +7,12 @@ instanced geometry is stored once, whatever the number of nodes that place it.
 
 from __future__ import annotations
 
-import io
-import logging
-import os
-import stat
-import sys
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .areas import cross_columns, norms
-from .errors import ScatterError, ScatterUsageError
-from .inputs import INPUT_FORMATS, USD_FORMATS
-
-# Called before trimesh is first imported, when set: the command line imports it with
-# SciPy hidden (see cli.py). Nothing imports trimesh before a mesh needs it.
-import_trimesh = None
+from .errors import ScatterError
 
 
 @dataclass
@@ -54,12 +44,23 @@ class Instance:
 
 
 @dataclass
+class Unsampled:
+    """Something the file held that is not sampled: ``path`` (its name in the file),
+    ``reason`` (e.g. "invisible", "guide purpose", "a Cube prim, not a mesh") and its
+    world-space ``area`` where it has one (0.0 where it has none or it is not known)."""
+
+    path: str
+    reason: str
+    area: float = 0.0
+
+
+@dataclass
 class Surface:
     geometries: list[Geometry]
     instances: list[Instance]
     source: str = "<mesh>"
     is_scene: bool = False
-    _cache: dict = field(default_factory=dict, repr=False)
+    _cache: dict = field(default_factory=dict, repr=False)  # decoded textures, shared by attributes
     # The scene's up axis ("Y" or "Z") and metres per unit, where the format says them
     # (USD stages; glTF by its specification); None where it does not.
     up_axis: str | None = None
@@ -67,6 +68,10 @@ class Surface:
     # (n_instances,) int64: the index `scatter info` lists each instance under in the
     # whole file (what `-a object` writes); None: its position in ``instances``.
     object_index: np.ndarray | None = None
+    # What the loader has to say about the file (one line each, naming it), for the run to print.
+    warnings: list[str] = field(default_factory=list)
+    # What the file held that is not sampled, and why.
+    unsampled: list[Unsampled] = field(default_factory=list)
 
     def keeping(self, instances) -> "Surface":
         """The same scene with only ``instances`` (a list of this surface's instances),
@@ -76,7 +81,8 @@ class Surface:
         if self.object_index is not None:
             index = self.object_index[index]
         return Surface(self.geometries, instances, self.source, self.is_scene, up_axis=self.up_axis,
-                       meters_per_unit=self.meters_per_unit, object_index=index)
+                       meters_per_unit=self.meters_per_unit, object_index=index, warnings=self.warnings,
+                       unsampled=self.unsampled)
 
     @property
     def face_count(self) -> int:
@@ -90,207 +96,6 @@ class Surface:
             return v
         m = instance.matrix
         return v @ m[:3, :3].T + m[:3, 3]
-
-
-def load_surface(source, *, input_format: str | None = None, objects=None, plain=False, smooth=False,
-                 color=False, uv=False) -> Surface:
-    """Load ``source`` (path, ``'-'`` for standard input, trimesh.Trimesh or trimesh.Scene).
-
-    ``plain``: only vertices and faces are wanted (no colours, UVs or normals from the
-    file), so the fast readers (readers.py) may read it without importing trimesh.
-    ``smooth``: smooth vertex normals are wanted too; the fast readers then read a
-    PLY's own normals and otherwise only files without normals or UVs of their own (the
-    normals are computed from the faces, as for trimesh's mesh of such a file).
-    ``color``: vertex colours are wanted too; the fast readers then read only PLY.
-    ``uv``: texture coordinates are wanted too; the fast readers then read only OBJ.
-    """
-    if isinstance(source, (str, os.PathLike)) and _suffix(source, input_format) in USD_FORMATS:
-        from .usdread import load_usd
-
-        # smooth normals: a stage's own (primvars:normals, normals) when it has them
-        return load_usd(os.fspath(source), input_format, objects=objects, plain=plain and not (smooth or color or uv))
-    if plain and not objects and isinstance(source, (str, os.PathLike)) and not _is_stream(os.fspath(source)):
-        fast = _read_plain(os.fspath(source), input_format, smooth, color, uv)
-        if fast is not None:
-            return _with_units(fast, source, input_format)
-    if import_trimesh is not None and "trimesh" not in sys.modules:
-        import_trimesh()
-    import trimesh
-
-    logging.getLogger("trimesh").setLevel(logging.ERROR)
-    name = "<mesh>"
-    if isinstance(source, (str, os.PathLike)):
-        name = "<stdin>" if str(source) == "-" else os.fspath(source)
-        loaded = _read_file(source, input_format)
-    else:
-        loaded = source
-    if isinstance(loaded, trimesh.Trimesh):
-        surface = Surface([_geometry(name, loaded, name)], [Instance(os.path.basename(name), 0)], name)
-    elif isinstance(loaded, trimesh.Scene):
-        surface = _from_scene(loaded, name)
-    else:
-        raise ScatterError(f"{name}: not a surface mesh (trimesh loaded a {type(loaded).__name__})")
-    if objects:
-        surface = select_objects(surface, objects)
-    if surface.face_count == 0:
-        raise ScatterError(f"{name}: the mesh has no faces")
-    return _with_units(surface, source, input_format)
-
-
-def _with_units(surface, source, input_format):
-    """glTF is Y up in metres by its specification: the surface says so (other formats
-    this module reads carry no such metadata)."""
-    if isinstance(source, (str, os.PathLike)) and _suffix(source, input_format) in ("glb", "gltf"):
-        surface.up_axis, surface.meters_per_unit = "Y", 1.0
-    return surface
-
-
-def _suffix(source, input_format):
-    return (input_format or os.path.splitext(os.fspath(source))[1].lstrip(".")).lower()
-
-
-def _read_plain(path, input_format, smooth=False, color=False, uv=False):
-    """The Surface of a mesh file read by the fast readers, or None (use trimesh).
-
-    One geometry makes a mesh, several a scene, as trimesh.load makes them; the names
-    follow trimesh's for an OBJ split by material (file name, then name_1, name_2...).
-    """
-    from .readers import read_mesh
-
-    _check_readable(path)
-    parts = read_mesh(path, (input_format or os.path.splitext(path)[1].lstrip(".")).lower(), smooth, color, uv)
-    if parts is None:
-        return None
-    tables = [p[2] if len(p) > 2 else {} for p in parts] if isinstance(parts, list) else None
-    surface = _plain_surface(path, parts if tables is None else [p[:2] for p in parts])
-    if smooth or color or uv:
-        from .visuals import VertexTables
-
-        for g, t in zip(surface.geometries, tables or [{}] * len(surface.geometries)):
-            g.mesh = VertexTables(g.vertices, g.faces, **t)  # normals computed from the faces unless given
-    return surface
-
-
-def _plain_surface(path, parts):
-    if isinstance(parts, tuple):  # a GLB scene
-        geometries = [_checked_geometry(n, v, f, path) for n, v, f in parts[0]]
-        surface = Surface(geometries, [Instance(*i) for i in parts[1]], path, is_scene=True)
-    elif len(parts) == 1:
-        surface = Surface([_checked_geometry(path, *parts[0], path)], [Instance(os.path.basename(path), 0)], path)
-    else:
-        base = os.path.basename(path)
-        names = [base] + [f"{base}_{k}" for k in range(1, len(parts))]
-        geometries = [_checked_geometry(n, *arrays, path) for n, arrays in zip(names, parts)]
-        surface = Surface(geometries, [Instance(n, k) for k, n in enumerate(names)], path, is_scene=True)
-    if surface.face_count == 0:
-        raise ScatterError(f"{path}: the mesh has no faces")
-    return surface
-
-
-def _read_file(source, input_format):
-    import trimesh
-
-    path = os.fspath(source)
-    if path == "-":
-        if not input_format:
-            raise ScatterUsageError("reading a mesh from standard input needs --input-format (ply, obj, stl, off, glb)")
-        data = sys.stdin.buffer.read()
-        if not data:
-            raise ScatterError("<stdin>: no data on standard input")
-        file_obj, file_type = io.BytesIO(data), input_format.lower()
-    else:
-        _check_readable(path)
-        stream = _is_stream(path)
-        file_type = (input_format or os.path.splitext(path)[1].lstrip(".")).lower()
-        if not file_type:
-            pipe = "a pipe has " if stream else ""
-            raise ScatterUsageError(f"{path}: {pipe}no file suffix to tell the format; pass --input-format")
-        file_obj = path
-        if stream:  # a pipe, e.g. `scatter sample <(gunzip -c mesh.ply.gz)`: read it once
-            with open(path, "rb") as f:
-                data = f.read()
-            if not data:
-                raise ScatterError(f"{path}: no data in the pipe")
-            file_obj = io.BytesIO(data)
-    if file_type not in trimesh.available_formats():
-        raise ScatterUsageError(f"{path}: unknown mesh format '{file_type}' (try one of: {', '.join(INPUT_FORMATS)})")
-    if file_type in ("glb", "gltf"):
-        from .draco import check_decoder
-
-        check_decoder(path, file_type, file_obj)
-    try:
-        with np.errstate(all="ignore"):
-            return trimesh.load(file_obj, file_type=file_type, process=False)
-    except MemoryError:
-        raise ScatterError(f"{path}: out of memory while reading the mesh") from None
-    except Exception as exc:  # trimesh raises many kinds on malformed input
-        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ScatterError(f"{path}: not a readable {file_type.upper()} mesh ({reason[:200]})") from None
-
-
-def _check_readable(path):
-    if not os.path.exists(path):
-        raise ScatterError(f"{path}: no such file")
-    if os.path.isdir(path):
-        raise ScatterError(f"{path}: is a directory, not a mesh file")
-    if not os.access(path, os.R_OK):
-        raise ScatterError(f"{path}: permission denied")
-    if not _is_stream(path) and os.path.getsize(path) == 0:
-        raise ScatterError(f"{path}: the file is empty")
-
-
-def _is_stream(path):
-    """Whether ``path`` is standard input or a pipe, socket or device: read once, no size."""
-    if path == "-":
-        return True
-    try:
-        mode = os.stat(path).st_mode
-    except OSError:
-        return False
-    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
-
-
-def _geometry(name, mesh, source) -> Geometry:
-    try:  # trimesh builds some arrays lazily: a malformed file can fail only here
-        vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        faces = np.asarray(mesh.faces, dtype=np.int64)
-    except (ValueError, TypeError, IndexError, OverflowError) as exc:
-        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise ScatterError(f"{source}: malformed geometry '{name}' ({reason[:200]})") from None
-    return _checked_geometry(name, vertices, faces, source, mesh)
-
-
-def _checked_geometry(name, vertices, faces, source, mesh=None) -> Geometry:
-    if vertices.size == 0:
-        vertices = vertices.reshape(0, 3)
-    if faces.size == 0:
-        faces = faces.reshape(0, 3)
-    # Never reshape blindly: (V, 2) vertices read as (V * 2 / 3, 3) would be wrong points.
-    if vertices.ndim != 2 or vertices.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3:
-        raise ScatterError(f"{source}: malformed geometry '{name}' (vertices {vertices.shape}, faces {faces.shape})")
-    if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
-        raise ScatterError(f"{source}: face indices out of range in geometry '{name}'")
-    return Geometry(name, vertices, faces, mesh)
-
-
-def _from_scene(scene, source) -> Surface:
-    import trimesh
-
-    geometries, index, instances = [], {}, []
-    for node in scene.graph.nodes_geometry:
-        try:
-            matrix, geom_name = scene.graph[node]
-        except (ValueError, KeyError, AssertionError) as exc:  # a graph trimesh cannot walk, e.g. a cycle
-            raise ScatterError(f"{source}: malformed scene graph at node '{node}' ({str(exc).strip()[:200]})") from None
-        mesh = scene.geometry.get(geom_name)
-        if not isinstance(mesh, trimesh.Trimesh):
-            continue
-        if geom_name not in index:
-            index[geom_name] = len(geometries)
-            geometries.append(_geometry(geom_name, mesh, source))
-        matrix = np.asarray(matrix, dtype=np.float64)
-        instances.append(Instance(str(node), index[geom_name], None if np.array_equal(matrix, np.eye(4)) else matrix))
-    return Surface(geometries, instances, source, is_scene=True)
 
 
 def select_objects(surface: Surface, names) -> Surface:

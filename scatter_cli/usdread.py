@@ -11,11 +11,7 @@ with its subtree; the children of a point instancer are drawn only as its protot
 Only ``Mesh`` prims are sampled (implicit shapes such as ``Cube`` are not). Subdivision
 schemes are ignored: the control mesh is sampled as authored.
 
-Triangulation: polygon k, with corners s .. s+c-1 in ``faceVertexIndices``, becomes the
-fan (s, s+j+1, s+j+2) for j = 0 .. c-3, polygons in file order, each polygon's
-triangles together; polygons of fewer than three corners and the faces listed in
-``holeIndices`` give none; ``leftHanded`` meshes have the last two corners of each
-triangle swapped so that face normals follow the right-hand rule.
+Triangulation and primvars: usdmesh.py.
 
 Instance names (``--object``, ``scatter info``): a mesh's prim path; inside an
 instanceable prim, the instance proxy path (``/World/house_2/roof``); inside a point
@@ -26,7 +22,6 @@ below the prototype's parent (``/World/trees[17]/oak/trunk``).
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import sys
 import tempfile
@@ -34,12 +29,11 @@ import tempfile
 import numpy as np
 
 from .errors import ScatterError, ScatterUsageError
-from .surface import Geometry, Instance, Surface, _check_readable, _is_stream
-from .visuals import VertexTables
+from .sourcefile import check_readable, is_stream, stream_bytes
+from .surface import Geometry, Instance, Surface, Unsampled, corners, doubled_areas
+from .usdmesh import Topology, fan_faces, with_primvars
 
 INSTALL_HINT = "pip install 'scatter-cli[usd]'"
-# How far an interpolation is from constant: a colour stored at the finest of its parts.
-_RANK = {"constant": 0, "uniform": 1, "vertex": 2, "varying": 2, "faceVarying": 3}
 
 
 def load_usd(path: str, input_format=None, *, objects=None, plain=False) -> Surface:
@@ -51,10 +45,8 @@ def load_usd(path: str, input_format=None, *, objects=None, plain=False) -> Surf
     name = "<stdin>" if path == "-" else path
     _import_pxr(name)
     with _diagnostics() as printed:
-        if _is_stream(path):  # USD reads files by name: a pipe's bytes go to a file first
-            data = sys.stdin.buffer.read() if path == "-" else open(path, "rb").read()
-            if not data:
-                raise ScatterError(f"{name}: no data to read")
+        if is_stream(path):  # USD reads files by name: a pipe's bytes go to a file first
+            data = stream_bytes(path, f"{name}: no data to read")
             suffix = (input_format or os.path.splitext(path)[1].lstrip(".") or "usd").lower()
             with tempfile.TemporaryDirectory() as tmp:
                 copy = os.path.join(tmp, "stage." + suffix)
@@ -62,10 +54,11 @@ def load_usd(path: str, input_format=None, *, objects=None, plain=False) -> Surf
                     f.write(data)
                 surface, aliases = _StageReader(_open(copy, name), name, plain).surface()
         else:
-            _check_readable(path)
+            check_readable(path)
             surface, aliases = _StageReader(_open(path, name), name, plain).surface()
     # USD's own warnings (a reference that does not resolve, ...) as the run's warnings
-    surface._cache["warnings"] = [f"{name}: {m}" for m in map(_diagnostic, printed) if m]
+    surface.warnings += [f"{name}: {m}" for m in map(_diagnostic, printed) if m]
+    surface.warnings += unsampled_warning(name, surface.unsampled)
     if objects:
         surface = select_paths(surface, objects, aliases)
     if surface.face_count == 0:
@@ -89,6 +82,16 @@ def _diagnostics():
             os.close(saved)
             tmp.seek(0)
             lines += tmp.read().decode("utf-8", "replace").splitlines()
+
+
+def unsampled_warning(name, unsampled):
+    """The run's warning (a list of one line, or none) when prims that are not sampled hold area."""
+    held = [u for u in unsampled if u.area > 0]
+    if not held:
+        return []
+    reasons = sorted({u.reason for u in held})
+    return [f"{name}: {len(held)} prim(s) holding {sum(u.area for u in held):.6g} units of area are not sampled "
+            f"({'; '.join(reasons)}): `scatter info` lists them"]
 
 
 def _diagnostic(line):
@@ -169,6 +172,10 @@ class _StageReader:
         self.in_prototype: set[int] = set()
         self.subtrees: dict[tuple, _Placed] = {}
         self.skip_purposes = {UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy}
+        self.unsampled: list[Unsampled] = []
+        # A point instancer's prototypes are drawn wherever they are defined, under a class
+        # (abstract) prim too; the stage itself is walked with USD's default predicate.
+        self.anywhere = Usd.PrimIsActive & Usd.PrimIsLoaded
 
     def surface(self):
         """(Surface, aliases): aliases[k] is the prim path of instance k's mesh as authored."""
@@ -181,20 +188,23 @@ class _StageReader:
         columns = np.ascontiguousarray(placed.matrix.transpose(0, 2, 1))  # column-vector matrices
         instances = [Instance(name, g, None if same else columns[k])
                      for k, (name, g, same) in enumerate(zip(placed.names, placed.geometry.tolist(), identity))]
-        surface = Surface(self.geometries, instances, self.source, is_scene=True)
+        surface = Surface(self.geometries, instances, self.source, is_scene=True, unsampled=self.unsampled)
         surface.up_axis, surface.meters_per_unit = stage_units(self.stage)
         return surface, placed.aliases
 
     # -- placements -----------------------------------------------------------------------
 
-    def _walk(self, root, base) -> _Placed:
+    def _walk(self, root, base, predicate=None) -> _Placed:
         """Meshes under ``root`` (itself included), each with the matrix that maps its points
-        into the frame of ``base`` (an ancestor prim; None: world space)."""
+        into the frame of ``base`` (an ancestor prim; None: world space); ``predicate``:
+        which prims the walk visits (None: USD's default)."""
         out = []
-        it = iter(self.Usd.PrimRange(root))
+        it = iter(self.Usd.PrimRange(root) if predicate is None else self.Usd.PrimRange(root, predicate))
         for prim in it:
-            if self._skipped(prim):
+            why = self._skipped(prim)
+            if why:
                 it.PruneChildren()
+                self._note(prim, why, base, predicate)
             elif prim.IsInstance():
                 it.PruneChildren()
                 out.append(self._instance(prim, base))
@@ -204,7 +214,36 @@ class _StageReader:
             elif prim.IsA(self.UsdGeom.Mesh):
                 path = str(prim.GetPath())
                 out.append(_Placed([self._geometry(prim)], self._matrix(prim, base), [path], [path]))
+            elif prim.IsA(self.UsdGeom.Gprim):
+                self._note(prim, f"a {prim.GetTypeName()} prim, not a mesh", base, predicate)
         return _Placed.join(out) if out else _Placed([], [], [], [])
+
+    def _note(self, prim, why, base, predicate):
+        """Record the geometry under ``prim`` (itself included) as not sampled, ``why``; area
+        in the frame of ``base`` (world space when None: inside a prototype, one instance's)."""
+        rng = self.Usd.PrimRange(prim) if predicate is None else self.Usd.PrimRange(prim, predicate)
+        for p in rng:
+            if p.IsA(self.UsdGeom.Gprim):
+                self.unsampled.append(Unsampled(str(p.GetPath()), why, self._area(p, base)))
+
+    def _area(self, prim, base):
+        """The area of a gprim in the frame of ``base``: a mesh's triangles; an implicit
+        shape's formula, under the matrix's mean scale (exact for uniform scales); 0.0 for
+        prims without a surface (points, curves) or an unreadable one."""
+        matrix = self._matrix(prim, base)
+        try:
+            if prim.IsA(self.UsdGeom.Mesh):
+                mesh = self.UsdGeom.Mesh(prim)
+                counts, corner, holes = self._polygons(mesh, str(prim.GetPath()))
+                faces = fan_faces(counts, corner, holes)
+                points = self._points(mesh, str(prim.GetPath()), _top(corner))
+                with np.errstate(all="ignore"):
+                    a = 0.5 * doubled_areas(corners(points, faces), matrix.T)
+                return float(a[np.isfinite(a)].sum())
+            local = shape_area(prim.GetTypeName(), lambda name: prim.GetAttribute(name).Get(self.time))
+        except ScatterError:
+            return 0.0
+        return local * abs(float(np.linalg.det(matrix[:3, :3]))) ** (2 / 3)
 
     def _matrix(self, prim, base):
         if base is None:
@@ -214,18 +253,20 @@ class _StageReader:
         return np.array(m, dtype=np.float64)
 
     def _skipped(self, prim):
+        """Why ``prim`` and its subtree are not drawn ("invisible", "guide purpose"...), or None."""
         if not prim.IsA(self.UsdGeom.Imageable):
-            return False
+            return None
         image = self.UsdGeom.Imageable(prim)
         if image.GetVisibilityAttr().Get(self.time) == self.UsdGeom.Tokens.invisible:
-            return True
-        return image.GetPurposeAttr().Get(self.time) in self.skip_purposes
+            return "invisible"
+        purpose = image.GetPurposeAttr().Get(self.time)
+        return f"{purpose} purpose" if purpose in self.skip_purposes else None
 
-    def _subtree(self, root, base):
-        """``_walk(root, base)``, once per prototype whatever its number of instances."""
-        key = (str(root.GetPath()), None if base is None else str(base.GetPath()))
+    def _subtree(self, root, base, predicate=None):
+        """``_walk(root, base, predicate)``, once per prototype whatever its number of instances."""
+        key = (str(root.GetPath()), None if base is None else str(base.GetPath()), predicate is None)
         if key not in self.subtrees:
-            self.subtrees[key] = self._walk(root, base)
+            self.subtrees[key] = self._walk(root, base, predicate)
         return self.subtrees[key]
 
     def _instance(self, prim, base):
@@ -268,7 +309,7 @@ class _StageReader:
             return _Placed([], [], [], [])
         parent = proto.GetParent()
         cut = 0 if parent.IsPseudoRoot() else len(str(parent.GetPath()))
-        inner = self._subtree(proto, parent)
+        inner = self._subtree(proto, parent, self.anywhere)
         return _Placed(inner.geometry, inner.matrix, [n[cut:] for n in inner.names], inner.aliases)
 
     def _instancer_arrays(self, prim, where):
@@ -312,8 +353,8 @@ class _StageReader:
             del counts, corners, holes
             return Geometry(path, self._points(mesh, path, top), faces)
         points = self._points(mesh, path, _top(corners))
-        topo = _Topology(counts, corners, holes, left, len(points))
-        return _with_primvars(path, mesh, points, topo, self.time)
+        topo = Topology(counts, corners, holes, left, len(points))
+        return with_primvars(path, mesh, points, topo, self.time)
 
     def _polygons(self, mesh, path):
         """(faceVertexCounts, faceVertexIndices, holeIndices or None) as integer arrays,
@@ -341,6 +382,30 @@ class _StageReader:
         return points
 
 
+def shape_area(kind, get):
+    """The area of an implicit USD shape of type ``kind`` in its own frame, its attributes
+    read by ``get(name)`` (USD's fallbacks when unauthored); 0.0 for other types."""
+    def value(name, fallback):
+        v = get(name)
+        return float(fallback if v is None else v)
+
+    pi = np.pi
+    if kind == "Cube":
+        return 6.0 * value("size", 2.0) ** 2
+    if kind == "Sphere":
+        return 4.0 * pi * value("radius", 1.0) ** 2
+    r, h = value("radius", 1.0), value("height", 2.0)
+    if kind == "Cylinder":
+        return 2.0 * pi * r * h + 2.0 * pi * r * r
+    if kind == "Cone":
+        return pi * r * r + pi * r * float(np.hypot(r, h))
+    if kind == "Capsule":
+        return 2.0 * pi * r * h + 4.0 * pi * r * r
+    if kind == "Plane":
+        return value("width", 2.0) * value("length", 2.0)
+    return 0.0
+
+
 def _top(corners):
     return int(corners.max()) if len(corners) else -1
 
@@ -366,167 +431,6 @@ def _array(value, dtype, width=None):
     if a.size == 0:
         return a.reshape(0, width)
     return a if a.ndim == 2 and a.shape[1] == width else None
-
-
-def fan_faces(counts, corners, holes=None, left_handed=False, block=1 << 16):
-    """(F, 3) int64 vertex indices of the fan triangles of polygons, in polygon order:
-    polygon k, at positions s .. s+c-1 of ``corners``, gives (s, s+j+1, s+j+2) for j = 0
-    .. c-3 (none for fewer than 3 corners, nor for a hole); ``left_handed`` swaps the last
-    two corners of each.
-
-    counts (P,), corners (C,) and holes (H,) integer arrays (faceVertexCounts,
-    faceVertexIndices, holeIndices). Polygons of one size are a reshape; mixed sizes go
-    ``block`` polygons at a time, so no (F,) table is built beside the result.
-    """
-    hole = _hole_mask(counts, holes)
-    if len(counts) and counts.min() == counts.max() >= 3 and not hole.any():
-        c = int(counts[0])
-        grid = corners.reshape(len(counts), c)
-        faces = np.empty((len(counts), c - 2, 3), dtype=np.int64)
-        faces[:, :, 0] = grid[:, :1]
-        faces[:, :, 1] = grid[:, 1:-1]
-        faces[:, :, 2] = grid[:, 2:]
-        faces = faces.reshape(-1, 3)
-    else:
-        faces = np.empty((int(_made(counts, hole).sum()), 3), dtype=np.int64)
-        at = row = 0
-        for p in range(0, len(counts), block):
-            n = np.asarray(counts[p : p + block], dtype=np.int64)
-            made = _made(n, hole[p : p + block])
-            polygon = np.repeat(np.arange(len(n)), made)
-            s = (at + np.cumsum(n) - n)[polygon]
-            rows = faces[row : row + len(polygon)]
-            rows[:, 0] = corners[s]
-            s += np.arange(len(polygon)) - (np.cumsum(made) - made)[polygon]  # s + j
-            rows[:, 1] = corners[s + 1]
-            rows[:, 2] = corners[s + 2]
-            at += int(n.sum())
-            row += len(polygon)
-    if left_handed:
-        second = faces[:, 1].copy()
-        faces[:, 1] = faces[:, 2]
-        faces[:, 2] = second
-    return faces
-
-
-def _hole_mask(counts, holes):
-    """(P,) bool: the polygons ``holes`` names (indices out of range ignored)."""
-    hole = np.zeros(len(counts), dtype=bool)
-    if holes is not None and len(holes):
-        hole[holes[(holes >= 0) & (holes < len(counts))]] = True
-    return hole
-
-
-def _made(counts, hole):
-    """(P,) int64 triangles each polygon's fan makes: corners - 2, none for a hole."""
-    made = np.maximum(np.asarray(counts, dtype=np.int64) - 2, 0)
-    made[hole] = 0
-    return made
-
-
-class _Topology:
-    """A mesh's polygons and triangles, for expanding primvars to the rows a table needs;
-    the per-triangle tables are made only when a primvar needs them."""
-
-    def __init__(self, counts, corners, holes, left_handed, n_points):
-        self.counts, self.corners, self.n_points = counts, corners, n_points
-        self.hole, self.left_handed = _hole_mask(counts, holes), left_handed
-        self.triangles = int(_made(counts, self.hole).sum())
-        self.sizes = {"constant": 1, "uniform": len(counts), "vertex": n_points, "varying": n_points,
-                      "faceVarying": len(corners)}
-
-    def faces(self):
-        """(F, 3) int64 vertex indices of the triangles."""
-        return fan_faces(self.counts, self.corners, np.flatnonzero(self.hole), self.left_handed)
-
-    @functools.cached_property
-    def tri(self):
-        """(F, 3) int64 positions in faceVertexIndices of the triangles' corners."""
-        return fan_faces(self.counts, np.arange(len(self.corners)), np.flatnonzero(self.hole), self.left_handed)
-
-    @functools.cached_property
-    def polygon(self):
-        """(F,) int64 the polygon of each triangle."""
-        return np.repeat(np.arange(len(self.counts)), _made(self.counts, self.hole))
-
-    @functools.cached_property
-    def polygon_of_corner(self):
-        return np.repeat(np.arange(len(self.counts)), self.counts)
-
-    def expand(self, values, interpolation, rows):
-        """Primvar values (n, C) -> one row per ``rows`` ("point", "corner" or "triangle"),
-        or None when that interpolation cannot give such rows."""
-        if interpolation == "constant":
-            n = {"point": self.n_points, "corner": len(self.corners), "triangle": self.triangles}[rows]
-            return np.broadcast_to(values[:1], (n, values.shape[1]))
-        if interpolation == "uniform":
-            return {"corner": lambda: values[self.polygon_of_corner], "triangle": lambda: values[self.polygon]}.get(
-                rows, lambda: None)()
-        if interpolation in ("vertex", "varying"):
-            return {"point": lambda: values, "corner": lambda: values[self.corners]}.get(rows, lambda: None)()
-        return values if rows == "corner" else None
-
-
-def _primvar(api, name, topo, time, inherited=False):
-    """(values (n, C) float64, interpolation) of an authored primvar, or None."""
-    pv = api.FindPrimvarWithInheritance(name) if inherited else api.GetPrimvar(name)
-    if not pv or not pv.HasValue():
-        return None
-    return _checked(pv.ComputeFlattened(time), pv.GetInterpolation(), topo)
-
-
-def _checked(values, interpolation, topo):
-    if values is None or interpolation not in topo.sizes:
-        return None
-    a = np.asarray(values, dtype=np.float64)
-    a = a.reshape(len(a), -1) if a.ndim else a.reshape(1, 1)
-    return (a, interpolation) if len(a) == topo.sizes[interpolation] else None
-
-
-def _uv_primvar(api, topo, time):
-    """``primvars:st``, else the first texture-coordinate primvar."""
-    found = _primvar(api, "st", topo, time)
-    if found is not None:
-        return found
-    for pv in api.GetPrimvarsWithValues():
-        if str(pv.GetTypeName().role) == "TextureCoordinate":
-            return _primvar(api, pv.GetPrimvarName(), topo, time)
-    return None
-
-
-def _with_primvars(path, mesh, points, topo, time):
-    """The Geometry with its uv, colour and normal tables (per point, or per corner when a
-    face-varying or uniform value needs it)."""
-    from pxr import UsdGeom
-
-    api = UsdGeom.PrimvarsAPI(mesh.GetPrim())
-    uv = _uv_primvar(api, topo, time)
-    normals = _primvar(api, "normals", topo, time)
-    if normals is None and mesh.GetNormalsAttr().HasAuthoredValue():
-        normals = _checked(mesh.GetNormalsAttr().Get(time), mesh.GetNormalsInterpolation(), topo)
-    rgb = _primvar(api, "displayColor", topo, time, inherited=True)
-    alpha = _primvar(api, "displayOpacity", topo, time, inherited=True)
-    color = [c for c in (rgb, alpha) if c is not None] if rgb is not None else []
-    color_rank = max((_RANK[i] for _, i in color), default=0)
-    per_point = [p for p in (uv, normals) if p is not None] + (color if color_rank >= 2 else [])
-    rows = "corner" if any(_RANK[i] in (1, 3) for _, i in per_point) else "point"
-
-    def table(p, width):
-        return None if p is None else np.ascontiguousarray(topo.expand(p[0], p[1], rows)[:, :width])
-
-    if rows == "corner":
-        vertices, faces, point_of = points[topo.corners], topo.tri, topo.corners
-    else:
-        vertices, faces, point_of = points, topo.faces(), None
-    tables = VertexTables(vertices, faces, uv=table(uv, 2), normals=table(normals, 3), point_of=point_of)
-    if color:
-        kind = {0: "constant_color", 1: "face_colors"}.get(color_rank, "vertex_colors")
-        at = {0: "triangle", 1: "triangle"}.get(color_rank, rows)
-        rgba = np.empty((topo.triangles if at == "triangle" else len(vertices), 4))
-        rgba[:, :3] = topo.expand(rgb[0], rgb[1], at)[:, :3] * 255.0
-        rgba[:, 3] = 255.0 if alpha is None else topo.expand(alpha[0], alpha[1], at)[:, 0] * 255.0
-        setattr(tables, kind, rgba[0] if kind == "constant_color" else rgba)
-    return Geometry(path, vertices, faces, tables)
 
 
 def select_paths(surface: Surface, paths, aliases) -> Surface:

@@ -17,7 +17,7 @@ import gc, json, os, sys
 import numpy as np
 import scatter_cli.gltfread, scatter_cli.plyread, scatter_cli.readers
 from scatter_cli.native import kernel
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 kernel("_creaders")
 gc.collect()
 with open("/proc/self/statm") as f:

@@ -13,7 +13,8 @@ import scatter_cli
 from scatter_cli.attributes import AttributeMaker
 from scatter_cli.errors import ScatterError, ScatterUsageError
 from scatter_cli.sampling import RawChunk
-from scatter_cli.surface import Geometry, load_surface
+from scatter_cli.loaders import load_surface
+from scatter_cli.surface import Geometry
 from scatter_cli.texture import CLAMP_TO_EDGE, MIRRORED_REPEAT, REPEAT, bilinear, wrap_index
 from scatter_cli.visuals import vertex_normal_table
 from scatter_cli.weighting import barycentric

@@ -8,7 +8,7 @@ from scipy import stats as sps
 
 from scatter_cli import bench
 from scatter_cli.exact import smooth_test_function
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from .conftest import run_scatter, run_user
 

@@ -7,7 +7,7 @@ pytest.importorskip("pymeshlab")
 
 from scatter_cli.check import ALPHA, run_check  # noqa: E402
 from scatter_cli.sampling import SamplePlan  # noqa: E402
-from scatter_cli.surface import load_surface  # noqa: E402
+from scatter_cli.loaders import load_surface  # noqa: E402
 
 from .conftest import run_scatter  # noqa: E402
 from .doubles import UnweightedSource  # noqa: E402

@@ -14,7 +14,7 @@ pytest.importorskip("embreex")
 from scatter_cli import enclosure, visibility  # noqa: E402
 from scatter_cli.exterior import classify  # noqa: E402
 from scatter_cli.sampling import RawChunk, SamplePlan  # noqa: E402
-from scatter_cli.surface import load_surface  # noqa: E402
+from scatter_cli.loaders import load_surface  # noqa: E402
 
 
 def truth(surface, cells):

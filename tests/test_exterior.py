@@ -17,7 +17,7 @@ import scatter_cli  # noqa: E402
 from scatter_cli import visibility  # noqa: E402
 from scatter_cli.exterior import classify  # noqa: E402
 from scatter_cli.sampling import SamplePlan  # noqa: E402
-from scatter_cli.surface import load_surface  # noqa: E402
+from scatter_cli.loaders import load_surface  # noqa: E402
 
 LEVEL = 1e-3
 

@@ -13,7 +13,7 @@ from scipy import stats  # noqa: E402
 
 import scatter_cli  # noqa: E402
 from scatter_cli import exterior  # noqa: E402
-from scatter_cli.surface import load_surface  # noqa: E402
+from scatter_cli.loaders import load_surface  # noqa: E402
 
 LEVEL = 1e-3
 

@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 import scatter_cli
-from scatter_cli.readers import read_mesh
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface, read_mesh
 
 from .conftest import run_scatter
 from .gltfwrite import GLB

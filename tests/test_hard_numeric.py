@@ -15,7 +15,7 @@ import scatter_cli
 from scatter_cli.api import prepare
 from scatter_cli.sampling import SamplePlan
 from scatter_cli.sources import RandomSource
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 from scatter_cli.warps import square_to_triangle
 
 from benchmarks.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_pvalue, recover_bary,

@@ -14,7 +14,7 @@ from scatter_cli import bench, methods, warps
 from scatter_cli.api import prepare
 from scatter_cli.errors import ScatterUsageError
 from scatter_cli.sampling import SamplePlan
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from .conftest import spread_triangles, triangles_mesh
 from .test_warps import bin_index

@@ -8,7 +8,7 @@ import trimesh
 
 import scatter_cli
 from scatter_cli.plyread import read_triangles
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from .conftest import SAMPLES, run_user, scatter_command
 

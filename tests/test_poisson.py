@@ -8,7 +8,7 @@ from scipy.spatial import cKDTree
 import scatter_cli
 from scatter_cli import api, uniformity
 from scatter_cli.check import world_triangles
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 from scatter_cli.spacing import relative_radius
 
 from .conftest import run_scatter

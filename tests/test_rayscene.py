@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from scatter_cli import rayscene, visibility
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from . import exterior_scenes as es
 from .conftest import run_scatter

@@ -18,8 +18,7 @@ import trimesh
 
 import scatter_cli
 from scatter_cli import plyread
-from scatter_cli.readers import read_mesh
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface, read_mesh
 from scatter_cli.visuals import VertexTables, uv_table, vertex_normal_table, weighted_vertex_normals
 
 from .conftest import run_scatter, run_user

@@ -15,8 +15,7 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli.readers import read_mesh
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface, read_mesh
 
 from .conftest import SAMPLES, run_scatter, run_user
 from .fuzz_inputs import SEEDS

@@ -13,7 +13,7 @@ from scipy import stats
 import scatter_cli
 from scatter_cli.errors import ScatterError, ScatterUsageError
 from scatter_cli.sampling import SamplePlan
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from .conftest import SAMPLES, run_scatter, scaled_scene
 

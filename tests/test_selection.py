@@ -10,7 +10,7 @@ import pytest
 
 from scatter_cli.sampling import SamplePlan
 from scatter_cli.sources import RandomSource
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from benchmarks.hardcheck import pooled_pvalue
 from .conftest import spread_triangles, triangles_mesh

@@ -16,7 +16,7 @@ from scatter_cli.pipeline import plan_surface
 from scatter_cli.sources import METHOD_SOURCES, make_source
 from scatter_cli.sampling import RawChunk
 from scatter_cli.thinning import ThinnedSource, dart_thrown, thinned
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from .conftest import SAMPLES
 from .doubles import RestartingSource

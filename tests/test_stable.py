@@ -14,7 +14,7 @@ import pytest
 from scatter_cli import stable, stable_arrivals, stable_faces, stable_order, stable_weights, thinning
 from scatter_cli.chisquare import chi2_gof
 from scatter_cli.stable import StableSource
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from .conftest import SAMPLES, spread_triangles, triangles_mesh
 

@@ -19,7 +19,7 @@ import scatter_cli  # noqa: E402
 from scatter_cli import visibility  # noqa: E402
 from scatter_cli.exterior import classify  # noqa: E402
 from scatter_cli.stable import StableSource  # noqa: E402
-from scatter_cli.surface import load_surface  # noqa: E402
+from scatter_cli.loaders import load_surface  # noqa: E402
 
 from .test_exterior import BROKEN, cell_test  # noqa: E402
 

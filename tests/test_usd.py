@@ -17,7 +17,7 @@ from scipy import stats
 import scatter_cli
 from scatter_cli.errors import ScatterError, ScatterUsageError
 from scatter_cli.info import describe
-from scatter_cli.surface import load_surface
+from scatter_cli.loaders import load_surface
 
 from .conftest import run_scatter
 from .gltfwrite import glb_bytes
@@ -474,7 +474,7 @@ def test_instancer_plan_bounds_and_normals_as_one_instance_at_a_time(tmp_path):
 def test_fan_faces_are_the_documented_fans(sizes, block):
     """Uniform polygons (a reshape) and mixed ones (in blocks of polygons) give the fans
     of the documented order, holes dropped, left-handed corners swapped."""
-    from scatter_cli.usdread import fan_faces
+    from scatter_cli.usdmesh import fan_faces
 
     rng = np.random.default_rng(len(sizes) + block)
     counts = rng.choice(sizes, 50).astype(np.int32)

@@ -1,0 +1,46 @@
+"""An input path before any format reads it: checks that word the error, and the bytes of
+standard input or a pipe (read once: no size, no second pass)."""
+
+from __future__ import annotations
+
+import os
+import stat
+import sys
+
+from .errors import ScatterError
+
+
+def check_readable(path):
+    """Raise ScatterError when ``path`` is missing, a folder, unreadable or an empty file."""
+    if not os.path.exists(path):
+        raise ScatterError(f"{path}: no such file")
+    if os.path.isdir(path):
+        raise ScatterError(f"{path}: is a directory, not a mesh file")
+    if not os.access(path, os.R_OK):
+        raise ScatterError(f"{path}: permission denied")
+    if not is_stream(path) and os.path.getsize(path) == 0:
+        raise ScatterError(f"{path}: the file is empty")
+
+
+def is_stream(path):
+    """Whether ``path`` is standard input or a pipe, socket or device: read once, no size."""
+    if path == "-":
+        return True
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
+
+
+def stream_bytes(path, empty):
+    """All the bytes of standard input (``-``) or the pipe ``path``; ScatterError(``empty``)
+    when there are none."""
+    if path == "-":
+        data = sys.stdin.buffer.read()
+    else:
+        with open(path, "rb") as f:
+            data = f.read()
+    if not data:
+        raise ScatterError(empty)
+    return data
