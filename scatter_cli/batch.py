@@ -218,6 +218,11 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
     if ascii and infer_format(template.fill(found.fields(0)), fmt) != "ply":
         raise ScatterUsageError("--ascii applies to PLY output only")
     setup = {"options": options, "ascii": ascii, "quiet": quiet}
+    if report is not None and os.fspath(report) != "-":
+        report = os.path.abspath(report)
+        from .worker import remove_temps
+
+        remove_temps(report)  # what a killed run of this report left (outputs' are cleared per mesh)
     tally = Tally(len(found), report, collect, progress and not quiet, quiet)
     jobs_iter = ((i, found.paths[i], template.fill(found.fields(i))) for i in range(len(found)))
     try:
@@ -317,10 +322,17 @@ class Tally:
             self.stream = self._report_cm.__enter__()
 
     def add(self, index, rec):
+        """The record ``rec`` of mesh ``index``: its warnings (a list the report does not
+        keep, each naming the mesh) and its error are printed, the progress line erased first."""
         self.counts[rec["status"]] += 1
-        if rec["status"] == "failed" and not self.quiet:
-            self._clear_line()
-            print(f"error: {rec['error']}", file=sys.stderr, flush=True)
+        warnings = rec.pop("warnings", None) or ()
+        if not self.quiet:
+            lines = [f"warning: {w}" for w in warnings]
+            if rec["status"] == "failed":
+                lines.append(f"error: {rec['error']}")
+            if lines:
+                self._clear_line()
+                print("\n".join(lines), file=sys.stderr, flush=True)
         self.pending[index] = rec
         while self.next in self.pending:
             self._emit(self.pending.pop(self.next))

@@ -50,10 +50,12 @@ def serve():
         return
     _warm_up()
     answer.write('{"ready": true}\n')
-    warn = None if setup.get("quiet") else (lambda m: print(f"warning: {m}", file=sys.stderr, flush=True))
     for line in sys.stdin:
         job = json.loads(line)
-        answer.write(json.dumps(sample_file(job["input"], job["output"], job["format"], setup, warn)) + "\n")
+        warnings = []  # handed to the parent, which prints them between its progress lines
+        result = sample_file(job["input"], job["output"], job["format"], setup,
+                             None if setup.get("quiet") else warnings.append)
+        answer.write(json.dumps(dict(result, warnings=warnings)) + "\n")
         _trim_heap()
 
 
@@ -290,7 +292,8 @@ class Lane:
         self.stopped = False
 
     def process(self, input, output, fmt, skip=None):
-        """The report record of one mesh (``input``, ``output``, ``status``, ``error``, ...).
+        """The report record of one mesh (``input``, ``output``, ``status``, ``error``, ...),
+        with ``warnings`` (lines naming the mesh) when sampling it warned.
 
         ``skip``: whether an existing output is skipped (default: the lane's ``skip_existing``).
         """
@@ -311,8 +314,11 @@ class Lane:
                 raise
             answer = {"error": name_the_file(str(lost), input), "count": None, "faces": None, "area": None}
         status = "failed" if answer["error"] else "written"
-        return record(input, output, status, answer["error"], answer["count"], answer["faces"], answer["area"],
-                      time.perf_counter() - t)
+        rec = record(input, output, status, answer["error"], answer["count"], answer["faces"], answer["area"],
+                     time.perf_counter() - t)
+        if answer.get("warnings"):  # not a report field: the batch prints and drops them
+            rec["warnings"] = [name_the_file(w, input) for w in answer["warnings"]]
+        return rec
 
     def stop(self):
         """Kill the child now (an interrupted batch); the job in flight raises WorkerLost."""
