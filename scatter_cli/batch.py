@@ -232,8 +232,8 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
             run_dask(jobs_iter, setup, fmt, client=client, scheduler=scheduler, timeout=timeout,
                      max_memory=max_memory, skip_existing=skip_existing, done=tally.add)
         else:
-            run_local(jobs_iter, setup, fmt, jobs=jobs or available_cpus(), timeout=timeout, max_memory=max_memory,
-                      skip_existing=skip_existing, done=tally.add)
+            run_local(jobs_iter, setup, fmt, jobs=min(jobs or available_cpus(), len(found)), timeout=timeout,
+                      max_memory=max_memory, skip_existing=skip_existing, done=tally.add)
     finally:
         tally.close()
     result = tally.summary(time.monotonic() - started)
@@ -251,11 +251,15 @@ def available_cpus() -> int:
 
 
 def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing, done):
-    """``jobs`` lanes (threads, each driving one worker process) take meshes one at a time."""
+    """``jobs`` lanes (threads, each driving one worker process) take meshes one at a time.
+
+    The workers are forked from this process, after it has imported what they need, when
+    it may fork (:func:`scatter_cli.worker.can_fork`): none imports NumPy or trimesh again.
+    """
     import queue
     import threading
 
-    from .worker import Lane, StaleTemps
+    from .worker import Lane, StaleTemps, WorkerProcess, can_fork, preload
     from .writers import infer_format
 
     env = dict(os.environ)
@@ -263,7 +267,11 @@ def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing
     stale = StaleTemps()
     lock = threading.Lock()
     results = queue.Queue()
-    lanes = [Lane(setup, env, timeout, max_memory, skip_existing, stale) for _ in range(jobs)]
+    fork = can_fork()
+    if fork:
+        preload()
+    lanes = [Lane(setup, env, timeout, max_memory, skip_existing, stale,
+                  WorkerProcess(setup, env, fork=True) if fork else None) for _ in range(jobs)]
 
     def work(lane):
         try:
@@ -279,19 +287,24 @@ def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing
                 results.put((None, exc))
         finally:
             lane.close()
+            results.put((None, None))  # this lane is done
 
     threads = [threading.Thread(target=work, args=(lane,), daemon=True) for lane in lanes]
     for t in threads:
         t.start()
     try:
-        while any(t.is_alive() for t in threads) or not results.empty():
+        running = len(threads)
+        while running:
             try:
-                index, rec = results.get(timeout=0.2)
+                index, rec = results.get(timeout=1.0)
             except queue.Empty:
                 continue
-            if index is None:
+            if index is not None:
+                done(index, rec)
+            elif rec is None:
+                running -= 1
+            else:
                 raise rec
-            done(index, rec)
     except BaseException:
         for lane in lanes:
             lane.stop()

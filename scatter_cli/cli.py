@@ -237,6 +237,7 @@ def batch(
 
       scatter batch /shared/meshes -o /shared/pts/{rel}.ply --engine dask --scheduler tcp://head:8786
     """
+    process.lean_trimesh()
     from .batch import run_batch
 
     options = dict(count=count, density=density, seed=seed, method=method, attributes=attributes, poisson=poisson,

@@ -229,9 +229,13 @@ def test_a_rerun_clears_what_a_batch_killed_with_sigkill_left(tmp_path):
         if out.is_dir() and [p for p in out.iterdir() if p.name.startswith(".b.csv.")]:
             worker = next(pid for pid in children(proc.pid))
             os.kill(worker, signal.SIGSTOP)  # b stays half-written until the worker is killed
+    with open(f"/proc/{worker}/cmdline", "rb") as f:
+        assert b"scatter_cli.worker" not in f.read()  # forked from the command, as it forks them
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
+    deadline = time.monotonic() + 60
     while alive(worker):  # killed with its parent (PR_SET_PDEATHSIG)
+        assert time.monotonic() < deadline, "the worker outlived its batch"
         time.sleep(0.01)
     assert sorted(p.name.split(".")[1] for p in tmp_path.rglob("*.part")) == ["b", "report"]
     assert (out / "a.csv").is_file() and not (tmp_path / "report.jsonl").exists()
