@@ -30,6 +30,9 @@ import threading
 import time
 
 POLL = 0.05  # seconds between checks of a running job's time and memory
+# bytes of resident memory above a worker's own after start-up past which it hands freed
+# memory back after a job (doing so after every job costs small meshes 15-25% of their time)
+TRIM_ABOVE = 64 << 20
 _PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
 
@@ -49,6 +52,7 @@ def serve():
     if setup is None:
         return
     _warm_up()
+    settled = resident_bytes(os.getpid())
     answer.write('{"ready": true}\n')
     for line in sys.stdin:
         job = json.loads(line)
@@ -56,7 +60,8 @@ def serve():
         result = sample_file(job["input"], job["output"], job["format"], setup,
                              None if setup.get("quiet") else warnings.append)
         answer.write(json.dumps(dict(result, warnings=warnings)) + "\n")
-        _trim_heap()
+        if resident_bytes(os.getpid()) > settled + TRIM_ABOVE:
+            _trim_heap()
 
 
 def sample_file(input, output, fmt, setup, warn=None):
