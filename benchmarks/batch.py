@@ -1,16 +1,20 @@
 """Collections: `scatter batch` against its peers on 300+ small real meshes.
 
-    NUMPY_MADVISE_HUGEPAGE=0 PYTHONPATH=$PWD python benchmarks/batch.py [--copies 28] [--repeats 3] [--out FILE]
+    NUMPY_MADVISE_HUGEPAGE=0 PYTHONPATH=$PWD python benchmarks/batch.py [--meshes 304] [--repeats 3]
+        [--no-dask] [--out FILE]
 
-The collection: copies of the small meshes of samples/ in OBJ, OFF, PLY, STL and GLB,
+The collection: --meshes copies of the small untextured meshes of samples/ (not the large
+skull and koala, whose sampling time would hide the fixed costs) in OBJ, OFF, PLY, STL and GLB,
 each copy scaled and moved so that no two files are alike, in a temporary folder, listed
 in an interleaved order (copy 0 of every mesh, then copy 1, ...) so that every fifth of
-the run holds the same mix of meshes. Each mesh: 2,048 points with normals, written as
+the run holds the same mix of meshes. Every command runs once before the timed rounds
+(a warm-up), then the rounds run back to back; the commands run with Python's bytecode
+cache on (PYTHONDONTWRITEBYTECODE unset), as an installed package runs. Each mesh: 2,048 points with normals, written as
 binary PLY. Timed as whole commands, start-up included, medians of back-to-back runs:
 
 - `scatter batch --from-list LIST -o OUT/{stem}.ply -n 2048 -a normal -j 2`: the time
-  includes Python's start-up, the imports, starting the two worker processes (each
-  imports NumPy and trimesh) and stopping them;
+  includes Python's start-up, the imports, starting the two worker processes (forked
+  from the command after its imports) and stopping them;
 - a trimesh script: multiprocessing.Pool(2) mapping load, sample_surface, write PLY;
 - a shell loop of `scatter sample` (over the first --loop meshes, scaled to the whole);
 - `scatter batch --engine dask` on a local cluster of two one-thread workers started
@@ -20,7 +24,8 @@ binary PLY. Timed as whole commands, start-up included, medians of back-to-back 
   process (as -j 2 starts its workers); a later batch finds them running (a long-lived
   cluster's usual case). Starting the cluster itself is timed on its own.
 
-Also: the fixed cost of a run (a batch of one mesh, each engine), the CPU seconds each
+Also: the fixed cost of a run (a batch of one mesh, each engine) against one `scatter
+sample` of that mesh (the goal: a batch's within 0.1 s of it), the CPU seconds each
 run costs by process (the command with the workers it waits for; the Dask scheduler,
 workers and their sampling processes), the peak resident memory of each batch worker
 over each fifth of the collection (VmHWM, reset at each fifth through
@@ -44,9 +49,11 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
+# not the textured boxtextured.glb and cesiummilktruck.glb either: trimesh decodes their
+# textures on load (2.5 s for the truck), which scatter does not need: the peer would lose
+# on work it need not do
 SMALL = ["icosahedron_binary.stl", "moebius-160-10.ply", "hemisphere.off", "narrow_triangles.obj",
-         "pediment_join_plate_12.stl", "spot_triangulated.obj", "boxtextured.glb", "boxvertexcolors.glb",
-         "cesiummilktruck.glb", "skull.ply", "koala.obj"]
+         "pediment_join_plate_12.stl", "spot_triangulated.obj", "boxvertexcolors.glb"]
 SUFFIXES = ["obj", "off", "ply", "stl", "glb"]
 COUNT = 2048
 TRIMESH_SCRIPT = r'''
@@ -89,7 +96,9 @@ def make_collection(folder, copies):
             m.apply_translation(rng.uniform(-10, 10, 3))
             suffix = SUFFIXES[(c + len(paths)) % len(SUFFIXES)]
             path = folder / f"{Path(name).stem}-{c:03d}.{suffix}"
-            m.export(path)
+            # an OBJ as the sample is, with no material library (trimesh would add one for
+            # the UVs, and a material's OBJ takes the slow way through trimesh)
+            m.export(path, **({"include_texture": False} if suffix == "obj" else {}))
             paths.append(path)
     return [paths[i * copies + c] for c in range(copies) for i in range(len(SMALL))]  # interleaved
 
@@ -231,13 +240,14 @@ def stage_times(paths):
 
     out = Path(tempfile.mkdtemp())
     load, samp, write = [], [], []
-    for p in paths:
+    for i, p in enumerate(paths):
         t0 = time.perf_counter()
         run = api.prepare(str(p), COUNT, attributes="normal")
         t1 = time.perf_counter()
         chunks = list(run.chunks())
         t2 = time.perf_counter()
-        write_samples(chunks, out / "x.ply", "ply", run.layout, run.size)
+        # a new file each time, as in a batch: renaming over an existing file makes ext4 flush it first
+        write_samples(chunks, out / f"{i}.ply", "ply", run.layout, run.size)
         t3 = time.perf_counter()
         load.append(t1 - t0)
         samp.append(t2 - t1)
@@ -249,17 +259,22 @@ def stage_times(paths):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--copies", type=int, default=28, help="copies of each sample mesh")
+    ap.add_argument("--meshes", type=int, default=304, help="meshes in the collection")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--loop", type=int, default=20, help="meshes in the timed shell loop")
+    ap.add_argument("--no-dask", action="store_true", help="leave the Dask engine out")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     os.environ.setdefault("PYTHONPATH", str(ROOT))
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)  # an installed package has its bytecode cached
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "scatter_cli")], check=True,
+                   stdout=subprocess.DEVNULL)
+    load_before = os.getloadavg()
     work = Path(tempfile.mkdtemp(prefix="scatter-batch-bench-"))
     try:
         src = work / "meshes"
         src.mkdir()
-        paths = make_collection(src, args.copies)
+        paths = make_collection(src, -(-args.meshes // len(SMALL)))[: args.meshes]
         n = len(paths)
         listing = work / "meshes.txt"
         listing.write_text("".join(f"{p}\n" for p in paths))
@@ -271,27 +286,42 @@ def main():
         script = work / "tm_pool.py"
         script.write_text(TRIMESH_SCRIPT)
         common = ["-n", COUNT, "-a", "normal", "-q"]
-        times = {k: [] for k in ("batch", "trimesh", "dask_first", "dask", "cluster", "batch_one", "dask_one")}
+        kinds = ["batch", "trimesh", "batch_one", "sample_one"]
+        if not args.no_dask:
+            kinds += ["dask_first", "dask", "cluster", "dask_one"]
+        times = {k: [] for k in kinds}
+        cpus = {k: [] for k in kinds if k != "cluster"}  # CPU seconds of the command and the children it waited for
         cpu = {}
 
         def batch_cmd(lst, out, *engine):
             shutil.rmtree(out, ignore_errors=True)
             return scatter("batch", "--from-list", lst, "-o", f"{out}/{{stem}}.ply", *common, *engine)
 
-        for r in range(args.repeats):
-            t, cpu["batch"] = timed(batch_cmd(listing, work / "out", "-j", 2))
-            times["batch"].append(t)
-            times["batch_one"].append(timed(batch_cmd(one, work / "out", "-j", 2))[0])
-            times["trimesh"].append(run([sys.executable, str(script), str(jobs_file)]))
+        sample_one = scatter("sample", paths[0], *common, "-o", work / "one.ply")
+        for r in range(-1, args.repeats):  # round -1: the warm-up, not kept
+            def keep(kind, t, c=None):
+                if r >= 0:
+                    times[kind].append(t)
+                    if c is not None:
+                        cpus[kind].append(c["command"])
+
+            t, c = timed(batch_cmd(listing, work / "out", "-j", 2))
+            keep("batch", t, c)
+            cpu["batch"] = c
+            keep("batch_one", *timed(batch_cmd(one, work / "out", "-j", 2)))
+            keep("sample_one", *timed(sample_one))
+            keep("trimesh", *timed([sys.executable, str(script), str(jobs_file)]))
+            if args.no_dask:
+                continue
             address, cluster, started = start_cluster()
-            times["cluster"].append(started)
+            keep("cluster", started)
             try:
                 dask = ("--engine", "dask", "--scheduler", address)
                 t, cpu["dask_first"] = timed(batch_cmd(listing, work / "dask", *dask), cluster)
-                times["dask_first"].append(t)
+                keep("dask_first", t)
                 t, cpu["dask"] = timed(batch_cmd(listing, work / "dask", *dask), cluster)
-                times["dask"].append(t)
-                times["dask_one"].append(timed(batch_cmd(one, work / "dask", *dask), cluster)[0])
+                keep("dask", t)
+                keep("dask_one", timed(batch_cmd(one, work / "dask", *dask), cluster)[0])
             finally:
                 stop_cluster(cluster)
         memory = batch_memory(listing, work / "mem", n)
@@ -302,22 +332,28 @@ def main():
         stages = stage_times(paths)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    print(report(args, n, times, cpu, memory, t_loop, len(subset), stages))
+    text = report(args, n, times, cpu, memory, t_loop, len(subset), stages, load_before, cpus)
+    print(text)
     if args.out:
-        Path(args.out).write_text(report(args, n, times, cpu, memory, t_loop, len(subset), stages))
+        Path(args.out).write_text(text)
 
 
-def report(args, n, times, cpu, memory, t_loop, looped, stages):
+def report(args, n, times, cpu, memory, t_loop, looped, stages, load_before, cpus):
     med = {k: statistics.median(v) for k, v in times.items()}
-    rate = {k: n / med[k] for k in ("batch", "trimesh", "dask_first", "dask")}
+    cmed = {k: statistics.median(v) for k, v in cpus.items() if v}
+    engines = ("batch", "trimesh") + (() if args.no_dask else ("dask_first", "dask"))
+    rate = {k: n / med[k] for k in engines}
     rate["loop"] = n / t_loop
-    per_mesh = {k: (med[k] - med[k + "_one"]) / (n - 1) for k in ("batch", "dask")}
+    per_mesh = {k: (med[k] - med[k + "_one"]) / (n - 1) for k in ("batch",) + (() if args.no_dask else ("dask",))}
+    load = os.getloadavg()
     lines = [
-        f"# scatter batch: {n} meshes, {COUNT} points with normals each (binary PLY)",
+        f"# scatter batch: {n} small meshes, {COUNT} points with normals each (binary PLY)",
         "",
-        f"Command: `NUMPY_MADVISE_HUGEPAGE=0 PYTHONPATH=$PWD python benchmarks/batch.py --copies {args.copies} "
-        f"--repeats {args.repeats} --loop {args.loop}` ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
-        f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs)",
+        f"Command: `NUMPY_MADVISE_HUGEPAGE=0 PYTHONPATH=$PWD python benchmarks/batch.py --meshes {args.meshes} "
+        f"--repeats {args.repeats} --loop {args.loop}{' --no-dask' if args.no_dask else ''}` "
+        f"({time.strftime('%Y-%m-%d', time.gmtime())}; load average (1, 5, 15 min) before "
+        f"{' '.join(f'{x:.1f}' for x in load_before)}, after {' '.join(f'{x:.1f}' for x in load)} "
+        f"on {os.cpu_count()} CPUs)",
         "",
         "| run (whole command) | seconds (median) | meshes/s | scatter batch -j 2 is |",
         "|---|---|---|---|",
@@ -326,19 +362,35 @@ def report(args, n, times, cpu, memory, t_loop, looped, stages):
         f"{rate['batch'] / rate['trimesh']:.2f}x faster |",
         f"| shell loop of scatter sample ({looped} timed, scaled) | {t_loop:.1f} | {rate['loop']:.2f} | "
         f"{rate['batch'] / rate['loop']:.1f}x faster |",
-        f"| Dask, 2 workers x 1 thread: first batch on the cluster (starting its sampling processes included) | "
-        f"{med['dask_first']:.2f} | {rate['dask_first']:.1f} | {med['dask_first'] / med['batch']:.2f}x the time |",
-        f"| Dask, 2 workers x 1 thread: a later batch (sampling processes running) | {med['dask']:.2f} | "
-        f"{rate['dask']:.1f} | {med['dask'] / med['batch']:.2f}x the time |",
+    ]
+    if not args.no_dask:
+        lines += [
+            f"| Dask, 2 workers x 1 thread: first batch on the cluster (starting its sampling processes included) | "
+            f"{med['dask_first']:.2f} | {rate['dask_first']:.1f} | {med['dask_first'] / med['batch']:.2f}x the time |",
+            f"| Dask, 2 workers x 1 thread: a later batch (sampling processes running) | {med['dask']:.2f} | "
+            f"{rate['dask']:.1f} | {med['dask'] / med['batch']:.2f}x the time |",
+        ]
+    lines += [
         "",
         "All runs (s): " + "; ".join(f"{k} " + ", ".join(f"{t:.2f}" for t in v) for k, v in times.items()),
         "",
-        f"Starting the Dask cluster (scheduler and 2 workers, until connected; not in any time above): "
-        f"{med['cluster']:.2f} s.",
+        "CPU seconds of the whole command (its own and its workers', median): "
+        + ", ".join(f"{k} {v:.2f}" for k, v in cmed.items())
+        + f". On a loaded machine the wall times above stretch; CPU seconds less so: -j 2 costs "
+        f"{cmed['trimesh'] / cmed['batch']:.2f}x less CPU than the trimesh script, and its fixed cost is "
+        f"{cmed['batch_one'] - cmed['sample_one']:+.2f} CPU s against one `scatter sample`.",
+        "All runs (CPU s): " + "; ".join(f"{k} " + ", ".join(f"{t:.2f}" for t in v) for k, v in cpus.items() if v),
         "",
-        f"Fixed cost of a run (a batch of one mesh): -j 2 {med['batch_one']:.2f} s, Dask {med['dask_one']:.2f} s "
-        f"(later batch). Cost per further mesh ((all - one) / {n - 1}): -j 2 {per_mesh['batch'] * 1e3:.1f} ms, "
-        f"Dask {per_mesh['dask'] * 1e3:.1f} ms.",
+        f"Fixed cost: one `scatter sample` of the first mesh {med['sample_one']:.2f} s; a batch of that one mesh: "
+        f"-j 2 {med['batch_one']:.2f} s ({med['batch_one'] - med['sample_one']:+.2f} s)"
+        + ("" if args.no_dask else f", Dask {med['dask_one']:.2f} s (later batch)") + ". "
+        f"Cost per further mesh ((all - one) / {n - 1}): "
+        + ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in per_mesh.items()) + ".",
+    ]
+    if not args.no_dask:
+        lines += ["", f"Starting the Dask cluster (scheduler and 2 workers, until connected; not in any time above): "
+                      f"{med['cluster']:.2f} s."]
+    lines += [
         "",
         "CPU seconds of one run (last repeat), by process: "
         + "; ".join(f"{k}: " + ", ".join(f"{role} {v:.2f}" for role, v in c.items()) + f" (total {sum(c.values()):.2f})"

@@ -190,6 +190,11 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
     plan_outputs(found, template, fmt)
     check_output(infer_format(template.fill(found.fields(0)), fmt), ascii, crs)
     setup = {"options": options.as_dict(), "ascii": ascii, "crs": crs, "quiet": quiet}
+    if report is not None and os.fspath(report) != "-":
+        report = os.path.abspath(report)
+        from .worker import remove_temps
+
+        remove_temps(report)  # what a killed run of this report left (outputs' are cleared per mesh)
     tally = Tally(len(found), report, collect, progress and not quiet, quiet)
     jobs_iter = ((i, found.paths[i], template.fill(found.fields(i))) for i in range(len(found)))
     try:
@@ -199,8 +204,8 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
             run_dask(jobs_iter, setup, fmt, client=client, scheduler=scheduler, timeout=timeout,
                      max_memory=max_memory, skip_existing=skip_existing, done=tally.add)
         else:
-            run_local(jobs_iter, setup, fmt, jobs=jobs or available_cpus(), timeout=timeout, max_memory=max_memory,
-                      skip_existing=skip_existing, done=tally.add)
+            run_local(jobs_iter, setup, fmt, jobs=min(jobs or available_cpus(), len(found)), timeout=timeout,
+                      max_memory=max_memory, skip_existing=skip_existing, done=tally.add)
     finally:
         tally.close()
     result = tally.summary(time.monotonic() - started)
@@ -218,11 +223,15 @@ def available_cpus() -> int:
 
 
 def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing, done):
-    """``jobs`` lanes (threads, each driving one worker process) take meshes one at a time."""
+    """``jobs`` lanes (threads, each driving one worker process) take meshes one at a time.
+
+    The workers are forked from this process, after it has imported what they need, when
+    it may fork (:func:`scatter_cli.worker.can_fork`): none imports NumPy or trimesh again.
+    """
     import queue
     import threading
 
-    from .worker import Lane, StaleTemps
+    from .worker import Lane, StaleTemps, WorkerProcess, can_fork, preload
     from .writers import infer_format
 
     env = dict(os.environ)
@@ -230,7 +239,11 @@ def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing
     stale = StaleTemps()
     lock = threading.Lock()
     results = queue.Queue()
-    lanes = [Lane(setup, env, timeout, max_memory, skip_existing, stale) for _ in range(jobs)]
+    fork = can_fork()
+    if fork:
+        preload()
+    lanes = [Lane(setup, env, timeout, max_memory, skip_existing, stale,
+                  WorkerProcess(setup, env, fork=True) if fork else None) for _ in range(jobs)]
 
     def work(lane):
         try:
@@ -246,19 +259,24 @@ def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing
                 results.put((None, exc))
         finally:
             lane.close()
+            results.put((None, None))  # this lane is done
 
     threads = [threading.Thread(target=work, args=(lane,), daemon=True) for lane in lanes]
     for t in threads:
         t.start()
     try:
-        while any(t.is_alive() for t in threads) or not results.empty():
+        running = len(threads)
+        while running:
             try:
-                index, rec = results.get(timeout=0.2)
+                index, rec = results.get(timeout=1.0)
             except queue.Empty:
                 continue
-            if index is None:
+            if index is not None:
+                done(index, rec)
+            elif rec is None:
+                running -= 1
+            else:
                 raise rec
-            done(index, rec)
     except BaseException:
         for lane in lanes:
             lane.stop()
@@ -289,10 +307,17 @@ class Tally:
             self.stream = self._report_cm.__enter__()
 
     def add(self, index, rec):
+        """The record ``rec`` of mesh ``index``: its warnings (a list the report does not
+        keep, each naming the mesh) and its error are printed, the progress line erased first."""
         self.counts[rec["status"]] += 1
-        if rec["status"] == "failed" and not self.quiet:
-            self._clear_line()
-            print(f"error: {rec['error']}", file=sys.stderr, flush=True)
+        warnings = rec.pop("warnings", None) or ()
+        if not self.quiet:
+            lines = [f"warning: {w}" for w in warnings]
+            if rec["status"] == "failed":
+                lines.append(f"error: {rec['error']}")
+            if lines:
+                self._clear_line()
+                print("\n".join(lines), file=sys.stderr, flush=True)
         self.pending[index] = rec
         while self.next in self.pending:
             self._emit(self.pending.pop(self.next))

@@ -272,6 +272,7 @@ def batch(
 
       scatter batch /shared/meshes -o /shared/pts/{rel}.ply --engine dask --scheduler tcp://head:8786
     """
+    process.lean_trimesh()
     from .batch import run_batch
 
     result = run_batch(inputs or [], output, from_list=from_list, jobs=jobs, skip_existing=skip_existing,

@@ -63,8 +63,10 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
     A group that gives no records (its workers were lost past Dask's allowed-failures) is
     run again one mesh a task, so only a mesh that kills its workers fails.
 
-    With ``skip_existing`` whether each output exists is decided here, once, before its
-    task exists: a task Dask runs again after losing a worker that had written the output
+    Every path is made absolute here, against this process's folder, before its task
+    exists (a Dask worker runs in a folder of its own); the records and their messages
+    give the paths as ``jobs_iter`` spelled them. With ``skip_existing`` whether each
+    output exists is decided here, once, before its task exists: a task Dask runs again after losing a worker that had written the output
     writes it again (the same bytes) and reports it written, not skipped.
     """
     distributed = _import_distributed()
@@ -73,12 +75,16 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
         client = connect(scheduler)
     batch_id = uuid.uuid4().hex[:8]
     tasks = {}  # future -> its jobs [(index, input, output, fmt, skip)], until its records are in
+    given = {}  # index -> (input, output) as given, for the jobs in flight
     size = GroupSize()
     try:
         threads = max(1, sum(client.nthreads().values()))
         window = WINDOW_PER_THREAD * threads
         pending = distributed.as_completed(loop=client.loop)
-        jobs = _task_jobs(jobs_iter, fmt, skip_existing)
+        jobs = _task_jobs(jobs_iter, fmt, skip_existing, given)
+
+        def finish(job, rec):
+            done(job[0], as_given(rec, *given.pop(job[0])))
 
         def submit(groups, keys):
             if groups:
@@ -105,11 +111,11 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
                     if isinstance(got, list):
                         size.learn(got)
                         for job, rec in zip(group, got):
-                            done(job[0], rec)
+                            finish(job, rec)
                     elif len(group) > 1:
                         alone.extend([job] for job in group)
                     else:
-                        done(group[0][0], _lost(got, group[0][1], group[0][2], distributed))
+                        finish(group[0], _lost(got, group[0][1], group[0][2], distributed))
                 submit(alone, [f"scatter-{batch_id}-{g[0][0]}-alone" for g in alone])
                 ready = []
             if pending.count() <= window // 2:
@@ -122,12 +128,33 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
             client.close()
 
 
-def _task_jobs(jobs_iter, fmt, skip_existing):
-    """The jobs as tasks take them: ``(index, input, output, format, skip)``."""
+def _task_jobs(jobs_iter, fmt, skip_existing, given):
+    """The jobs as tasks take them: ``(index, input, output, format, skip)``, the paths
+    absolute; ``given[index]`` keeps the paths as ``jobs_iter`` spelled them."""
     from .writers import infer_format
 
     for index, input, output in jobs_iter:
-        yield index, input, output, infer_format(output, fmt), skip_existing and os.path.isfile(output)
+        given[index] = (input, output)
+        target = os.path.abspath(output)
+        yield index, os.path.abspath(input), target, infer_format(output, fmt), skip_existing and os.path.isfile(target)
+
+
+def as_given(rec, input, output):
+    """The record ``rec`` of a task (absolute paths) with the paths spelled as given, in
+    its fields and its messages."""
+    spelled = sorted({(rec["output"], output), (rec["input"], input)}, key=lambda pair: -len(pair[0]))
+
+    def respell(text):
+        for absolute, shown in spelled:
+            text = text.replace(absolute, shown)
+        return text
+
+    rec = dict(rec, input=input, output=output)
+    if rec["error"]:
+        rec["error"] = respell(rec["error"])
+    if rec.get("warnings"):
+        rec["warnings"] = [respell(w) for w in rec["warnings"]]
+    return rec
 
 
 class GroupSize:

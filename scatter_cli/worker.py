@@ -30,6 +30,9 @@ import threading
 import time
 
 POLL = 0.05  # seconds between checks of a running job's time and memory
+# bytes of resident memory above a worker's own after start-up past which it hands freed
+# memory back after a job (doing so after every job costs small meshes 15-25% of their time)
+TRIM_ABOVE = 64 << 20
 _PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
 
@@ -49,12 +52,16 @@ def serve():
     if setup is None:
         return
     _warm_up()
+    settled = resident_bytes(os.getpid())
     answer.write('{"ready": true}\n')
-    warn = None if setup.get("quiet") else (lambda m: print(f"warning: {m}", file=sys.stderr, flush=True))
     for line in sys.stdin:
         job = json.loads(line)
-        answer.write(json.dumps(sample_file(job["input"], job["output"], job["format"], setup, warn)) + "\n")
-        _trim_heap()
+        warnings = []  # handed to the parent, which prints them between its progress lines
+        result = sample_file(job["input"], job["output"], job["format"], setup,
+                             None if setup.get("quiet") else warnings.append)
+        answer.write(json.dumps(dict(result, warnings=warnings)) + "\n")
+        if resident_bytes(os.getpid()) > settled + TRIM_ABOVE:
+            _trim_heap()
 
 
 def sample_file(input, output, fmt, setup, warn=None):
@@ -96,9 +103,9 @@ def name_the_file(message, input, output=None):
 
 def _warm_up():
     from . import api, writers  # noqa: F401  (NumPy, the sampler and the writers)
-    from .process import import_trimesh_lean
+    from .process import lean_trimesh
 
-    import_trimesh_lean()  # as the command line imports it: SciPy hidden
+    lean_trimesh()  # trimesh as the command line imports it (SciPy hidden), when a mesh needs it
 
 
 def _die_with_parent():
@@ -126,13 +133,20 @@ def _trim_heap():
 # ---------------------------------------------------------------- the parent side ----
 
 class WorkerProcess:
-    """One child; ``run(job)`` sends it one job and waits for its answer."""
+    """One child; ``run(job)`` sends it one job and waits for its answer.
 
-    def __init__(self, setup, env=None):
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "scatter_cli.worker"],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0,
-        )
+    ``fork``: fork it from this process (:class:`Forked`, see :func:`can_fork`) instead of
+    starting ``python -m scatter_cli.worker``.
+    """
+
+    def __init__(self, setup, env=None, fork=False):
+        if fork:
+            self.proc = Forked(env)
+        else:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "scatter_cli.worker"],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0,
+            )
         self.proc.stdin.write((json.dumps(setup) + "\n").encode())
         self.ready = False
         self.output = None  # the output of the job in flight
@@ -212,6 +226,104 @@ class WorkerProcess:
             self.proc.wait()
 
 
+def can_fork() -> bool:
+    """Whether workers may be forked from this process: on Linux, from the main thread
+    while it is the only one (a thread holding a lock at the fork would leave the
+    child's copy of that lock held for ever)."""
+    return (sys.platform.startswith("linux") and threading.current_thread() is threading.main_thread()
+            and threading.active_count() == 1)
+
+
+def preload():
+    """Import in this process what the workers forked from it need (NumPy, the sampler,
+    the writers), so that none imports it again. Not trimesh: the fast readers load the
+    plain formats without it (a worker imports it for the first mesh that needs it)."""
+    from . import api, writers  # noqa: F401
+
+
+class Forked:
+    """A worker forked from this process (which has imported what it needs: :func:`preload`),
+    in place of ``subprocess.Popen``: ``pid``, ``stdin``, ``stdout``, ``wait``, ``kill``.
+
+    Fork only where :func:`can_fork` says so. The child keeps standard error; its standard
+    input and output are pipes to this process, every other file of this process is closed
+    in it (another worker's pipe held open would hide that worker's death), and it leaves
+    with ``os._exit``, so buffers and handlers of this process never run there.
+    """
+
+    def __init__(self, env=None):
+        job_r, job_w = os.pipe()
+        answer_r, answer_w = os.pipe()
+        self.pid = os.fork()
+        if self.pid == 0:
+            _forked_child(job_r, answer_w, env)
+        os.close(job_r)
+        os.close(answer_w)
+        self.stdin = os.fdopen(job_w, "wb", buffering=0)
+        self.stdout = os.fdopen(answer_r, "rb", buffering=0)
+        self.returncode = None
+
+    def poll(self):
+        if self.returncode is None:
+            pid, status = os.waitpid(self.pid, os.WNOHANG)
+            if pid:
+                self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
+
+    def wait(self, timeout=None):
+        if timeout is None:
+            if self.returncode is None:
+                self.returncode = os.waitstatus_to_exitcode(os.waitpid(self.pid, 0)[1])
+            return self.returncode
+        deadline = time.monotonic() + timeout
+        while self.poll() is None:
+            if time.monotonic() > deadline:
+                raise subprocess.TimeoutExpired(f"worker {self.pid}", timeout)
+            time.sleep(0.005)
+        return self.returncode
+
+    def kill(self):
+        if self.poll() is None:
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
+
+def _forked_child(job_r, answer_w, env):
+    """The forked worker: standard input and output on the pipes, then :func:`serve`."""
+    code = 1
+    try:
+        os.dup2(job_r, 0)
+        os.dup2(answer_w, 1)
+        _close_files_from(3)
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        if env is not None:
+            os.environ.update(env)
+        # streams of its own: this process's may hold buffered text that is not the child's
+        sys.stdin = open(0, encoding="utf-8", closefd=False)
+        sys.stdout = open(1, "w", buffering=1, closefd=False)
+        sys.stderr = open(2, "w", buffering=1, closefd=False)
+        serve()
+        code = 0
+    finally:
+        os._exit(code)
+
+
+def _close_files_from(low):
+    try:
+        fds = [int(fd) for fd in os.listdir("/proc/self/fd")]
+    except OSError:
+        os.closerange(low, os.sysconf("SC_OPEN_MAX"))
+        return
+    for fd in fds:
+        if fd >= low:
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
 def resident_bytes(pid) -> int:
     try:
         with open(f"/proc/{pid}/statm") as f:
@@ -278,16 +390,19 @@ class StaleTemps:
 class Lane:
     """Runs jobs one after another in a child, replacing it when a job kills it."""
 
-    def __init__(self, setup, env=None, timeout=None, max_memory=None, skip_existing=False, stale=None):
+    def __init__(self, setup, env=None, timeout=None, max_memory=None, skip_existing=False, stale=None, worker=None):
+        """``worker``: a :class:`WorkerProcess` to start with (later ones, after a job
+        killed its child, are started with ``python -m scatter_cli.worker``)."""
         self.setup, self.env = setup, env
         self.timeout, self.max_memory = timeout, max_memory
         self.skip_existing = skip_existing
         self.stale = stale if stale is not None else StaleTemps()
-        self.worker = None
+        self.worker = worker
         self.stopped = False
 
     def process(self, input, output, fmt, skip=None):
-        """The report record of one mesh (``input``, ``output``, ``status``, ``error``, ...).
+        """The report record of one mesh (``input``, ``output``, ``status``, ``error``, ...),
+        with ``warnings`` (lines naming the mesh) when sampling it warned.
 
         ``skip``: whether an existing output is skipped (default: the lane's ``skip_existing``).
         """
@@ -298,6 +413,7 @@ class Lane:
         try:
             if self.worker is None:
                 self.worker = WorkerProcess(self.setup, self.env)
+            if not self.worker.ready:
                 self.worker.wait_ready()
                 t = time.perf_counter()
             answer = self.worker.run(input, output, fmt, self.timeout, self.max_memory)
@@ -308,8 +424,11 @@ class Lane:
                 raise
             answer = {"error": name_the_file(str(lost), input), "count": None, "faces": None, "area": None}
         status = "failed" if answer["error"] else "written"
-        return record(input, output, status, answer["error"], answer["count"], answer["faces"], answer["area"],
-                      time.perf_counter() - t)
+        rec = record(input, output, status, answer["error"], answer["count"], answer["faces"], answer["area"],
+                     time.perf_counter() - t)
+        if answer.get("warnings"):  # not a report field: the batch prints and drops them
+            rec["warnings"] = [name_the_file(w, input) for w in answer["warnings"]]
+        return rec
 
     def stop(self):
         """Kill the child now (an interrupted batch); the job in flight raises WorkerLost."""

@@ -6,7 +6,7 @@ import shutil
 import signal
 import time
 
-from .conftest import SAMPLES, run_scatter
+from .conftest import ROOT, SAMPLES, run_scatter, run_user, scatter_command
 
 GOOD = ["icosahedron_binary.stl", "moebius-160-10.ply", "hemisphere.off", "narrow_triangles.obj",
         "boxvertexcolors.glb"]
@@ -173,3 +173,31 @@ def fifo_reader(fifo, exclude=()):
 def parent_of(pid):
     with open(f"/proc/{pid}/stat") as f:
         return int(f.read().rsplit(")", 1)[1].split()[1])
+
+
+def warning_meshes(folder):
+    """Two meshes that sample with a warning: one with a face whose vertex is not finite,
+    one so far from the origin that float32 would move its points (float64 is written)."""
+    folder.mkdir(exist_ok=True)
+    (folder / "non-finite.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv nan 0 0\nf 1 2 3\nf 1 2 4\n")
+    (folder / "far.obj").write_text("v 1e7 0 0\nv 10000001 0 0\nv 1e7 1 0\nf 1 2 3\n")
+    return [folder / "non-finite.obj", folder / "far.obj"]
+
+
+def sample_warnings(mesh, cwd, *options):
+    """The warning lines of `scatter sample MESH OPTIONS` run in ``cwd``, each naming
+    ``mesh`` as a batch names it: what a batch of ``mesh`` must print."""
+    done = run_elsewhere(cwd, "sample", mesh, *options, "-f", "ply", "-o", os.devnull)
+    assert done.returncode == 0, done.stderr
+    lines = [line for line in done.stderr.decode().splitlines() if line.startswith("warning: ")]
+    assert lines, f"scatter sample {mesh} gave no warning"
+    return [line if str(mesh) in line else f"warning: {mesh}: {line[len('warning: '):]}" for line in lines]
+
+
+def warning_lines(stderr):
+    return sorted(line for line in stderr.decode().splitlines() if line.startswith("warning:"))
+
+
+def run_elsewhere(cwd, *args):
+    """The real command run in the folder ``cwd`` (this tree still the one imported)."""
+    return run_user(scatter_command(*args), cwd=cwd, env={"PYTHONPATH": str(ROOT)})

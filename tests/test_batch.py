@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import scatter_cli
+from scatter_cli import worker
 from scatter_cli.errors import ScatterUsageError
 
 from .batchtools import collection, no_temporary_files, outputs, reader_fd, reference, wait_for_reader
@@ -78,7 +79,24 @@ def bad_meshes(folder):
     return bad
 
 
-def test_bad_meshes_fail_alone(tmp_path, meshes):
+@pytest.fixture(params=["forked", "started"])
+def workers(request, monkeypatch):
+    """How the local engine starts its workers: forked from this process (as the command
+    does), or each started as `python -m scatter_cli.worker` (a program with threads)."""
+    monkeypatch.setattr(worker, "can_fork", lambda: request.param == "forked")
+    return request.param
+
+
+def test_workers_are_forked_only_from_a_lone_main_thread():
+    assert worker.can_fork() is (threading.active_count() == 1)
+    got = []
+    thread = threading.Thread(target=lambda: got.append(worker.can_fork()))
+    thread.start()
+    thread.join()
+    assert got == [False]
+
+
+def test_bad_meshes_fail_alone(tmp_path, meshes, workers):
     base, paths, ref, _ = meshes
     bad = bad_meshes(tmp_path / "bad")
     os.mkfifo(tmp_path / "bad" / "fifo.ply")  # nobody writes to it: only --timeout ends it
@@ -106,7 +124,7 @@ def test_bad_meshes_fail_alone(tmp_path, meshes):
     assert no_temporary_files(tmp_path)
 
 
-def test_a_worker_killed_mid_batch_fails_its_mesh_alone(tmp_path, meshes):
+def test_a_worker_killed_mid_batch_fails_its_mesh_alone(tmp_path, meshes, workers):
     base, paths, ref, _ = meshes
     fifo = tmp_path / "in" / "fifo.csv.ply"
     fifo.parent.mkdir()
@@ -117,6 +135,7 @@ def test_a_worker_killed_mid_batch_fails_its_mesh_alone(tmp_path, meshes):
         inputs, str(tmp_path / "out" / "{stem}"), jobs=2, count=300, attributes="normal,face")))
     thread.start()
     reader = wait_for_reader(fifo)
+    assert ("scatter_cli.worker" in open(f"/proc/{reader}/cmdline").read()) is (workers == "started")
     os.kill(reader, 9)
     os.close(reader_fd.pop())
     thread.join(60)

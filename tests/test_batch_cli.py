@@ -13,7 +13,7 @@ import time
 import pytest
 
 from .conftest import SAMPLES, popen_user, run_scatter, scatter_command
-from .batchtools import outputs, reader_fd, wait_for_reader
+from .batchtools import alive, outputs, parent_of, reader_fd, wait_for_reader, warning_meshes
 
 MESHES = ["icosahedron_binary.stl", "moebius-160-10.ply", "hemisphere.off", "narrow_triangles.obj"]
 
@@ -103,6 +103,8 @@ def test_progress_on_a_terminal_only(tmp_path):
     none of it."""
     src = folder_with_fifo(tmp_path)
     (src / "e.obj").write_text("not a mesh\n")  # replaces MESHES[3]: the one failure, last
+    os.unlink(src / "d.off")
+    os.replace(warning_meshes(tmp_path / "warn")[0], src / "d.obj")  # written, with a warning
     args = [src, "-o", f"{tmp_path}/out/{{stem}}.ply", "-n", "100", "-j", "1"]
     main, terminal = pty.openpty()
     proc = popen_user(scatter_command("batch", *args), stdout=subprocess.PIPE, stderr=terminal)
@@ -126,6 +128,7 @@ def test_progress_on_a_terminal_only(tmp_path):
     assert drawn == sorted(drawn)
     assert [p for p in pieces if p.startswith("error:")] == [p for p in pieces if "e.obj" in p]
     assert len([p for p in pieces if p.startswith("error:")]) == 1
+    assert [p for p in pieces if "warning:" in p] == [f"warning: {src / 'd.obj'}: skipped 1 faces with non-finite vertices"]
     assert text.rstrip().splitlines()[-1].startswith("\x1b[Kbatch: 4 written, 0 skipped, 1 failed in ")
     os.unlink(src / "c.ply")
     shutil.copy(SAMPLES / MESHES[1], src / "c.ply")
@@ -207,3 +210,43 @@ def test_batch_writes_what_sample_writes_for_formats_that_read_the_run(tmp_path,
         single = run_scatter("sample", src / name, "-n", "300", "-o", tmp_path / f"{stem}.{suffix}")
         assert single.returncode == 0
         assert (tmp_path / "out" / f"{stem}.{suffix}").read_bytes() == (tmp_path / f"{stem}.{suffix}").read_bytes()
+
+
+def test_a_rerun_clears_what_a_batch_killed_with_sigkill_left(tmp_path):
+    """kill -9 of a batch writing its second mesh, with --report: its worker dies with it,
+    leaving that output's temporary file and the report's. A --skip-existing rerun of the
+    same outputs and report removes both, and its report lists both meshes."""
+    src = tmp_path / "in"
+    src.mkdir()
+    for letter in "ab":
+        shutil.copy(SAMPLES / MESHES[0], src / f"{letter}.stl")
+    out = tmp_path / "out"
+    args = [src, "-o", f"{out}/{{stem}}.csv", "-n", "500000", "-j", "1", "--report", tmp_path / "report.jsonl"]
+    proc = start_batch(*args)
+    worker = None
+    while worker is None:  # until b is being written: its temporary file is there
+        assert proc.poll() is None, proc.communicate()
+        if out.is_dir() and [p for p in out.iterdir() if p.name.startswith(".b.csv.")]:
+            worker = next(pid for pid in children(proc.pid))
+            os.kill(worker, signal.SIGSTOP)  # b stays half-written until the worker is killed
+    with open(f"/proc/{worker}/cmdline", "rb") as f:
+        assert b"scatter_cli.worker" not in f.read()  # forked from the command, as it forks them
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 60
+    while alive(worker):  # killed with its parent (PR_SET_PDEATHSIG)
+        assert time.monotonic() < deadline, "the worker outlived its batch"
+        time.sleep(0.01)
+    assert sorted(p.name.split(".")[1] for p in tmp_path.rglob("*.part")) == ["b", "report"]
+    assert (out / "a.csv").is_file() and not (tmp_path / "report.jsonl").exists()
+    done = run_scatter("batch", *args[:3], "-n", "20", "-j", "1", "--report", tmp_path / "report.jsonl",
+                       "--skip-existing")
+    assert done.returncode == 0, done.stderr
+    assert not [p for p in tmp_path.rglob("*.part")]
+    report = [json.loads(line) for line in (tmp_path / "report.jsonl").read_text().splitlines()]
+    assert [(os.path.basename(r["input"]), r["status"]) for r in report] == [("a.stl", "skipped"), ("b.stl", "written")]
+
+
+def children(pid):
+    """The pids of the processes whose parent is ``pid``."""
+    return [int(p) for p in filter(str.isdigit, os.listdir("/proc")) if alive(int(p)) and parent_of(int(p)) == pid]

@@ -7,6 +7,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 
 import pytest
@@ -14,8 +15,9 @@ import pytest
 import scatter_cli
 from scatter_cli import dask_engine
 
-from .conftest import SAMPLES, popen_user, scatter_command
-from .batchtools import HANG, Feeder, alive, collection, outputs, parent_of, reference
+from .conftest import ROOT, SAMPLES, popen_user, run_user, scatter_command
+from .batchtools import (HANG, Feeder, alive, collection, outputs, parent_of, reference, run_elsewhere,
+                         sample_warnings, warning_lines, warning_meshes)
 
 distributed = pytest.importorskip("distributed")
 
@@ -26,16 +28,16 @@ def free_port():
         return s.getsockname()[1]
 
 
-def start_cluster(workers, scheduler_env=None):
-    """A `dask scheduler` and ``workers`` one-thread `dask worker` processes on 127.0.0.1:
-    (client, address, worker processes, all processes)."""
+def start_cluster(workers, scheduler_env=None, home=None):
+    """A `dask scheduler` and ``workers`` one-thread `dask worker` processes on 127.0.0.1,
+    the workers in the folder ``home``: (client, address, worker processes, all processes)."""
     dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     quiet = dict(stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     procs = [popen_user([*dask, "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], env=scheduler_env,
                         **quiet)]
-    procs += [start_worker(address) for _ in range(workers)]
+    procs += [start_worker(address, home) for _ in range(workers)]
     try:
         client = distributed.Client(address, timeout=60, set_as_default=False)
         client.wait_for_workers(workers, timeout=60)
@@ -45,10 +47,13 @@ def start_cluster(workers, scheduler_env=None):
     return client, address, procs[1:], procs
 
 
-def start_worker(address):
-    """A one-thread `dask worker` process for the scheduler at ``address``."""
+def start_worker(address, home=None):
+    """A one-thread `dask worker` process for the scheduler at ``address``, working in the
+    folder ``home`` (default: a new one), not the tests' (as on another machine)."""
+    home = home or tempfile.mkdtemp(prefix="dask-worker-")
     return popen_user([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--no-nanny",
-                       "--no-dashboard", "--host", "127.0.0.1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                       "--no-dashboard", "--host", "127.0.0.1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                      cwd=home, env={"PYTHONPATH": str(ROOT)})
 
 
 def stop(procs):
@@ -58,10 +63,11 @@ def stop(procs):
 
 
 @pytest.fixture(scope="module")
-def cluster():
-    client, address, workers, procs = start_cluster(2)
+def cluster(tmp_path_factory):
+    home = tmp_path_factory.mktemp("dask-worker-home")
+    client, address, workers, procs = start_cluster(2, home=home)
     try:
-        yield client, address, workers
+        yield client, address, workers, home
     finally:
         client.close()
         stop(procs)
@@ -75,7 +81,7 @@ def meshes(tmp_path_factory):
 
 
 def test_dask_writes_what_sample_writes(tmp_path, cluster, meshes):
-    client, address, _ = cluster
+    client, address, _, _ = cluster
     base, paths, ref = meshes
     (base / "in" / "garbage.ply.stl").write_bytes(b"solid nothing\n" * 3)
     try:
@@ -116,7 +122,7 @@ def batch_in_thread(client, inputs, out, **options):
 
 def test_a_dask_worker_killed_mid_batch(tmp_path, cluster, meshes):
     """The lost worker's task runs again on the other one: every good mesh is written."""
-    client, address, workers = cluster
+    client, address, workers, _ = cluster
     base, paths, ref = meshes
     fifo = tmp_path / "in" / "fifo.npy.obj"  # gets narrow_triangles.obj's bytes, late
     fifo.parent.mkdir()
@@ -279,3 +285,50 @@ def test_group_size_follows_the_measured_time_per_mesh():
     skipped = dask_engine.GroupSize()
     skipped.learn([{"seconds": 0.0}] * 4)
     assert skipped.size == dask_engine.MAX_GROUP
+
+
+def test_relative_paths_are_the_commands_not_the_workers(tmp_path, cluster, meshes):
+    """The Dask workers run in a folder of their own: relative inputs, template and report
+    are the command's, and --skip-existing looks where the tasks write."""
+    client, address, _, home = cluster
+    base, paths, ref = meshes
+    cmd = tmp_path / "cmd"
+    cmd.mkdir()
+    collection(cmd / "coll")
+
+    def batch(*args):
+        done = run_elsewhere(cmd, "batch", *args, "-n", "300", "-a", "normal,face", "--engine", "dask",
+                             "--scheduler", address)
+        assert done.returncode == 0, done.stderr.decode()
+        return [json.loads(line) for line in (cmd / args[-1]).read_text().splitlines()]
+
+    report = batch("coll", "-o", "pts/{rel}", "--report", "report.jsonl")
+    assert outputs(cmd / "pts") == ref
+    names = sorted(p.name for p in paths)
+    assert [(r["input"], r["output"], r["status"]) for r in report] == \
+        [(f"coll/{n}", f"pts/{os.path.splitext(n)[0]}", "written") for n in names]
+    first = os.path.splitext(names[0])[0]
+    (cmd / "pts" / first).unlink()
+    again = batch(cmd / "coll", "-o", "pts/{rel}", "--skip-existing", "--report", "again.jsonl")
+    assert [r["status"] for r in again] == ["written"] + ["skipped"] * (len(names) - 1)
+    assert outputs(cmd / "pts") == ref
+    assert not [p for p in home.rglob("*") if p.name in ref or p.suffix == ".jsonl"]
+
+
+def test_warnings_name_their_mesh_on_both_engines(tmp_path, cluster):
+    """A mesh's warnings reach the command's standard error from a Dask worker as from a
+    local one: the lines `scatter sample` prints, each naming its mesh."""
+    client, address, _, _ = cluster
+    warning_meshes(tmp_path / "in")
+    options = ["-n", "100"]
+    expected = sorted(line for name in ("in/non-finite.obj", "in/far.obj")
+                      for line in sample_warnings(name, tmp_path, *options))
+    assert len(expected) == 2
+    local = run_elsewhere(tmp_path, "batch", "in", "-o", "local/{stem}.ply", *options, "-j", "2")
+    dask = run_elsewhere(tmp_path, "batch", "in", "-o", "dask/{stem}.ply", *options, "--engine", "dask",
+                         "--scheduler", address)
+    assert local.returncode == dask.returncode == 0, (local.stderr, dask.stderr)
+    assert warning_lines(local.stderr) == warning_lines(dask.stderr) == expected
+    quiet = run_elsewhere(tmp_path, "batch", "in", "-o", "quiet/{stem}.ply", *options, "--engine", "dask",
+                          "--scheduler", address, "-q")
+    assert quiet.returncode == 0 and quiet.stderr == b""
