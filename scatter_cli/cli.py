@@ -277,7 +277,7 @@ def batch(
 
     result = run_batch(inputs or [], output, from_list=from_list, jobs=jobs, skip_existing=skip_existing,
                        timeout=timeout, max_memory=max_memory, report=report, engine=engine, scheduler=scheduler,
-                       fmt=fmt, ascii=ascii, options=SampleOptions.of(locals()), quiet=quiet,
+                       fmt=fmt, ascii=ascii, crs=crs, options=SampleOptions.of(locals()), quiet=quiet,
                        progress=sys.stderr.isatty())
     if result["failed"]:
         raise typer.Exit(1)

@@ -9,11 +9,14 @@ line on standard error for every other failure, and no traceback unless ``--debu
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import sys
 
 from .errors import STDOUT, OutputClosed, ScatterError, writing
 from .interrupts import Interrupted, Terminated, install
+
+_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO)  # a write that cannot go on
 
 
 class Options:
@@ -114,13 +117,16 @@ def run_command(command, argv):
     except Exception as exc:
         if options.debug:
             raise
-        code = fail(_stdout_failure() or f"internal error: {type(exc).__name__}: {exc} (run with --debug for a traceback)", 1)
+        code = fail(_stdout_failure(exc) or f"internal error: {type(exc).__name__}: {exc} (run with --debug for a traceback)", 1)
     return code
 
 
-def _stdout_failure():
+def _stdout_failure(exc=None):
     """The message for a standard output that cannot take its data (click's own writes, such
-    as --help, flush as they go), or None when standard output is fine."""
+    as --help, flush as they go: a long text fails in click's write, a short one at the
+    flush), or None when standard output is fine."""
+    if isinstance(exc, OSError) and exc.filename is None and exc.errno in _FULL:
+        return f"{STDOUT}: cannot write: {exc.strerror or exc}"
     try:
         sys.stdout.flush()
     except BrokenPipeError:

@@ -119,8 +119,8 @@ def test_the_command_line_and_the_options_share_their_defaults():
             default = params[name].default
             assert default is None or default == fields[name], (command.__name__, name, default)
     assert shared["sample"] - {"input_format"} == shared["batch"]  # batch reads no standard input
-    # what the command line does not offer: the API's oversampling, and the volume options (not yet built)
-    assert set(fields) - shared["sample"] == {"oversampling", "volume", "near", "box_share", "padding", "sign"}
+    # what the command line does not offer: the API's oversampling
+    assert set(fields) - shared["sample"] == {"oversampling"}
 
 
 def test_whole_numbers_as_users_type_them():
