@@ -226,7 +226,7 @@ def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing
     """``jobs`` lanes (threads, each driving one worker process) take meshes one at a time.
 
     The workers are forked from this process, after it has imported what they need, when
-    it may fork (:func:`scatter_cli.worker.can_fork`): none imports NumPy or trimesh again.
+    it may fork (:func:`scatter_cli.worker.can_fork`): none imports NumPy again.
     """
     import queue
     import threading

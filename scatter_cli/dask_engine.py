@@ -66,8 +66,9 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
     Every path is made absolute here, against this process's folder, before its task
     exists (a Dask worker runs in a folder of its own); the records and their messages
     give the paths as ``jobs_iter`` spelled them. With ``skip_existing`` whether each
-    output exists is decided here, once, before its task exists: a task Dask runs again after losing a worker that had written the output
-    writes it again (the same bytes) and reports it written, not skipped.
+    output exists is decided here, once, before its task exists: a task Dask runs again
+    after losing a worker that had written the output writes it again (the same bytes)
+    and reports it written, not skipped.
     """
     distributed = _import_distributed()
     own = client is None

@@ -140,9 +140,13 @@ class WorkerProcess:
     """
 
     def __init__(self, setup, env=None, fork=False):
+        self.proc = None
         if fork:
-            self.proc = Forked(env)
-        else:
+            try:
+                self.proc = Forked(env)
+            except OSError:  # no room for another process now: try the ordinary way
+                pass
+        if self.proc is None:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "scatter_cli.worker"],
                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0,
@@ -254,7 +258,12 @@ class Forked:
     def __init__(self, env=None):
         job_r, job_w = os.pipe()
         answer_r, answer_w = os.pipe()
-        self.pid = os.fork()
+        try:
+            self.pid = os.fork()
+        except OSError:
+            for fd in (job_r, job_w, answer_r, answer_w):
+                os.close(fd)
+            raise
         if self.pid == 0:
             _forked_child(job_r, answer_w, env)
         os.close(job_r)

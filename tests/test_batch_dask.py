@@ -15,7 +15,7 @@ import pytest
 import scatter_cli
 from scatter_cli import dask_engine
 
-from .conftest import ROOT, SAMPLES, popen_user, run_user, scatter_command
+from .conftest import ROOT, SAMPLES, popen_user, scatter_command
 from .batchtools import (HANG, Feeder, alive, collection, outputs, parent_of, reference, run_elsewhere,
                          sample_warnings, warning_lines, warning_meshes)
 
