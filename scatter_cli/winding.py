@@ -127,9 +127,9 @@ def _morton(p):
     if not finite.any():
         return np.zeros(len(p), np.uint64)
     lo, hi = p[finite].min(axis=0), p[finite].max(axis=0)
-    scale = (2.0**21 - 1) / np.maximum(hi - lo, np.finfo(float).tiny)
-    q = np.where(finite[:, None], np.clip((np.where(finite[:, None], p, lo) - lo) * scale, 0, 2.0**21 - 1), 0)
-    q = q.astype(np.uint64)
+    with np.errstate(all="ignore"):
+        rel = (np.where(finite[:, None], p, lo) - lo) / (hi - lo)
+    q = (np.nan_to_num(np.clip(rel, 0.0, 1.0), nan=0.0) * (2.0**21 - 1)).astype(np.uint64)
     return (_spread(q[:, 0]) << np.uint64(2)) | (_spread(q[:, 1]) << np.uint64(1)) | _spread(q[:, 2])
 
 
