@@ -17,6 +17,7 @@
 #include "_ckernel.h"
 #include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <pthread.h>
 
 #define FIELDS 28
@@ -85,11 +86,18 @@ static inline double far_term(const double *f, double rx, double ry, double rz, 
     return w * INV4PI;
 }
 
+/* what the walk reads at every node, in one cache line: the centre, the squared
+ * distance beyond which the node is far ((accuracy * radius)^2, as the NumPy path
+ * computes it), and the links */
+typedef struct {
+    double c[3], far2;
+    int64_t skip, first, count, pad;
+} Hot;
+
 typedef struct {
     const double *points, *nodes, *tri;
-    const int64_t *links;
+    const Hot *hot;
     int64_t n, count;
-    double beta;
     int order;
     double *out;
     int64_t next; /* the next block to take (atomic) */
@@ -100,18 +108,16 @@ static double winding_at(const Work *w, const double *q)
     double acc = 0.0;
     int64_t i = 0;
     while (i < w->count) {
-        const double *f = w->nodes + FIELDS * i;
-        const int64_t *l = w->links + 3 * i;
-        double rx = f[0] - q[0], ry = f[1] - q[1], rz = f[2] - q[2];
+        const Hot *h = w->hot + i;
+        double rx = h->c[0] - q[0], ry = h->c[1] - q[1], rz = h->c[2] - q[2];
         double d2 = rx * rx + ry * ry + rz * rz;
-        double t = w->beta * f[3];
-        if (d2 > t * t) {
-            acc += far_term(f, rx, ry, rz, d2, w->order);
-            i = l[0];
-        } else if (l[2] > 0) {
-            for (int64_t k = 0; k < l[2]; k++)
-                acc += triangle_term(w->tri + 9 * (l[1] + k), q);
-            i = l[0];
+        if (d2 > h->far2) {
+            acc += far_term(w->nodes + FIELDS * i, rx, ry, rz, d2, w->order);
+            i = h->skip;
+        } else if (h->count > 0) {
+            for (int64_t k = 0; k < h->count; k++)
+                acc += triangle_term(w->tri + 9 * (h->first + k), q);
+            i = h->skip;
         } else
             i++;
     }
@@ -182,12 +188,22 @@ static PyObject *winding(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "out: not writeable");
         return NULL;
     }
-    Work w = {PyArray_DATA(pa), PyArray_DATA(na), PyArray_DATA(ta), PyArray_DATA(la), PyArray_DIM(pa, 0),
-              PyArray_DIM(na, 0), beta, order, PyArray_DATA(oa), 0};
-    int ok;
+    const double *nodes = PyArray_DATA(na);
+    const int64_t *links = PyArray_DATA(la);
+    Work w = {PyArray_DATA(pa), nodes, PyArray_DATA(ta), NULL, PyArray_DIM(pa, 0), PyArray_DIM(na, 0), order,
+              PyArray_DATA(oa), 0};
+    int ok, memory = 1;
     Py_BEGIN_ALLOW_THREADS
-    ok = links_ok(w.links, w.count, PyArray_DIM(ta, 0));
-    if (ok) {
+    ok = links_ok(links, w.count, PyArray_DIM(ta, 0));
+    Hot *hot = ok ? malloc(sizeof(Hot) * (size_t)(w.count > 0 ? w.count : 1)) : NULL;
+    memory = !ok || hot != NULL;
+    if (hot) {
+        for (int64_t i = 0; i < w.count; i++) {
+            const double *f = nodes + FIELDS * i;
+            double t = beta * f[3];
+            hot[i] = (Hot){{f[0], f[1], f[2]}, t * t, links[3 * i], links[3 * i + 1], links[3 * i + 2], 0};
+        }
+        w.hot = hot;
         int64_t blocks = (w.n + BLOCK - 1) / BLOCK;
         int count = threads > MAX_THREADS ? MAX_THREADS : threads;
         if (count > blocks)
@@ -200,8 +216,11 @@ static PyObject *winding(PyObject *self, PyObject *args)
         for (int k = 1; k < count; k++)
             if (started[k])
                 pthread_join(id[k], NULL);
+        free(hot);
     }
     Py_END_ALLOW_THREADS
+    if (!memory)
+        return PyErr_NoMemory();
     if (!ok) {
         PyErr_SetString(PyExc_ValueError, "links: a subtree or a leaf's triangles out of range");
         return NULL;

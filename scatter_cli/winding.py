@@ -72,13 +72,14 @@ class WindingTree:
         keep = np.isfinite(tri).all(axis=(1, 2)) & np.isfinite(an).all(axis=1) & (an != 0).any(axis=1)
         self.face = np.flatnonzero(keep)
         tri, an = tri[keep], an[keep]
-        centroid = tri.mean(axis=1)
-        order = np.argsort(_morton(centroid), kind="stable")
+        centroid = (tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0
+        codes = _morton(centroid)
+        order = np.argsort(codes, kind="stable")
         self.face, tri, an, centroid = self.face[order], tri[order], an[order], centroid[order]
         self.triangles = np.ascontiguousarray(tri.reshape(-1, 9))
-        start, end, skip = _layout(_morton(centroid), LEAF)
+        start, end, skip = _layout(codes[order], LEAF)
         self.links = np.stack([skip, start, np.where(skip == np.arange(len(skip)) + 1, end - start, 0)], axis=1)
-        self.nodes = _node_fields(tri, an, centroid, start, end, skip)
+        self.nodes = _node_fields(tri, an, centroid, start, skip)
 
     def __len__(self):
         return len(self.triangles)
@@ -223,47 +224,53 @@ def _depths(skip):
     return depth
 
 
-def _node_fields(tri, an, centroid, start, end, skip):
+PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))  # the components kept of a symmetric 3x3
+
+
+def _node_fields(tri, an, centroid, start, skip):
     """(N, FIELDS) float64 per node: centre (0:3), radius (3), sum of area-weighted
     normals (4:7), the first-order moment's trace (7) and quadratic form's coefficients
     (8:14), the second-order moment's linear (14:17) and cubic form's coefficients
-    (17:27)."""
+    (17:27). The moments are summed about the middle of the box, then moved to each
+    node's centre."""
     n = len(skip)
     fields = np.zeros((n, FIELDS))
     if not n:
         return fields
     origin = 0.5 * (centroid.min(axis=0) + centroid.max(axis=0))
     p = (centroid - origin).T  # (3, T): rows of per-triangle values, summed along them
-    u = (tri - centroid[:, None, :]).transpose(2, 1, 0)  # (3 axes, 3 corners, T)
-    second = p[:, None, :] * p[None, :, :] + np.einsum("jvt,kvt->jkt", u, u) / 12.0  # E[(x-o)(x-o)^T]
+    u = [(tri[:, v] - centroid).T for v in range(3)]  # corners about the centroid
     an_t = an.T
-    raw = np.empty((43, len(tri)))
+    raw = np.empty((34, len(tri)))
     raw[0] = np.sqrt((an * an).sum(axis=1))
     raw[1:4] = raw[0] * p
     raw[4:7] = an_t
     raw[7:16] = (an_t[:, None, :] * p[None, :, :]).reshape(9, -1)
-    raw[16:43] = (an_t[:, None, None, :] * second[None]).reshape(27, -1)
+    for k, (i, j) in enumerate(PAIRS):  # E[(x - o)_i (x - o)_j] over the triangle
+        second = p[i] * p[j] + (u[0][i] * u[0][j] + u[1][i] * u[1][j] + u[2][i] * u[2][j]) / 12.0
+        raw[16 + k:34:6] = an_t * second
     sums = _subtree_sums(raw, start, skip)
     c = sums[:, 1:4] / sums[:, :1]
-    a0, a1, a2 = sums[:, 4:7], sums[:, 7:16].reshape(-1, 3, 3), sums[:, 16:43].reshape(-1, 3, 3, 3)
+    a0, a1 = sums[:, 4:7], sums[:, 7:16].reshape(-1, 3, 3)
     m = a1 - a0[:, :, None] * c[:, None, :]
-    s = (a2 - a1[:, :, :, None] * c[:, None, None, :] - a1[:, :, None, :] * c[:, None, :, None]
-         + a0[:, :, None, None] * c[:, None, :, None] * c[:, None, None, :])
+    s = {}  # s[i, j, k] = sum of an_i (x - c)_j (x - c)_k, j <= k
+    for k, (j, l) in enumerate(PAIRS):
+        for i in range(3):
+            s[i, j, l] = s[i, l, j] = (sums[:, 16 + 6 * i + k] - a1[:, i, j] * c[:, l] - a1[:, i, l] * c[:, j]
+                                       + a0[:, i] * c[:, j] * c[:, l])
     fields[:, 0:3] = c + origin
     fields[:, 3] = _radii(tri, fields[:, 0:3], start, skip)
     fields[:, 4:7] = a0
     fields[:, 7] = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
     fields[:, 8:14] = np.stack([m[:, 0, 0], m[:, 1, 1], m[:, 2, 2], m[:, 0, 1] + m[:, 1, 0],
                                 m[:, 0, 2] + m[:, 2, 0], m[:, 1, 2] + m[:, 2, 1]], axis=1)
-    lin_u = np.einsum("niik->nk", s)
-    lin_v = np.einsum("nijj->ni", s)
-    fields[:, 14:17] = 2.0 * lin_u + lin_v
-    sym = sum(s.transpose(0, *perm) for perm in ((1, 2, 3), (1, 3, 2), (2, 1, 3), (2, 3, 1), (3, 1, 2), (3, 2, 1)))
-    sym = sym / 6.0
+    for k in range(3):  # 2 sum_i s_iik + sum_j s_kjj
+        fields[:, 14 + k] = 2.0 * (s[0, 0, k] + s[1, 1, k] + s[2, 2, k]) + s[k, 0, 0] + s[k, 1, 1] + s[k, 2, 2]
     x, y, z = 0, 1, 2
-    fields[:, 17:27] = np.stack([sym[:, x, x, x], sym[:, y, y, y], sym[:, z, z, z], 3 * sym[:, x, x, y],
-                                 3 * sym[:, x, x, z], 3 * sym[:, y, y, x], 3 * sym[:, y, y, z],
-                                 3 * sym[:, z, z, x], 3 * sym[:, z, z, y], 6 * sym[:, x, y, z]], axis=1)
+    fields[:, 17:27] = np.stack([  # sum_ijk s_ijk r_i r_j r_k by monomial: xxx yyy zzz xxy xxz yyx yyz zzx zzy xyz
+        s[x, x, x], s[y, y, y], s[z, z, z], 2 * s[x, x, y] + s[y, x, x], 2 * s[x, x, z] + s[z, x, x],
+        2 * s[y, y, x] + s[x, y, y], 2 * s[y, y, z] + s[z, y, y], 2 * s[z, z, x] + s[x, z, z],
+        2 * s[z, z, y] + s[y, z, z], 2 * (s[x, y, z] + s[y, x, z] + s[z, x, y])], axis=1)
     return fields
 
 
