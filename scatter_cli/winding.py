@@ -79,7 +79,7 @@ class WindingTree:
         self.triangles = np.ascontiguousarray(tri.reshape(-1, 9))
         start, end, skip = _layout(codes[order], LEAF)
         self.links = np.stack([skip, start, np.where(skip == np.arange(len(skip)) + 1, end - start, 0)], axis=1)
-        self.nodes = _node_fields(tri, an, centroid, start, skip)
+        self.nodes = _node_fields(tri, an, centroid, start, end, skip)
 
     def __len__(self):
         return len(self.triangles)
@@ -227,7 +227,7 @@ def _depths(skip):
 PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))  # the components kept of a symmetric 3x3
 
 
-def _node_fields(tri, an, centroid, start, skip):
+def _node_fields(tri, an, centroid, start, end, skip):
     """(N, FIELDS) float64 per node: centre (0:3), radius (3), sum of area-weighted
     normals (4:7), the first-order moment's trace (7) and quadratic form's coefficients
     (8:14), the second-order moment's linear (14:17) and cubic form's coefficients
@@ -259,7 +259,7 @@ def _node_fields(tri, an, centroid, start, skip):
             s[i, j, l] = s[i, l, j] = (sums[:, 16 + 6 * i + k] - a1[:, i, j] * c[:, l] - a1[:, i, l] * c[:, j]
                                        + a0[:, i] * c[:, j] * c[:, l])
     fields[:, 0:3] = c + origin
-    fields[:, 3] = _radii(tri, fields[:, 0:3], start, skip)
+    fields[:, 3] = _radii(tri, fields[:, 0:3], start, end, skip)
     fields[:, 4:7] = a0
     fields[:, 7] = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
     fields[:, 8:14] = np.stack([m[:, 0, 0], m[:, 1, 1], m[:, 2, 2], m[:, 0, 1] + m[:, 1, 0],
@@ -274,23 +274,20 @@ def _node_fields(tri, an, centroid, start, skip):
     return fields
 
 
-def _radii(tri, centre, start, skip):
-    """(N,) float64: an upper bound of the distance from each node's centre to its
-    triangles' vertices (exact at the leaves)."""
-    n = len(skip)
-    leaf = np.flatnonzero(skip == np.arange(n) + 1)
-    counts = np.diff(np.r_[start[leaf], len(tri)])
-    owner = np.repeat(leaf, counts)
-    far = np.sqrt(((tri - centre[owner][:, None, :]) ** 2).sum(axis=2)).max(axis=1)
-    r = np.zeros(n)
-    r[leaf] = np.maximum.reduceat(far, start[leaf])
-    inner = np.flatnonzero(skip != np.arange(n) + 1)
+def _radii(tri, centre, start, end, skip):
+    """(N,) float64 the distance from each node's centre to the farthest corner of its
+    triangles, one depth at a time (a triangle lies in one node of each depth)."""
+    r = np.zeros(len(skip))
     depth = _depths(skip)
-    for d in range(depth.max(initial=0), -1, -1):
-        k = inner[depth[inner] == d]
-        for child in (k + 1, skip[k + 1]):
-            gap = np.sqrt(((centre[child] - centre[k]) ** 2).sum(axis=1)) + r[child]
-            r[k] = np.maximum(r[k], gap)
+    corners = tri.reshape(-1, 3)
+    for d in range(depth.max(initial=-1) + 1):
+        k = np.flatnonzero(depth == d)  # in preorder: their ranges in order, disjoint
+        size = end[k] - start[k]
+        owner = np.repeat(k, size)
+        at = np.arange(len(owner)) - np.repeat(np.cumsum(size) - size, size) + np.repeat(start[k], size)
+        gap = corners.reshape(-1, 3, 3)[at] - centre[owner][:, None, :]
+        far = np.sqrt((gap * gap).sum(axis=2)).max(axis=1)
+        r[k] = np.maximum.reduceat(far, np.cumsum(size) - size)
     return r
 
 
