@@ -275,19 +275,32 @@ def _node_fields(tri, an, centroid, start, end, skip):
 
 
 def _radii(tri, centre, start, end, skip):
-    """(N,) float64 the distance from each node's centre to the farthest corner of its
-    triangles, one depth at a time (a triangle lies in one node of each depth)."""
-    r = np.zeros(len(skip))
+    """(N,) float64: at the leaves, the distance from the centre to the farthest corner of
+    their triangles; above, a bound of it by the triangles' own spheres (about their
+    centroids), one depth at a time (each triangle lies in one node of each depth down to
+    its leaf)."""
+    n = len(skip)
+    r = np.zeros(n)
+    if not n:
+        return r
     depth = _depths(skip)
-    corners = tri.reshape(-1, 3)
-    for d in range(depth.max(initial=-1) + 1):
-        k = np.flatnonzero(depth == d)  # in preorder: their ranges in order, disjoint
-        size = end[k] - start[k]
-        owner = np.repeat(k, size)
-        at = np.arange(len(owner)) - np.repeat(np.cumsum(size) - size, size) + np.repeat(start[k], size)
-        gap = corners.reshape(-1, 3, 3)[at] - centre[owner][:, None, :]
-        far = np.sqrt((gap * gap).sum(axis=2)).max(axis=1)
-        r[k] = np.maximum.reduceat(far, np.cumsum(size) - size)
+    leaf = np.flatnonzero(skip == np.arange(n) + 1)
+    size = end[leaf] - start[leaf]
+    owner = np.repeat(leaf, size)
+    corner = tri - centre[owner][:, None, :]
+    r[leaf] = np.maximum.reduceat(np.sqrt((corner * corner).sum(axis=2)).max(axis=1), start[leaf])
+    g = (tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0
+    gap = tri - g[:, None, :]
+    rho = np.sqrt((gap * gap).sum(axis=2)).max(axis=1)
+    bottom = np.repeat(depth[leaf], size)  # the depth of each triangle's leaf
+    inner = np.flatnonzero(skip != np.arange(n) + 1)
+    for d in range(int(depth[inner].max(initial=-1)) + 1):
+        k = inner[depth[inner] == d]  # in preorder: their ranges in order, disjoint, covering these triangles
+        at = np.flatnonzero(bottom > d)
+        who = np.repeat(k, end[k] - start[k])
+        off = g[at] - centre[who]
+        far = np.sqrt((off * off).sum(axis=1)) + rho[at]
+        r[k] = np.maximum.reduceat(far, np.cumsum(end[k] - start[k]) - (end[k] - start[k]))
     return r
 
 
