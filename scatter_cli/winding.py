@@ -90,7 +90,8 @@ def winding_numbers(tree: WindingTree, points, *, accuracy: float = ACCURACY, or
 
     ``accuracy``: a node is summed by its expansion of order ``order`` (0, 1 or 2) when
     the point is farther than ``accuracy`` times the node's radius (larger: slower and
-    closer to exact). A point with a non-finite coordinate gets NaN. The result is a pure
+    closer to exact; ``math.inf``: every triangle's exact solid angle). A point with a
+    non-finite coordinate gets NaN. The result is a pure
     function of the inputs, whatever the threads or chunks."""
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     if order not in (0, 1, 2) or not accuracy > 0:

@@ -212,6 +212,13 @@ def test_arctangent_is_within_two_ulp_of_numpys():
     assert np.isnan(winding.atan2(np.array([np.nan, 1.0]), np.array([1.0, np.nan]))).all()
 
 
+def test_infinite_accuracy_is_the_exact_sum(case_data):
+    tri, points, exact, _ = case_data("open_sphere")
+    w = winding_numbers(WindingTree(tri), points, accuracy=float("inf"))
+    assert np.abs(w - exact).max() < 1e-12
+    assert np.abs(winding_numbers(WindingTree(tri), points) - exact).max() > 1e-6  # (the default is not exact)
+
+
 def test_non_finite_points_get_nan_and_no_faces_give_zero():
     tree = WindingTree(icosphere(1))
     w = winding_numbers(tree, np.array([[np.nan, 0, 0], [0, np.inf, 0], [0, 0, 0]]))
