@@ -1,0 +1,248 @@
+/* Compiled winding numbers: the same sums as winding.py's NumPy path.
+ *
+ * winding(points, nodes, links, triangles, accuracy, order, threads, out): for each
+ * point, the tree walked depth-first in preorder (a far node adds its expansion and its
+ * subtree is skipped, a near leaf adds its triangles' solid angles one by one, a near
+ * inner node opens), every term added to a sum started at 0. Every float64 operation
+ * is the NumPy code's, in its order (built with -ffp-contract=off), the arctangent
+ * included (Cephes' atan, + - * / only), so the two paths give the same bytes. The
+ * points are shared among the threads in blocks; each point's sum is its own, so the
+ * result does not depend on the threads. The GIL is released while they run. The links
+ * are checked first: a subtree or a leaf's triangles out of range raise ValueError.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
+#include <numpy/arrayobject.h>
+#include "_ckernel.h"
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <pthread.h>
+
+#define FIELDS 28
+#define MAX_THREADS 8
+#define BLOCK 256 /* points a thread takes at a time */
+
+static const double INV2PI = 0.15915494309189535, INV4PI = 0.07957747154594767;
+static const double PIO2 = 1.5707963267948966, PIO4 = 0.7853981633974483, PI = 3.141592653589793;
+static const double MOREBITS = 6.123233995736765886130e-17, HALF_MOREBITS = 0.5 * 6.123233995736765886130e-17;
+static const double TAN3PIO8 = 2.41421356237309504880;
+
+/* winding.atan2 for one pair */
+static inline double atan2_(double y, double x)
+{
+    double ay = fabs(y), ax = fabs(x), t, arg, z, a;
+    t = ax == 0 ? INFINITY : ay / ax; /* (NaN stays NaN) */
+    int small = t <= 0.66, large = t > TAN3PIO8;
+    arg = small ? t : large ? 1.0 / t : (t - 1.0) / (t + 1.0);
+    z = arg * arg;
+    z = z * ((((-8.750608600031904122785e-01 * z + -1.615753718733365076637e+01) * z + -7.500855792314704667340e+01) * z +
+              -1.228866684490136173410e+02) * z + -6.485021904942025371773e+01) /
+        (((((z + 2.485846490142306297962e+01) * z + 1.650270098316988542046e+02) * z + 4.328810604912902668951e+02) * z +
+          4.853903996359136964868e+02) * z + 1.945506571482613964425e+02);
+    z = arg * z + arg;
+    a = small ? z : large ? PIO2 - z + MOREBITS : PIO4 + z + HALF_MOREBITS;
+    if (ay == 0)
+        a = 0.0;
+    if (x < 0)
+        a = PI - a;
+    return y < 0 ? -a : a;
+}
+
+/* winding._triangle_terms for one triangle t[9] and point q[3] */
+static inline double triangle_term(const double *t, const double *q)
+{
+    double ax = t[0] - q[0], ay = t[1] - q[1], az = t[2] - q[2];
+    double bx = t[3] - q[0], by = t[4] - q[1], bz = t[5] - q[2];
+    double cx = t[6] - q[0], cy = t[7] - q[1], cz = t[8] - q[2];
+    double la = sqrt(ax * ax + ay * ay + az * az);
+    double lb = sqrt(bx * bx + by * by + bz * bz);
+    double lc = sqrt(cx * cx + cy * cy + cz * cz);
+    double det = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx);
+    double ab = ax * bx + ay * by + az * bz;
+    double bc = bx * cx + by * cy + bz * cz;
+    double ca = cx * ax + cy * ay + cz * az;
+    double den = la * lb * lc + ab * lc + bc * la + ca * lb;
+    return atan2_(det, den) * INV2PI;
+}
+
+/* winding._far_terms for one node f and offset r (centre - point), d2 = |r|^2 */
+static inline double far_term(const double *f, double rx, double ry, double rz, double d2, int order)
+{
+    double id2 = 1.0 / d2;
+    double id3 = id2 / sqrt(d2);
+    double w = (f[4] * rx + f[5] * ry + f[6] * rz) * id3;
+    if (order >= 1) {
+        double quad = (f[8] * rx + f[11] * ry + f[12] * rz) * rx + (f[9] * ry + f[13] * rz) * ry + f[10] * rz * rz;
+        w = w + (f[7] - 3.0 * quad * id2) * id3;
+    }
+    if (order >= 2) {
+        double lin = f[14] * rx + f[15] * ry + f[16] * rz;
+        double cub = (f[17] * rx + f[20] * ry + f[21] * rz) * (rx * rx) + (f[18] * ry + f[22] * rx + f[23] * rz) * (ry * ry) +
+                     (f[19] * rz + f[24] * rx + f[25] * ry) * (rz * rz) + f[26] * rx * ry * rz;
+        w = w + (7.5 * cub * id2 - 1.5 * lin) * id2 * id3;
+    }
+    return w * INV4PI;
+}
+
+/* what the walk reads at every node, in one cache line: the centre, the squared
+ * distance beyond which the node is far ((accuracy * radius)^2, as the NumPy path
+ * computes it), and the links */
+typedef struct {
+    double c[3], far2;
+    int64_t skip, first, count, pad;
+} Hot;
+
+typedef struct {
+    const double *points, *nodes, *tri;
+    const Hot *hot;
+    int64_t n, count;
+    int order;
+    double *out;
+    int64_t next; /* the next block to take (atomic) */
+} Work;
+
+static double winding_at(const Work *w, const double *q)
+{
+    double acc = 0.0;
+    int64_t i = 0;
+    while (i < w->count) {
+        const Hot *h = w->hot + i;
+        double rx = h->c[0] - q[0], ry = h->c[1] - q[1], rz = h->c[2] - q[2];
+        double d2 = rx * rx + ry * ry + rz * rz;
+        if (d2 > h->far2) {
+            acc += far_term(w->nodes + FIELDS * i, rx, ry, rz, d2, w->order);
+            i = h->skip;
+        } else if (h->count > 0) {
+            for (int64_t k = 0; k < h->count; k++)
+                acc += triangle_term(w->tri + 9 * (h->first + k), q);
+            i = h->skip;
+        } else
+            i++;
+    }
+    return acc != acc ? NAN : acc;
+}
+
+static void *run(void *arg)
+{
+    Work *w = arg;
+    for (;;) {
+        int64_t b = __atomic_fetch_add(&w->next, 1, __ATOMIC_RELAXED);
+        int64_t i0 = b * BLOCK, i1 = i0 + BLOCK < w->n ? i0 + BLOCK : w->n;
+        if (i0 >= w->n)
+            return NULL;
+        for (int64_t i = i0; i < i1; i++)
+            w->out[i] = winding_at(w, w->points + 3 * i);
+    }
+}
+
+/* the links of a preorder tree: each node's subtree ends after it and within the tree,
+ * a leaf's triangles lie within the triangles */
+static int links_ok(const int64_t *links, int64_t count, int64_t ntri)
+{
+    for (int64_t i = 0; i < count; i++) {
+        const int64_t *l = links + 3 * i;
+        if (l[0] <= i || l[0] > count || l[1] < 0 || l[1] > ntri || l[2] < 0 || l[2] > ntri - l[1])
+            return 0;
+    }
+    return 1;
+}
+
+/* get() for an (n, cols) array */
+static int get2(PyObject *obj, int type, npy_intp cols, PyArrayObject **out, const char *name)
+{
+    if (!get(obj, type, -1, out, name))
+        return 0;
+    if (PyArray_NDIM(*out) != 2 || PyArray_DIM(*out, 1) != cols) {
+        PyErr_Format(PyExc_ValueError, "%s: not (n, %d)", name, (int)cols);
+        return 0;
+    }
+    return 1;
+}
+
+PyDoc_STRVAR(winding_doc, "winding(points (n, 3) float64, nodes (N, 28) float64, links (N, 3) int64, triangles "
+                          "(T, 9) float64, accuracy, order, threads, out (n,) float64): winding numbers into out");
+
+static PyObject *winding(PyObject *self, PyObject *args)
+{
+    PyObject *op, *on, *ol, *ot, *oo;
+    PyArrayObject *pa, *na, *la, *ta, *oa;
+    double beta;
+    int order, threads;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOOdiiO", &op, &on, &ol, &ot, &beta, &order, &threads, &oo) ||
+        !get2(op, NPY_FLOAT64, 3, &pa, "points") || !get2(on, NPY_FLOAT64, FIELDS, &na, "nodes") ||
+        !get2(ol, NPY_INT64, 3, &la, "links") || !get2(ot, NPY_FLOAT64, 9, &ta, "triangles") ||
+        !get(oo, NPY_FLOAT64, PyArray_DIM(pa, 0), &oa, "out"))
+        return NULL;
+    if (PyArray_DIM(na, 0) != PyArray_DIM(la, 0)) {
+        PyErr_SetString(PyExc_ValueError, "nodes and links differ in length");
+        return NULL;
+    }
+    if (order < 0 || order > 2 || threads < 1) {
+        PyErr_SetString(PyExc_ValueError, "order is 0, 1 or 2 and threads at least 1");
+        return NULL;
+    }
+    if (!PyArray_ISWRITEABLE(oa)) {
+        PyErr_SetString(PyExc_ValueError, "out: not writeable");
+        return NULL;
+    }
+    const double *nodes = PyArray_DATA(na);
+    const int64_t *links = PyArray_DATA(la);
+    Work w = {PyArray_DATA(pa), nodes, PyArray_DATA(ta), NULL, PyArray_DIM(pa, 0), PyArray_DIM(na, 0), order,
+              PyArray_DATA(oa), 0};
+    int ok, memory = 1;
+    Py_BEGIN_ALLOW_THREADS
+    ok = links_ok(links, w.count, PyArray_DIM(ta, 0));
+    Hot *hot = ok ? malloc(sizeof(Hot) * (size_t)(w.count > 0 ? w.count : 1)) : NULL;
+    memory = !ok || hot != NULL;
+    if (hot) {
+        for (int64_t i = 0; i < w.count; i++) {
+            const double *f = nodes + FIELDS * i;
+            double t = beta * f[3];
+            hot[i] = (Hot){{f[0], f[1], f[2]}, t * t, links[3 * i], links[3 * i + 1], links[3 * i + 2], 0};
+        }
+        w.hot = hot;
+        int64_t blocks = (w.n + BLOCK - 1) / BLOCK;
+        int count = threads > MAX_THREADS ? MAX_THREADS : threads;
+        if (count > blocks)
+            count = blocks > 0 ? (int)blocks : 1;
+        pthread_t id[MAX_THREADS];
+        int started[MAX_THREADS] = {0};
+        for (int k = 1; k < count; k++)
+            started[k] = pthread_create(&id[k], NULL, run, &w) == 0;
+        run(&w); /* the caller takes blocks too, and finishes any a thread that did not start would have */
+        for (int k = 1; k < count; k++)
+            if (started[k])
+                pthread_join(id[k], NULL);
+        free(hot);
+    }
+    Py_END_ALLOW_THREADS
+    if (!memory)
+        return PyErr_NoMemory();
+    if (!ok) {
+        PyErr_SetString(PyExc_ValueError, "links: a subtree or a leaf's triangles out of range");
+        return NULL;
+    }
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef methods[] = {
+    {"winding", winding, METH_VARARGS, winding_doc},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_cwinding", "Compiled winding numbers (see winding.py).", -1,
+                                    methods};
+
+PyMODINIT_FUNC PyInit__cwinding(void)
+{
+    import_array();
+    PyObject *m = PyModule_Create(&module);
+    if (m && PyModule_AddIntConstant(m, "FIELDS", FIELDS) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

@@ -1,0 +1,348 @@
+"""Winding numbers (scatter_cli/winding.py) against brute force, and the compiled kernel
+against its NumPy twin.
+
+The reference is the exact winding number, the sum of every triangle's solid angle over
+4 pi (van Oosterom and Strackee's formula with np.arctan2), written here independently of
+the module. On closed, open, nested, self-intersecting and instanced surfaces the fast
+value must be within 0.02 of it at points farther than 1e-3 of the diagonal from the
+surface, and its label (w >= 0.5) must equal the exact one wherever the exact w is not
+within 0.05 of 0.5. Each case is paired with a broken evaluation that must fail those
+checks: nodes expanded when barely farther than their radius (accuracy 0.5), and the
+dipole alone (order 0) at the default accuracy.
+"""
+
+import os
+
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from scatter_cli import native, winding
+from scatter_cli.winding import WindingTree, winding_numbers
+
+from .conftest import SAMPLES
+
+KERNEL = winding._kernel
+needs_kernel = pytest.mark.skipif(
+    KERNEL is None and os.environ.get("SCATTER_REQUIRE_KERNELS", "") in ("", "0"),
+    reason="compiled kernels not built (SCATTER_REQUIRE_KERNELS=1 makes this a failure)",
+)
+CLOSE = 0.02  # |w - exact| away from the surface
+MARGIN = 0.05  # labels must be right where |exact - 0.5| >= MARGIN
+AWAY = 1e-3  # of the diagonal: "away from the surface"
+
+
+def exact_winding(tri, points, chunk=64):
+    """(n,) exact winding numbers of triangles ``tri`` (F, 3, 3) at ``points`` (n, 3)."""
+    out = np.empty(len(points))
+    for at in range(0, len(points), chunk):
+        q = points[at:at + chunk, None, None, :]
+        a, b, c = (tri[None, :, k, :] - q[:, :, 0, :] for k in range(3))
+        la, lb, lc = (np.linalg.norm(x, axis=2) for x in (a, b, c))
+        det = np.einsum("pfi,pfi->pf", a, np.cross(b, c))
+        den = (la * lb * lc + np.einsum("pfi,pfi->pf", a, b) * lc + np.einsum("pfi,pfi->pf", b, c) * la
+               + np.einsum("pfi,pfi->pf", c, a) * lb)
+        out[at:at + chunk] = np.arctan2(det, den).sum(axis=1) / (2 * np.pi)
+    return out
+
+
+def distance_to(tri, points):
+    """(n,) distance from ``points`` to the triangles (Open3D, float32: enough to keep
+    points away from the surface)."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(tri.reshape(-1, 3).astype(np.float32)),
+                        o3d.core.Tensor(np.arange(3 * len(tri), dtype=np.uint32).reshape(-1, 3)))
+    return scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(np.float64)
+
+
+def query_points(tri, n_box=1200, n_near=600, seed=0):
+    """Points uniform in the box grown by 0.1 of its largest side, and points within 1e-3..3e-2
+    of the diagonal from surface points along the face normals, on both sides."""
+    rng = np.random.default_rng(seed)
+    lo, hi = tri.reshape(-1, 3).min(axis=0), tri.reshape(-1, 3).max(axis=0)
+    pad = 0.1 * (hi - lo).max()
+    box = rng.uniform(lo - pad, hi + pad, size=(n_box, 3))
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    face = rng.choice(len(tri), size=n_near, p=area / area.sum())
+    u, v = rng.random(n_near), rng.random(n_near)
+    flip = u + v > 1
+    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+    t = tri[face]
+    on = t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
+    normal = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    diag = np.linalg.norm(hi - lo)
+    offset = rng.choice([-1, 1], n_near) * diag * np.exp(rng.uniform(np.log(1e-3), np.log(3e-2), n_near))
+    return np.vstack([box, on + offset[:, None] * normal])
+
+
+def icosphere(subdivisions=3, radius=1.0, centre=(0, 0, 0)):
+    m = trimesh.creation.icosphere(subdivisions, radius=radius)
+    return m.triangles + np.asarray(centre, float)
+
+
+def open_sphere():
+    """An icosphere with the cap z > 0.6 removed."""
+    tri = icosphere(3)
+    return tri[tri[:, :, 2].max(axis=1) <= 0.6]
+
+
+def instanced():
+    """Three rotated, scaled and moved copies of a torus, as world-space triangles."""
+    torus = trimesh.creation.torus(1.0, 0.35, major_sections=24, minor_sections=12).triangles
+    rng = np.random.default_rng(5)
+    out = []
+    for k in range(3):
+        rot = trimesh.transformations.random_rotation_matrix(rng.random(3))[:3, :3]
+        out.append(torus @ rot.T * (0.6 + 0.3 * k) + np.array([1.6 * k, 0.4 * k, -0.3 * k]))
+    return np.concatenate(out)
+
+
+def sample(name):
+    return trimesh.load(SAMPLES / name, force="mesh").triangles
+
+
+CASES = {
+    "icosphere": lambda: icosphere(3),
+    "icosahedron_stl": lambda: sample("icosahedron_binary.stl"),
+    "skull": lambda: sample("skull.ply"),
+    "open_sphere": open_sphere,
+    "hemisphere_off": lambda: sample("hemisphere.off"),
+    "inner_shell": lambda: np.concatenate([icosphere(3), icosphere(2, 0.5)]),  # w = 2 inside both
+    "self_intersecting": lambda: np.concatenate([icosphere(3), icosphere(3, 0.8, (0.9, 0.2, 0.1))]),
+    "instanced": instanced,
+}
+FEW_POINTS = {"skull": (240, 120)}  # brute force on 100k faces: fewer points
+
+
+@pytest.fixture(scope="module")
+def case_data():
+    """name -> (triangles, points, exact w, points away from the surface) on demand."""
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            tri = np.ascontiguousarray(CASES[name](), dtype=np.float64)
+            points = query_points(tri, *FEW_POINTS.get(name, (1200, 600)))
+            diag = np.linalg.norm(np.ptp(tri.reshape(-1, 3), axis=0))
+            cache[name] = (tri, points, exact_winding(tri, points), distance_to(tri, points) > AWAY * diag)
+        return cache[name]
+
+    return get
+
+
+def failures(w, exact, away):
+    """(points off by more than CLOSE away from the surface, wrong labels off the margin)."""
+    off = np.count_nonzero(away & (np.abs(w - exact) > CLOSE))
+    wrong = np.count_nonzero((np.abs(exact - 0.5) >= MARGIN) & ((w >= 0.5) != (exact >= 0.5)))
+    return off, wrong
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_winding_numbers_match_brute_force(name, case_data):
+    tri, points, exact, away = case_data(name)
+    assert away.sum() > 0.8 * len(points)
+    w = winding_numbers(WindingTree(tri), points)
+    assert failures(w, exact, away) == (0, 0)
+    assert np.abs(w - exact)[away].max() <= CLOSE
+
+
+@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("broken", [{"accuracy": 0.5}, {"order": 0}])
+def test_broken_evaluations_fail_the_same_checks(name, broken, case_data):
+    tri, points, exact, away = case_data(name)
+    if broken == {"order": 0} and name in ("icosahedron_stl",):
+        pytest.skip("20 faces: too few nodes for the dipole's error to show")
+    assert failures(winding_numbers(WindingTree(tri), points, **broken), exact, away) != (0, 0)
+
+
+def test_the_reference_sees_a_flipped_triangle(case_data):
+    """The checks are sharp enough to catch one triangle turned over."""
+    tri, points, exact, away = case_data("icosphere")
+    flipped = tri.copy()
+    flipped[0] = flipped[0, ::-1]
+    assert failures(winding_numbers(WindingTree(flipped), points), exact, away) != (0, 0)
+
+
+def test_closed_surfaces_give_whole_numbers_away_from_them(case_data):
+    tri, points, exact, away = case_data("inner_shell")
+    w = winding_numbers(WindingTree(tri), points)
+    assert set(np.round(exact[away]).astype(int)) == {0, 1, 2}
+    assert np.abs(w - np.round(exact))[away].max() <= CLOSE
+
+
+def test_indexed_and_soup_input_build_the_same_tree():
+    m = trimesh.creation.icosphere(2)
+    a, b = WindingTree(m.vertices, m.faces), WindingTree(m.triangles)
+    assert np.array_equal(a.nodes, b.nodes) and np.array_equal(a.links, b.links)
+    assert np.array_equal(a.triangles, b.triangles) and np.array_equal(a.face, b.face)
+
+
+def test_tree_covers_every_triangle_once_within_each_nodes_radius():
+    tri = instanced()
+    tri[7] = tri[7, [0, 0, 1]]  # zero area: left out
+    tri[9, 1, 2] = np.nan  # not finite: left out
+    tree = WindingTree(tri)
+    assert sorted(tree.face) == sorted(set(range(len(tri))) - {7, 9})
+    assert np.array_equal(tree.triangles.reshape(-1, 3, 3), tri[tree.face])
+    skip, first, count = tree.links.T
+    n = len(skip)
+    leaf = count > 0
+    assert np.array_equal(leaf, skip == np.arange(n) + 1)  # leaves are exactly the nodes without children
+    assert np.array_equal(np.sort(first[leaf]), np.cumsum(np.r_[0, count[leaf]])[:-1])  # leaves tile the triangles
+    assert np.all(count <= winding.LEAF)
+    # each node's triangles are its leaves' triangles; all their corners within its radius
+    for i in range(n):
+        inside = (np.arange(n) >= i) & (np.arange(n) < skip[i]) & leaf
+        idx = np.concatenate([np.arange(f, f + c) for f, c in zip(first[inside], count[inside])])
+        corners = tree.triangles[idx].reshape(-1, 3)
+        assert np.linalg.norm(corners - tree.nodes[i, :3], axis=1).max() <= tree.nodes[i, 3] * (1 + 1e-12)
+
+
+def test_arctangent_is_within_two_ulp_of_numpys():
+    rng = np.random.default_rng(1)
+    y = np.concatenate([rng.normal(size=50000) * 10.0 ** rng.integers(-8, 8, 50000), [0.0, 1.0, -1.0, 0.0, 5.0]])
+    x = np.concatenate([rng.normal(size=50000) * 10.0 ** rng.integers(-8, 8, 50000), [1.0, 0.0, 0.0, -1.0, np.inf]])
+    ref = np.arctan2(y, x)
+    assert np.all(np.abs(winding.atan2(y, x) - ref) <= 2 * np.spacing(np.abs(ref)))
+    assert np.isnan(winding.atan2(np.array([np.nan, 1.0]), np.array([1.0, np.nan]))).all()
+
+
+def test_infinite_accuracy_is_the_exact_sum(case_data):
+    tri, points, exact, _ = case_data("open_sphere")
+    w = winding_numbers(WindingTree(tri), points, accuracy=float("inf"))
+    assert np.abs(w - exact).max() < 1e-12
+    assert np.abs(winding_numbers(WindingTree(tri), points) - exact).max() > 1e-6  # (the default is not exact)
+
+
+def test_non_finite_points_get_nan_and_no_faces_give_zero():
+    tree = WindingTree(icosphere(1))
+    w = winding_numbers(tree, np.array([[np.nan, 0, 0], [0, np.inf, 0], [0, 0, 0]]))
+    assert np.isnan(w[:2]).all() and abs(w[2] - 1) < 1e-12
+    assert np.array_equal(winding_numbers(WindingTree(np.zeros((0, 3, 3))), np.ones((4, 3))), np.zeros(4))
+
+
+def test_bad_options_are_refused():
+    tree = WindingTree(icosphere(1))
+    for bad in ({"order": 3}, {"accuracy": 0.0}, {"accuracy": float("nan")}):
+        with pytest.raises(ValueError):
+            winding_numbers(tree, np.zeros((1, 3)), **bad)
+
+
+# ---- the kernel and its NumPy twin ----
+
+def numpy_winding(monkeypatch, tree, points, **kw):
+    with monkeypatch.context() as m:
+        m.setattr(winding, "_kernel", None)
+        return winding_numbers(tree, points, **kw)
+
+
+@needs_kernel
+def test_the_kernel_is_built():
+    assert KERNEL is not None and KERNEL.FIELDS == winding.FIELDS
+
+
+@needs_kernel
+@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("options", [{}, {"order": 0, "accuracy": 1.0}, {"order": 1, "accuracy": 3.0}])
+def test_kernel_and_numpy_give_the_same_bytes(name, options, case_data, monkeypatch):
+    tri, points, _, _ = case_data(name)
+    tree = WindingTree(tri)
+    k = winding_numbers(tree, points, **options)
+    assert k.tobytes() == numpy_winding(monkeypatch, tree, points, **options).tobytes()
+
+
+@needs_kernel
+def test_same_bytes_whatever_the_threads_and_chunks(case_data, monkeypatch):
+    tri, points, _, _ = case_data("self_intersecting")
+    tree = WindingTree(tri)
+    ref = winding_numbers(tree, points)
+    for threads, chunk in ((1, 7), (3, 100), (8, 1 << 20)):
+        monkeypatch.setattr(native, "worker_count", lambda t=threads: t)
+        monkeypatch.setattr(winding, "CHUNK", chunk)
+        assert winding_numbers(tree, points).tobytes() == ref.tobytes()
+        assert numpy_winding(monkeypatch, tree, points).tobytes() == ref.tobytes()
+    # the parity check is sharp: the same terms added in another order change some bytes
+    reordered = WindingTree(tri)
+    for f, c in reordered.links[reordered.links[:, 2] > 1][:, 1:]:
+        reordered.triangles[f:f + c] = reordered.triangles[f:f + c][::-1].copy()
+    assert winding_numbers(reordered, points).tobytes() != ref.tobytes()
+
+
+def kernel_args(tree, points):
+    out = np.empty(len(points))
+    return [points, tree.nodes, tree.links, tree.triangles, 2.0, 2, 2, out]
+
+
+@needs_kernel
+def test_kernel_refuses_bad_arrays():
+    tree = WindingTree(icosphere(1))
+    points = np.zeros((5, 3))
+    good = kernel_args(tree, points)
+    KERNEL.winding(*good)
+    bad_links = []
+    for row, col, value in ((0, 0, 0), (3, 0, 3), (0, 0, len(tree.links) + 1), (len(tree.links) - 1, 1, -1),
+                            (len(tree.links) - 1, 2, len(tree.triangles)), (len(tree.links) - 1, 2, -1)):
+        links = tree.links.copy()
+        links[row, col] = value
+        bad_links.append(links)
+    readonly = np.empty(5)
+    readonly.flags.writeable = False
+    bad = [
+        (0, points.astype(np.float32)), (0, np.zeros((5, 2))), (0, np.zeros((3, 5)).T), (0, [[0.0, 0, 0]]),
+        (1, tree.nodes[:, :-1].copy()), (1, tree.nodes[:-1]), (2, tree.links.astype(np.int32)),
+        (3, tree.triangles.reshape(-1, 3)), (4, "2"), (5, 3), (5, -1), (6, 0), (7, np.empty(4)),
+        (7, np.empty(5, np.float32)), (7, readonly),
+    ] + [(2, links) for links in bad_links]
+    for at, value in bad:
+        args = list(good)
+        args[at] = value
+        with pytest.raises((TypeError, ValueError)):
+            KERNEL.winding(*args)
+
+
+finite = st.floats(-1e6, 1e6, allow_nan=False, width=64)
+coordinate = st.one_of(finite, st.sampled_from([0.0, 1e-300, -1e-300, 1e300, -1e300, np.nan, np.inf]))
+
+
+@needs_kernel
+@settings(max_examples=60)
+@given(st.lists(st.tuples(*[coordinate] * 9), min_size=0, max_size=40),
+       st.lists(st.tuples(*[coordinate] * 3), min_size=1, max_size=30),
+       st.sampled_from([0.3, 1.0, 2.0]), st.integers(0, 2))
+def test_fuzzed_soups_give_the_same_bytes_on_both_paths(tris, points, accuracy, order):
+    tri = np.array(tris, dtype=np.float64).reshape(-1, 3, 3)
+    tri = np.concatenate([tri, tri[:3, [0, 0, 1]]])  # and some zero-area copies
+    points = np.array(points, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        tree = WindingTree(tri)
+        k = winding_numbers(tree, points, accuracy=accuracy, order=order)
+        saved, winding._kernel = winding._kernel, None
+        try:
+            n = winding_numbers(tree, points, accuracy=accuracy, order=order)
+        finally:
+            winding._kernel = saved
+    assert k.tobytes() == n.tobytes()
+
+
+@needs_kernel
+@settings(max_examples=60)
+@given(st.lists(st.tuples(st.integers(-3, 40), st.integers(-3, 80), st.integers(-3, 12)), min_size=1, max_size=30))
+def test_fuzzed_links_are_refused_or_walked_safely(rows):
+    """Random links: the kernel refuses them or walks them within its arrays (the
+    sanitizer run, benchmarks/winding_sanitizers.py, checks the second)."""
+    nodes = np.random.default_rng(len(rows)).normal(size=(len(rows), winding.FIELDS))
+    links = np.array(rows, dtype=np.int64)
+    tri = np.random.default_rng(1).normal(size=(64, 9))
+    out = np.empty(4)
+    try:
+        KERNEL.winding(np.zeros((4, 3)), nodes, links, tri, 1.0, 2, 2, out)
+    except ValueError:
+        skip, first, count = links.T
+        i = np.arange(len(links))
+        assert np.any((skip <= i) | (skip > len(links)) | (first < 0) | (first > 64) | (count < 0)
+                      | (count > 64 - first))
