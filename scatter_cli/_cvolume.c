@@ -170,47 +170,66 @@ static inline double segment(const double *a, const double *u, const double *p, 
  * edges; for a thin triangle (whose regions rounding may confuse), the closest of the
  * region's point and the three edges' (ties: in that order). Returns |p - q|^2, +inf
  * instead of NaN. */
-static double closest_on(const double *t, int thin, const double *p, double *q)
+static inline void copy3(const double *a, double *q) { q[0] = a[0], q[1] = a[1], q[2] = a[2]; }
+
+/* Ericson's closest point, each quantity computed when first needed */
+static void regions(const double *a, const double *b, const double *c, const double *ab, const double *ac,
+                    const double *p, double *q)
 {
-    const double *a = t, *b = t + 3, *c = t + 6;
-    double ab[3], ac[3], ap[3], bp[3], cp[3], bc[3];
+    double ap[3], bp[3], cp[3], bc[3];
     for (int k = 0; k < 3; k++)
-        ab[k] = b[k] - a[k], ac[k] = c[k] - a[k], ap[k] = p[k] - a[k];
+        ap[k] = p[k] - a[k];
     double d1 = dot(ab, ap), d2 = dot(ac, ap);
+    if (d1 <= 0 && d2 <= 0)
+        return copy3(a, q);
     for (int k = 0; k < 3; k++)
         bp[k] = p[k] - b[k];
     double d3 = dot(ab, bp), d4 = dot(ac, bp);
-    for (int k = 0; k < 3; k++)
-        cp[k] = p[k] - c[k], bc[k] = c[k] - b[k];
-    double d5 = dot(ab, cp), d6 = dot(ac, cp);
-    double vc = d1 * d4 - d3 * d2, vb = d5 * d2 - d1 * d6, va = d3 * d6 - d5 * d4;
-    if (d1 <= 0 && d2 <= 0) {
-        q[0] = a[0], q[1] = a[1], q[2] = a[2];
-    } else if (d3 >= 0 && d4 <= d3) {
-        q[0] = b[0], q[1] = b[1], q[2] = b[2];
-    } else if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    if (d3 >= 0 && d4 <= d3)
+        return copy3(b, q);
+    double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) {
         double den = d1 - d3;
-        along(a, den != 0 ? d1 / den : 0.0, ab, q);
-    } else if (d6 >= 0 && d5 <= d6) {
-        q[0] = c[0], q[1] = c[1], q[2] = c[2];
-    } else if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+        return along(a, den != 0 ? d1 / den : 0.0, ab, q);
+    }
+    for (int k = 0; k < 3; k++)
+        cp[k] = p[k] - c[k];
+    double d5 = dot(ab, cp), d6 = dot(ac, cp);
+    if (d6 >= 0 && d5 <= d6)
+        return copy3(c, q);
+    double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) {
         double den = d2 - d6;
-        along(a, den != 0 ? d2 / den : 0.0, ac, q);
-    } else if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) {
+        return along(a, den != 0 ? d2 / den : 0.0, ac, q);
+    }
+    for (int k = 0; k < 3; k++)
+        bc[k] = c[k] - b[k];
+    double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && d4 - d3 >= 0 && d5 - d6 >= 0) {
         double e = d4 - d3, den = e + (d5 - d6);
-        along(b, den != 0 ? e / den : 0.0, bc, q);
-    } else if (va >= 0 && vb >= 0 && vc >= 0 && va + vb + vc > 0) {
+        return along(b, den != 0 ? e / den : 0.0, bc, q);
+    }
+    if (va >= 0 && vb >= 0 && vc >= 0 && va + vb + vc > 0) {
         double den = va + vb + vc, v = vb / den, w = vc / den;
         for (int k = 0; k < 3; k++)
             q[k] = a[k] + ab[k] * v + ac[k] * w;
-    } else {
-        double r[3], s[3];
-        double best = segment(a, ab, p, q), d = segment(b, bc, p, r), e = segment(a, ac, p, s);
-        if (d < best)
-            best = d, q[0] = r[0], q[1] = r[1], q[2] = r[2];
-        if (e < best)
-            q[0] = s[0], q[1] = s[1], q[2] = s[2];
+        return;
     }
+    double r[3], s[3];
+    double best = segment(a, ab, p, q), d = segment(b, bc, p, r), e = segment(a, ac, p, s);
+    if (d < best)
+        best = d, copy3(r, q);
+    if (e < best)
+        copy3(s, q);
+}
+
+static double closest_on(const double *t, int thin, const double *p, double *q)
+{
+    const double *a = t, *b = t + 3, *c = t + 6;
+    double ab[3], ac[3], bc[3];
+    for (int k = 0; k < 3; k++)
+        ab[k] = b[k] - a[k], ac[k] = c[k] - a[k], bc[k] = c[k] - b[k];
+    regions(a, b, c, ab, ac, p, q);
     double d[3] = {p[0] - q[0], p[1] - q[1], p[2] - q[2]};
     double dd = dot(d, d);
     if (thin) {
@@ -223,6 +242,20 @@ static double closest_on(const double *t, int thin, const double *p, double *q)
         }
     }
     return isnan(dd) ? INFINITY : dd;
+}
+
+/* squared distance from p to the box of triangle t: no more than its distance */
+static inline double face_d2(const double *t, const double *p)
+{
+    double s = 0;
+    for (int k = 0; k < 3; k++) {
+        double lo = t[k] < t[3 + k] ? t[k] : t[3 + k], hi = t[k] < t[3 + k] ? t[3 + k] : t[k];
+        lo = t[6 + k] < lo ? t[6 + k] : lo, hi = t[6 + k] > hi ? t[6 + k] : hi;
+        double g = lo - p[k] > p[k] - hi ? lo - p[k] : p[k] - hi;
+        g = g > 0 ? g : 0.0;
+        s += g * g;
+    }
+    return s;
 }
 
 /* squared distance from p to box i (+inf for an empty box) */
@@ -276,6 +309,8 @@ static void closest_one(const Tree *t, const double *p, double tol, double *dist
             int64_t s0 = (node - (t->leaves - 1)) * t->leaf, s1 = s0 + t->leaf;
             s1 = s1 < t->nf ? s1 : t->nf;
             for (int64_t s = s0; s < s1; s++) {
+                if (face_d2(t->tri + 9 * s, p) > bound)
+                    continue;
 #ifdef COUNT
                 __atomic_fetch_add(&faces_tested, 1, __ATOMIC_RELAXED);
 #endif
@@ -485,6 +520,11 @@ static void crossings_job(void *ctx, int k, int count)
     int64_t i0, i1;
     share(c->n, k, count, &i0, &i1);
     for (int64_t i = i0; i < i1; i++) {
+        const double *p = c->points + 3 * i, *lo = c->t.lo, *hi = c->t.hi;
+        if (p[0] < lo[0] || p[1] < lo[1] || p[2] < lo[2] || p[0] > hi[0] || p[1] > hi[1] || p[2] > hi[2]) {
+            c->inside[i] = 0; /* outside the surface's box */
+            continue;
+        }
         int odd = 0, even = 0; /* rays stop once a majority is reached */
         for (int j = 0; j < c->nrays && 2 * odd <= c->nrays && 2 * even < c->nrays; j++) {
             int v = parity_of(&c->t, c->points + 3 * i, c->rays + j, c->pad);

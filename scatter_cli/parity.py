@@ -6,7 +6,8 @@ not run along the edges of axis-aligned meshes), counts each ray's crossings wit
 triangles of ``tree`` (distance.TriangleTree) and calls the point inside when most rays
 cross an odd number of times. On a closed surface every ray gives the exact answer; the
 majority only guards against rays that run within rounding of an edge's line or along a
-face.
+face. A point outside the box of the surface is outside, with no ray cast (for an open
+surface a ray from there may cross it once).
 
 A crossing is the watertight ray-triangle test of Woop, Benthin and Wald (2013) in
 float64: the triangle's vertices, moved to the point and sheared so that the ray runs
@@ -75,8 +76,11 @@ def parity_inside(tree, points, rays=3, dirs=None):
         _kernel.crossings(tree.triangles, tree.order, tree.thin, tree.lo, tree.hi, tree.leaf, points, axes, shear, inverse, pad,
                           inside, native.worker_count())
         return inside
-    for i in range(0, len(points), BLOCK):
-        inside[i:i + BLOCK] = _inside_numpy(tree, points[i:i + BLOCK], axes, shear, inverse, pad)
+    boxed = ((points >= tree.lo[0]) & (points <= tree.hi[0])).all(axis=1)
+    inside[:] = False
+    at = np.flatnonzero(boxed)
+    for i in range(0, len(at), BLOCK):
+        inside[at[i:i + BLOCK]] = _inside_numpy(tree, points[at[i:i + BLOCK]], axes, shear, inverse, pad)
     return inside
 
 
