@@ -39,7 +39,9 @@ LIMIT = 1e60
 # Boxes within this much (times the largest coordinate) of the best distance are looked
 # into: far more than the rounding of a distance or a box distance.
 SLACK = 1e-12
-# Points per block on the NumPy path.
+# Points per call of the kernel (the working memory of a call grows with it), and per
+# block on the NumPy path.
+CHUNK = 1 << 16
 BLOCK = 2048
 # A triangle is thin when its least height is under this share of its longest side.
 THIN = 0.1
@@ -203,8 +205,10 @@ def closest_points(tree, points):
     dist, closest, face = np.empty(n), np.empty((n, 3)), np.empty(n, dtype=np.int64)
     tol = tolerance(tree, points)
     if _kernel is not None:
-        _kernel.closest(tree.triangles, tree.order, tree.thin, tree.lo, tree.hi, tree.leaf, points, visit_order(points), tol,
-                        dist, closest, face, native.worker_count())
+        for i in range(0, n, CHUNK):
+            part = points[i:i + CHUNK]
+            _kernel.closest(tree.triangles, tree.order, tree.thin, tree.lo, tree.hi, tree.leaf, part, visit_order(part),
+                            tol, dist[i:i + CHUNK], closest[i:i + CHUNK], face[i:i + CHUNK], native.worker_count())
     else:
         for i in range(0, n, BLOCK):
             dist[i:i + BLOCK], closest[i:i + BLOCK], face[i:i + BLOCK] = _closest_numpy(tree, points[i:i + BLOCK], tol)

@@ -73,8 +73,13 @@ def parity_inside(tree, points, rays=3, dirs=None):
     pad = distance.tolerance(tree, points)
     inside = np.empty(len(points), dtype=bool)
     if _kernel is not None:
-        _kernel.crossings(tree.triangles, tree.order, tree.thin, tree.lo, tree.hi, tree.leaf, points, axes, shear, inverse, pad,
-                          inside, native.worker_count())
+        for i in range(0, len(points), distance.CHUNK):
+            # near points in turn: their rays walk the same nodes (the answers do not change)
+            visit = i + distance.visit_order(points[i:i + distance.CHUNK])
+            out = np.empty(len(visit), dtype=bool)
+            _kernel.crossings(tree.triangles, tree.order, tree.thin, tree.lo, tree.hi, tree.leaf, points[visit], axes,
+                              shear, inverse, pad, out, native.worker_count())
+            inside[visit] = out
         return inside
     boxed = ((points >= tree.lo[0]) & (points <= tree.hi[0])).all(axis=1)
     inside[:] = False

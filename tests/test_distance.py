@@ -295,7 +295,9 @@ def test_threads_and_chunks_change_nothing(monkeypatch):
     halves = [distance.closest_points(tree, points[s]) + (parity.parity_inside(tree, points[s]),)
               for s in (slice(0, 1234), slice(1234, None))]
     chunked = tuple(np.concatenate([h[k] for h in halves]) for k in range(4))
-    assert all(a.tobytes() == b.tobytes() == c.tobytes() for a, b, c in zip(one, three, chunked))
+    monkeypatch.setattr(distance, "CHUNK", 700)
+    small = distance.closest_points(tree, points) + (parity.parity_inside(tree, points),)
+    assert all(a.tobytes() == b.tobytes() == c.tobytes() == d.tobytes() for a, b, c, d in zip(one, three, chunked, small))
 
 
 # ---- bad input ----
