@@ -312,10 +312,30 @@ def _box_far2(lo, hi, p):
     return g[:, 0] * g[:, 0] + g[:, 1] * g[:, 1] + g[:, 2] * g[:, 2]
 
 
+def _greedy_bound(tree, points):
+    """(n,) squared distances of points to some face: the faces of the leaf reached by
+    always taking the nearer child (a bound on the least distance that prunes early)."""
+    leaves = (len(tree.lo) + 1) // 2
+    node = np.zeros(len(points), dtype=np.int64)
+    while len(node) and node[0] < leaves - 1:
+        left = 2 * node + 1
+        nearer = _box_d2(tree.lo[left], tree.hi[left], points) <= _box_d2(tree.lo[left + 1], tree.hi[left + 1], points)
+        node = np.where(nearer, left, left + 1)
+    slot = ((node - (leaves - 1)) * tree.leaf)[:, None] + np.arange(tree.leaf)
+    rows = np.repeat(np.arange(len(points)), tree.leaf)
+    slot = slot.ravel()
+    keep = slot < tree.face_count
+    rows, slot = rows[keep], slot[keep]
+    seed = np.full(len(points), np.inf)
+    np.minimum.at(seed, rows, closest_on(tree.triangles[slot], tree.thin[slot], points[rows])[1])
+    return seed
+
+
 def _closest_numpy(tree, points, tol):
     """closest_points for one block, level by level: (point, node) pairs whose box may hold
     a face within the least farthest-corner distance of the point's boxes (plus tol)."""
     n = len(points)
+    seed = _greedy_bound(tree, points)
     query, node = np.arange(n), np.zeros(n, dtype=np.int64)
     leaves = (len(tree.lo) + 1) // 2
     while node.size and node[0] < leaves - 1:
@@ -323,7 +343,7 @@ def _closest_numpy(tree, points, tol):
         p, lo, hi = points[query], tree.lo[node], tree.hi[node]
         near, far = _box_d2(lo, hi, p), _box_far2(lo, hi, p)
         starts = np.flatnonzero(np.r_[True, query[1:] != query[:-1]])
-        reach = np.sqrt(np.minimum.reduceat(far, starts)) + tol
+        reach = np.sqrt(np.minimum(np.minimum.reduceat(far, starts), seed[query[starts]])) + tol
         keep = near <= np.repeat(reach * reach, np.diff(np.r_[starts, len(query)]))
         query, node = query[keep], node[keep]
     slot = ((node - (leaves - 1)) * tree.leaf)[:, None] + np.arange(tree.leaf)
