@@ -17,7 +17,7 @@ exact winding number (libigl's ``winding_number``, a sum of solid angles) at 2*1
 points of its padded box: the share of points labelled differently, over all points and
 over those with |w - 0.5| >= 0.05.
 
-    python benchmarks/volume.py [--points N] [--repeats R] [--meshes skull,sphere7] [--threads T]
+    python benchmarks/volume.py [--points N] [--repeats R] [--peer-repeats R] [--meshes skull,sphere7]
 
 Figures: benchmarks/results/2026-12-03-volume-distance.md.
 """
@@ -129,6 +129,7 @@ PEERS = {"Open3D compute_signed_distance": open3d_sdf, "point-cloud-utils signed
 
 
 def timed(fn, v, f, p, repeats):
+    """(median s, the runs' s, the last output) of ``repeats`` runs after a warm-up"""
     fn(v, f, p[:10000])  # warm-up
     times = []
     for _ in range(repeats):
@@ -138,14 +139,15 @@ def timed(fn, v, f, p, repeats):
     return statistics.median(times), times, out
 
 
-def speed(name, n, repeats):
+def speed(name, n, repeats, peer_repeats):
     v, f = load(name)
     p = box_points(v, n)
-    print(f"\n### {name}: {len(f)} faces, {n} points in the padded box, median of {repeats} runs\n")
+    print(f"\n### {name}: {len(f)} faces, {n} points in the padded box, median of {repeats} runs "
+          f"(peers: {peer_repeats})\n")
     rows, ref = [], None
     for label, fn in {**OURS, **PEERS}.items():
         try:
-            med, times, out = timed(fn, v, f, p, repeats)
+            med, times, out = timed(fn, v, f, p, repeats if label in OURS else peer_repeats)
         except ImportError as e:
             print(f"- {label}: not installed ({e})")
             continue
@@ -189,6 +191,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--points", type=int, default=10**6)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--peer-repeats", type=int, default=None, help="runs of each peer (default: --repeats)")
     ap.add_argument("--meshes", default="skull,sphere7")
     ap.add_argument("--label-points", type=int, default=20000)
     ap.add_argument("--threads", type=int, default=None, help="SCATTER_THREADS for ours (default: its default)")
@@ -198,7 +201,7 @@ def main():
     print(f"load before: {open('/proc/loadavg').read().strip()}; cores: {os.cpu_count()}; "
           f"kernel: {'yes' if distance._kernel else 'no (NumPy path)'}; winding: {'yes' if winding else 'absent'}")
     for name in args.meshes.split(","):
-        speed(name, args.points, args.repeats)
+        speed(name, args.points, args.repeats, args.peer_repeats or args.repeats)
     labels(args.label_points)
     print(f"\nload after: {open('/proc/loadavg').read().strip()}")
 

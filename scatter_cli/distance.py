@@ -14,14 +14,17 @@ The point-triangle distance is Ericson's region method (Real-Time Collision Dete
 on the triangle; where rounding puts a point in no region (slivers, overflow) the closest
 of the three edges is taken.
 
-The tree: faces sorted by the Morton code of their box centre (ties by face index), in
-leaves of ``LEAF`` consecutive faces; a complete binary tree over the leaves (their
-count rounded up to a power of two, the extra ones empty), node i's children 2i+1 and
-2i+2. Scenes are concatenated triangles: instances are copied, not shared.
+The tree: a complete binary tree over leaves of ``LEAF`` faces (the leaf count rounded
+up to a power of two, the extra leaves empty), node i's children 2i+1 and 2i+2; each
+node's faces split across the longest side of their box centres' box (median_order).
+Queries run in chunks, each in Morton order, every query's walk starting bounded by the
+previous one's answer. Scenes are concatenated triangles: instances are copied, not
+shared.
 
 The compiled kernel ``_cvolume`` does the same float64 operations in the same order
-(tests/test_distance.py holds both paths to the same bytes); ``SCATTER_NUMPY=1`` runs
-the NumPy code, a level-by-level traversal of the tree for blocks of points.
+(tests/test_distance.py holds both paths to the same bytes) and builds the same tree;
+``SCATTER_NUMPY=1`` runs the NumPy code, a level-by-level walk of the tree for blocks of
+points (some hundred times slower).
 """
 
 from __future__ import annotations
