@@ -31,4 +31,4 @@ def kernel(name):
 
 
 setup(ext_modules=[kernel("_csampling"), kernel("_cthinning"), kernel("_cstable"), kernel("_creaders"),
-                     kernel("_cenclosure"), kernel("_cembree"), kernel("_cwinding")])
+                     kernel("_cenclosure"), kernel("_cembree"), kernel("_cwinding"), kernel("_cvolume")])

@@ -12,7 +12,7 @@ import importlib
 import os
 
 # Every compiled kernel, by module name (setup.py builds these).
-KERNELS = ("_csampling", "_cthinning", "_cstable", "_creaders", "_cenclosure", "_cembree")
+KERNELS = ("_csampling", "_cthinning", "_cstable", "_creaders", "_cenclosure", "_cembree", "_cwinding", "_cvolume")
 
 
 def kernel(name):
