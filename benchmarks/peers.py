@@ -257,7 +257,7 @@ def detect_tools():
 
 def dist_version(name):
     if name == "ours":
-        name = "scatter-cli"
+        name = "mesh-scatter"
     try:
         return metadata.version(DIST_NAMES.get(name, name))
     except metadata.PackageNotFoundError:

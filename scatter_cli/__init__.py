@@ -6,6 +6,10 @@
     ((1000, 3), (1000, 3))
 """
 
+# The distribution's name on the package index (the command is `scatter`, the import
+# package `scatter_cli`): `--version` reads its version.
+DISTRIBUTION = "mesh-scatter"
+
 __all__ = ["sample", "prepare", "batch", "preview", "load_surface", "Samples", "ScatterError", "version"]
 
 # The function, not the module of the same name (which imports only the standard library).
@@ -18,7 +22,7 @@ def version() -> str:
     from importlib import metadata
 
     try:
-        return metadata.version("scatter-cli")
+        return metadata.version(DISTRIBUTION)
     except metadata.PackageNotFoundError:
         return _checkout_version()
 

@@ -33,7 +33,7 @@ import numpy as np
 from .errors import ScatterError
 from .surface import corners
 
-INSTALL_HINT = "the bench plot needs matplotlib: pip install 'scatter-cli[bench]' (or: pip install matplotlib)"
+INSTALL_HINT = "the bench plot needs matplotlib: pip install matplotlib"
 SAMPLES_DIR = Path(__file__).resolve().parent.parent / "samples"
 FAR_OFFSET = 1e6
 SMOOTH_ORDER = 8

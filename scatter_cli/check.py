@@ -18,7 +18,7 @@ from .loaders import load_surface
 from .surface import Surface, corners, doubled_areas
 
 ALPHA = 1e-3
-INSTALL_HINT = "scatter check needs pymeshlab and scipy: pip install 'scatter-cli[check]' (or: pip install pymeshlab scipy)"
+INSTALL_HINT = "scatter check needs pymeshlab and scipy: pip install pymeshlab scipy"
 
 
 def world_triangles(surface: Surface):

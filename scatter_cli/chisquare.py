@@ -1,7 +1,7 @@
 """Pearson chi-square tests of counts in bins, pooled: goodness of fit and two samples.
 
 The one pooled chi-square of the project: ``scatter check``, the benchmarks and the
-tests call these. P-values come from SciPy (``pip install 'scatter-cli[check]'``),
+tests call these. P-values come from SciPy (``pip install scipy``),
 imported when a test runs.
 """
 

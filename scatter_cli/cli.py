@@ -203,7 +203,7 @@ def bench(
     the central second moments and a smooth function's mean from the points, compares
     them with their exact values, fits the convergence slope and writes a Markdown
     table, JSON and a PNG plot to --out. Needs matplotlib for the plot
-    (pip install 'scatter-cli[bench]').
+    (pip install matplotlib).
     """
     from .bench import run_bench
 

@@ -35,7 +35,7 @@ def _import_distributed():
     try:
         import distributed
     except ImportError:
-        raise ScatterError("the Dask engine needs dask.distributed: pip install 'scatter-cli[dask]'") from None
+        raise ScatterError("the Dask engine needs dask.distributed: pip install 'dask[distributed]'") from None
     return distributed
 
 

@@ -16,7 +16,7 @@ import struct
 from .errors import ScatterError
 
 EXTENSION = "KHR_draco_mesh_compression"
-INSTALL_HINT = "pip install 'scatter-cli[draco]'"
+INSTALL_HINT = "pip install DracoPy"
 
 
 def check_decoder(name, file_type, file_obj):

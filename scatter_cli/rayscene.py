@@ -16,7 +16,7 @@ import numpy as np
 from . import native
 from .errors import ScatterError
 
-INSTALL_HINT = "--exterior needs Embree: pip install 'scatter-cli[exterior]'"
+INSTALL_HINT = "--exterior needs Embree: pip install embreex"
 # Where the embreex wheels keep their Embree library: Linux (auditwheel), macOS (delocate).
 # (_cembree opens it with dlopen: elsewhere the embreex path runs.)
 LIBRARY_GLOBS = ("../embreex.libs/libembree4*.so*", ".dylibs/libembree4*.dylib")

@@ -67,7 +67,7 @@ def decode(image, source="<texture>"):
     except ImportError:
         from .errors import ScatterError
 
-        raise ScatterError(f"{source}: decoding the texture needs Pillow (pip install 'scatter-cli[texture]')") from None
+        raise ScatterError(f"{source}: decoding the texture needs Pillow (pip install pillow)") from None
     return np.ascontiguousarray(np.asarray(image.convert("RGBA")), dtype=np.uint8)
 
 

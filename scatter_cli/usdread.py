@@ -33,7 +33,7 @@ from .sourcefile import check_readable, is_stream, stream_bytes
 from .surface import Geometry, Instance, Surface, Unsampled, corners, doubled_areas
 from .usdmesh import Topology, fan_faces, with_primvars
 
-INSTALL_HINT = "pip install 'scatter-cli[usd]'"
+INSTALL_HINT = "pip install usd-core"
 
 
 def load_usd(path: str, input_format=None, *, objects=None, plain=False) -> Surface:

@@ -141,13 +141,13 @@ def test_missing_dracopy_gives_one_line(tmp_path):
     err = proc.stderr.decode().strip().splitlines()
     assert proc.returncode == 1 and not out.exists()
     assert len(err) == 1 and err[0].startswith(f"error: {path}:")
-    assert "pip install 'scatter-cli[draco]'" in err[0]
+    assert "pip install DracoPy" in err[0]
 
 
 def test_missing_dracopy_from_python(tmp_path, monkeypatch):
     path = _glb(tmp_path, "draco.glb", draco=True)
     monkeypatch.setitem(__import__("sys").modules, "DracoPy", None)  # `import DracoPy` raises ImportError
-    with pytest.raises(ScatterError, match=r"scatter-cli\[draco\]"):
+    with pytest.raises(ScatterError, match=r"pip install DracoPy"):
         load_surface(path)
     # an uncompressed glTF never asks for it
     assert load_surface(_glb(tmp_path, "plain.glb", draco=False)).face_count > 0
@@ -160,5 +160,5 @@ def test_trimesh_without_a_draco_handler_gives_one_line(tmp_path, monkeypatch):
     handlers = dict(extensions._handlers["primitive_preprocess"])
     handlers.pop("KHR_draco_mesh_compression")
     monkeypatch.setitem(extensions._handlers, "primitive_preprocess", handlers)  # as an older trimesh
-    with pytest.raises(ScatterError, match=r"trimesh 5.2 or later .*scatter-cli\[draco\]"):
+    with pytest.raises(ScatterError, match=r"trimesh 5.2 or later .*pip install DracoPy"):
         load_surface(path)

@@ -284,7 +284,7 @@ def test_without_embreex_one_line_and_exit_1(box_file, tmp_path):
     for args in (["sample", box_file, "--exterior", "-n", "5"], ["info", box_file, "--exterior"]):
         proc = run_scatter(*args, env=env)
         lines = proc.stderr.decode().strip().splitlines()
-        assert proc.returncode == 1 and len(lines) == 1 and "pip install 'scatter-cli[exterior]'" in lines[0]
+        assert proc.returncode == 1 and len(lines) == 1 and "pip install embreex" in lines[0]
     assert run_scatter("sample", box_file, "-n", "5", env=env).returncode == 0  # only --exterior needs it
 
 

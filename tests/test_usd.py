@@ -353,7 +353,7 @@ def test_missing_usd_core_gives_one_line(files, tmp_path):
     env = {"PYTHONPATH": os.pathsep.join([str(fake.parent), os.environ.get("PYTHONPATH", "")])}
     proc = run_scatter("sample", files["usd"], "-n", 10, "-o", tmp_path / "o.ply", env=env)
     err = proc.stderr.decode().strip().splitlines()
-    assert proc.returncode == 1 and len(err) == 1 and "pip install 'scatter-cli[usd]'" in err[0]
+    assert proc.returncode == 1 and len(err) == 1 and "pip install usd-core" in err[0]
     assert err[0].startswith(f"error: {files['usd']}:")
 
 
