@@ -51,7 +51,7 @@ def __getattr__(name):
 
         return load_surface
     if name == "Samples":
-        from .samples import Samples
+        from .columns import Samples
 
         return Samples
     if name == "ScatterError":

@@ -19,7 +19,7 @@ from .attributes import AttributeMaker
 from .bounds import choose_precision, in_frame, normal_frame, sampled_bounds
 from .options import SampleOptions
 from .pipeline import surface_source, volume_source
-from .samples import ATTRIBUTES, Samples, column_layout
+from .columns import ATTRIBUTES, Samples, column_layout
 from .sampling import chunk_ranges, run_chunks
 from .sources import Source
 from .loaders import load_surface

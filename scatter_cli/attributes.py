@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ScatterError
-from .samples import ATTRIBUTES
+from .columns import ATTRIBUTES
 from .surface import Surface, cofactors
-from .visuals import color_source, interpolate, uv_table, vertex_normal_table
+from .surface_data import color_source, interpolate, uv_table, vertex_normal_table
 
 
 NORMAL_USERS = ("normal", "smooth-normal", "orient")

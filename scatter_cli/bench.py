@@ -8,7 +8,7 @@ integrals whose exact values follow from the triangles:
   bounding-box diagonal;
 - ``second``: the central second moments C = E[(x - c)(x - c)^T] (closed form);
   error |C^ - C|_F / |C|_F, C^ the mean of (x - c)(x - c)^T over the points;
-- ``smooth``: the mean of :func:`exact.smooth_test_function` (a Gauss rule of order 8
+- ``smooth``: the mean of :func:`surface_measures.smooth_test_function` (a Gauss rule of order 8
   per triangle, exact to degree 15); error |f^ - f| / sqrt(E f^2).
 
 ``error`` is the root mean square of the three. Each (variant, count) is run with
@@ -84,19 +84,19 @@ class Exact:
 
 def exact_values(tri, areas, order=SMOOTH_ORDER) -> Exact:
     """Exact integrals over triangles ``tri`` (F, 3, 3) with areas ``areas`` (F,)."""
-    from . import exact
+    from . import surface_measures
 
     flat = tri.reshape(-1, 3)
     bounds = np.stack([flat.min(0), flat.max(0)])
-    centroid, second = exact.surface_covariance(tri, areas)
+    centroid, second = surface_measures.surface_covariance(tri, areas)
     area = float(areas.sum())
-    f = exact.surface_integral(lambda p: _smooth_and_square(p, bounds), tri, areas, order=order) / area
+    f = surface_measures.surface_integral(lambda p: _smooth_and_square(p, bounds), tri, areas, order=order) / area
     return Exact(centroid, second, float(f[0]), math.sqrt(float(f[1])), bounds,
                  float(np.linalg.norm(bounds[1] - bounds[0])), area)
 
 
 def _smooth_and_square(p, bounds):
-    from .exact import smooth_test_function
+    from .surface_measures import smooth_test_function
 
     v = smooth_test_function(p, bounds)
     return np.column_stack([v, v * v])
@@ -104,7 +104,7 @@ def _smooth_and_square(p, bounds):
 
 def errors(points, exact: Exact):
     """Relative errors (dict of floats) of the integrals estimated from points (n, 3)."""
-    from .exact import smooth_test_function
+    from .surface_measures import smooth_test_function
 
     x = np.asarray(points, dtype=np.float64)
     d = x - exact.centroid

@@ -86,7 +86,7 @@ def exterior_report(surface, seed=0) -> dict:
     between its probes counts as exterior (so sampling classifies every point it keeps)."""
     from .exterior import ExteriorSource, classify
     from .sampling import RawChunk, SamplePlan
-    from .visibility import Occluder
+    from .exterior_rays import Occluder
 
     occluder = Occluder(surface)
     plan = SamplePlan(surface)
@@ -127,7 +127,7 @@ class _Plain:
 
 def _attributes(surface) -> dict:
     """Which per-point attributes the file can provide (without computing any of them)."""
-    from .visuals import VertexTables
+    from .surface_data import VertexTables
 
     has = {"normals": False, "colors": False, "uv": False, "texture": False}
     for g in surface.geometries:

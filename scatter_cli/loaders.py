@@ -127,7 +127,7 @@ def _read_fast(job, read):
     tables = [p[2] if len(p) > 2 else {} for p in parts] if isinstance(parts, list) else None
     surface = _plain_surface(job.path, parts if tables is None else [p[:2] for p in parts])
     if job.smooth or job.color or job.uv:
-        from .visuals import VertexTables
+        from .surface_data import VertexTables
 
         for g, t in zip(surface.geometries, tables or [{}] * len(surface.geometries)):
             g.mesh = VertexTables(g.vertices, g.faces, **t)  # normals computed from the faces unless given

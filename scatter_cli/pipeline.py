@@ -137,7 +137,7 @@ class ExteriorStage:
     ``--radius``) every exterior one among the base's ``count``."""
 
     def __init__(self, base, surface, o: SampleOptions, info):
-        from .visibility import Occluder
+        from .exterior_rays import Occluder
 
         t = time.perf_counter()
         self.occluder = Occluder(surface)

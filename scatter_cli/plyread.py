@@ -71,7 +71,7 @@ _TEXTURE_COORDINATES = {"texture_u", "texture_v", "u", "v", "s", "t"}
 
 
 def vertex_tables(columns, smooth, color):
-    """The keyword arguments of a :class:`~scatter_cli.visuals.VertexTables` for what a
+    """The keyword arguments of a :class:`~scatter_cli.surface_data.VertexTables` for what a
     PLY's vertex properties give, as trimesh's PLY loader and Trimesh give them.
 
     columns: property name -> (V,) array of the property's own type, as trimesh holds

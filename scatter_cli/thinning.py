@@ -20,7 +20,7 @@ import numpy as np
 
 from . import greedy, pairs
 from .errors import ScatterError, ScatterUsageError
-from .exact_count import search_radius, trim_to_count
+from .count_search import search_radius, trim_to_count
 from .greedy import PairGraph
 from .pairs import as_points, cross_pairs
 from .sampling import RawChunk, in_blocks

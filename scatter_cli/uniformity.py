@@ -2,14 +2,14 @@
 
 Counts in exact equal-area slabs along several directions (chi-square) and the sample
 moments against their exact values (z-scores), combined by Bonferroni. The exact
-quantities are :mod:`scatter_cli.exact`, the tests :mod:`scatter_cli.chisquare`.
+quantities are :mod:`scatter_cli.surface_measures`, the tests :mod:`scatter_cli.chisquare`.
 """
 
 import math
 
 import numpy as np
 
-from . import exact
+from . import surface_measures
 from .chisquare import chi2_gof, chi2_two_sample
 
 
@@ -28,10 +28,10 @@ class ExactMoments:
     ``scale`` (the largest extent, for the floors of the standard errors)."""
 
     def __init__(self, tri, areas):
-        ref, mean, self.cov, tri_k, areas_k = exact.centred_moments(tri, areas)
+        ref, mean, self.cov, tri_k, areas_k = surface_measures.centred_moments(tri, areas)
         self.centre = ref + mean
         self.scale = float(np.ptp(tri_k.reshape(-1, 3), axis=0).max())
-        self.fourth = exact.fourth_central_moments(tri_k - self.centre, areas_k)
+        self.fourth = surface_measures.fourth_central_moments(tri_k - self.centre, areas_k)
 
 
 def moment_z_scores(points, tri, areas, moments=None):
@@ -57,8 +57,8 @@ def moment_z_scores(points, tri, areas, moments=None):
     sample_cov = xc.T @ xc / (n - 1)
     se_mean = np.maximum(np.sqrt(np.diag(m.cov) / n), 1e-12 * m.scale)
     z_mean = xbar / se_mean
-    want = np.array([m.cov[i, j] for i, j in exact.COV_PAIRS])
-    got = np.array([sample_cov[i, j] for i, j in exact.COV_PAIRS])
+    want = np.array([m.cov[i, j] for i, j in surface_measures.COV_PAIRS])
+    got = np.array([sample_cov[i, j] for i, j in surface_measures.COV_PAIRS])
     se_cov = np.sqrt(np.maximum(m.fourth - want**2, 0.0) / n)
     se_cov = np.maximum(se_cov, 1e-12 * m.scale**2)
     return z_mean, (got - want) / se_cov
@@ -78,10 +78,10 @@ def _bonferroni(pvalues):
 
 class Regions:
     """The regions points are counted in: about k exact equal-area slabs along each
-    direction (default: 3 axes + 4 diagonals; see :func:`exact.slabs`), with their exact
+    direction (default: 3 axes + 4 diagonals; see :func:`surface_measures.slabs`), with their exact
     probabilities, computed once for every sample tested.
 
-    Rounding: a point within :func:`exact.rounding` of a slab's edge counts in the slab
+    Rounding: a point within :func:`surface_measures.rounding` of a slab's edge counts in the slab
     it is on (no edge lies within rounding of a flat face or of the surface's ends), and
     a point further than that beyond the surface's lowest or highest height along a
     direction is off the surface.
@@ -90,9 +90,9 @@ class Regions:
     def __init__(self, tri, areas, k=32, directions=None, progress=None):
         dirs = default_directions() if directions is None else np.asarray(directions, dtype=float).reshape(-1, 3)
         self.k = int(k)
-        self.tol = exact.rounding(np.asarray(tri, dtype=float))
+        self.tol = surface_measures.rounding(np.asarray(tri, dtype=float))
         tell = progress and (lambda i, m: progress(f"exact regions, direction {i + 1}/{m}"))
-        self.slabs = exact.slabs(tri, areas, dirs, self.k, progress=tell)
+        self.slabs = surface_measures.slabs(tri, areas, dirs, self.k, progress=tell)
 
     def counts(self, points):
         """([(j,) int64 counts per slab, one array per direction], points off the surface)
@@ -102,7 +102,7 @@ class Regions:
         for d, edges, _ in self.slabs:
             h = pts @ d
             off |= (h < edges[0] - self.tol) | (h > edges[-1] + self.tol)
-            out.append(exact.slab_counts(pts, d, edges))
+            out.append(surface_measures.slab_counts(pts, d, edges))
         return out, int(np.count_nonzero(off))
 
 

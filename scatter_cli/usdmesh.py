@@ -15,7 +15,7 @@ import functools
 import numpy as np
 
 from .surface import Geometry
-from .visuals import VertexTables
+from .surface_data import VertexTables
 
 # How far an interpolation is from constant: a colour stored at the finest of its parts.
 _RANK = {"constant": 0, "uniform": 1, "vertex": 2, "varying": 2, "faceVarying": 3}

@@ -30,7 +30,7 @@ import numpy as np
 from .errors import ScatterError, ScatterUsageError
 from .sampling import SamplePlan
 from .surface import Surface
-from .visuals import color_source
+from .surface_data import color_source
 from .warps import square_to_triangle
 
 SOURCES = ("vertex-color", "texture")

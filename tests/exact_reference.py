@@ -1,10 +1,10 @@
 """Exact quantities of a surface that only the tests use: the area below a height,
 equal-area slabs of exactly 1/k each and their probabilities, the second moment about
-the origin. Built on :mod:`scatter_cli.exact`'s closed forms per triangle."""
+the origin. Built on :mod:`scatter_cli.surface_measures`'s closed forms per triangle."""
 
 import numpy as np
 
-from scatter_cli.exact import _below_fraction, _chunks, _edges, _kept, _split, _unit, centred_moments
+from scatter_cli.surface_measures import _below_fraction, _chunks, _edges, _kept, _split, _unit, centred_moments
 
 
 def _heights(tri, ref, d):

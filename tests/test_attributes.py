@@ -16,7 +16,7 @@ from scatter_cli.sampling import RawChunk
 from scatter_cli.loaders import load_surface
 from scatter_cli.surface import Geometry
 from scatter_cli.texture import CLAMP_TO_EDGE, MIRRORED_REPEAT, REPEAT, bilinear, wrap_index
-from scatter_cli.visuals import vertex_normal_table
+from scatter_cli.surface_data import vertex_normal_table
 from scatter_cli.weighting import barycentric
 
 from .conftest import SAMPLES, run_scatter, scaled_scene
@@ -345,7 +345,7 @@ def test_bad_weights_are_clear_errors():
 
 def test_xyz_only_decodes_no_texture_and_computes_no_normals(monkeypatch):
     import scatter_cli.texture as texture
-    import scatter_cli.visuals as visuals
+    import scatter_cli.surface_data as visuals
 
     calls = []
     monkeypatch.setattr(texture, "decode", lambda *a, **k: calls.append("decode"))

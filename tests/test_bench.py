@@ -7,7 +7,7 @@ import pytest
 from scipy import stats as sps
 
 from scatter_cli import bench
-from scatter_cli.exact import smooth_test_function
+from scatter_cli.surface_measures import smooth_test_function
 from scatter_cli.loaders import load_surface
 
 from .conftest import run_scatter, run_user

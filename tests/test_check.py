@@ -157,13 +157,13 @@ def test_exact_slabs_work_is_a_small_multiple_of_the_faces(monkeypatch):
     edge; evaluating every first-bracket face at all 48 steps, as before, took 418),
     and their probabilities are exact (they sum to one, the area below each edge agrees
     with a direct evaluation)."""
-    from scatter_cli import exact, uniformity
+    from scatter_cli import surface_measures, uniformity
 
     tri = _terrain()
     areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     work = []
-    real = exact._Pairs.area_at
-    monkeypatch.setattr(exact._Pairs, "area_at", lambda pairs, t: work.append(len(pairs)) or real(pairs, t))
+    real = surface_measures._Pairs.area_at
+    monkeypatch.setattr(surface_measures._Pairs, "area_at", lambda pairs, t: work.append(len(pairs)) or real(pairs, t))
     regions = uniformity.Regions(tri, areas, 32)
     assert sum(work) < 100 * len(tri), sum(work) / len(tri)
     for d, edges, prob in regions.slabs:
@@ -175,7 +175,7 @@ def test_exact_slabs_work_is_a_small_multiple_of_the_faces(monkeypatch):
 def _area_below(tri, areas, d, t):
     """The area of ``tri`` below height t along d, by the closed form per face."""
     h = np.sort(tri @ d, axis=1)
-    from scatter_cli.exact import _below_fraction
+    from scatter_cli.surface_measures import _below_fraction
 
     return float(areas @ _below_fraction(h[:, 0], h[:, 1], h[:, 2], t))
 

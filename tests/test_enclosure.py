@@ -11,7 +11,7 @@ from .conftest import triangles_mesh
 
 pytest.importorskip("embreex")
 
-from scatter_cli import enclosure, visibility  # noqa: E402
+from scatter_cli import enclosure, exterior_rays  # noqa: E402
 from scatter_cli.exterior import classify  # noqa: E402
 from scatter_cli.sampling import RawChunk, SamplePlan  # noqa: E402
 from scatter_cli.loaders import load_surface  # noqa: E402
@@ -24,7 +24,7 @@ def truth(surface, cells):
 
 def verdicts(surface, chunk, seed=3):
     """(exterior by rays alone, exterior with the enclosed faces skipped, enclosed faces, rays saved)."""
-    occluder = visibility.Occluder(surface)
+    occluder = exterior_rays.Occluder(surface)
     alone, rays = classify(occluder, chunk, seed)
     occluder.enclose()
     skipped, fewer = classify(occluder, chunk, seed)
@@ -128,7 +128,7 @@ def test_hidden_sphere_inside_a_sphere_is_enclosed_whole():
     inner = trimesh.creation.icosphere(subdivisions=3, radius=0.5)
     both = trimesh.Trimesh(np.vstack([outer.vertices, inner.vertices]),
                            np.vstack([outer.faces, inner.faces + len(outer.vertices)]), process=False)
-    occluder = visibility.Occluder(load_surface(both))
+    occluder = exterior_rays.Occluder(load_surface(both))
     assert occluder.enclose() == len(inner.faces)
     assert occluder.enclosed[len(outer.faces):].all()
 

@@ -14,7 +14,7 @@ pytest.importorskip("embreex")
 from scipy import stats  # noqa: E402
 
 import scatter_cli  # noqa: E402
-from scatter_cli import visibility  # noqa: E402
+from scatter_cli import exterior_rays  # noqa: E402
 from scatter_cli.exterior import classify  # noqa: E402
 from scatter_cli.sampling import SamplePlan  # noqa: E402
 from scatter_cli.loaders import load_surface  # noqa: E402
@@ -22,21 +22,21 @@ from scatter_cli.loaders import load_surface  # noqa: E402
 LEVEL = 1e-3
 
 
-class FromTheFace(visibility.Occluder):
+class FromTheFace(exterior_rays.Occluder):
     """Broken: rays start on the face itself (no offset)."""
 
     def __init__(self, surface):
         super().__init__(surface, offset_roundings=0)
 
 
-class OneDirection(visibility.Occluder):
+class OneDirection(exterior_rays.Occluder):
     """Broken: one random direction a point."""
 
     def __init__(self, surface):
         super().__init__(surface, design_size=1, normal_rays=False)
 
 
-class TooFar(visibility.Occluder):
+class TooFar(exterior_rays.Occluder):
     """Broken: rays start about the radius of the scene off the face (through walls)."""
 
     def __init__(self, surface):
@@ -60,7 +60,7 @@ def cell_test(name, n=6000, seed=1, occluder=None, monkeypatch=None, **options):
     cells); ``options``: more sample options (``stable=True``)."""
     scene, cells = scene_cells(name)
     if occluder is not None:
-        monkeypatch.setattr(visibility, "Occluder", occluder)
+        monkeypatch.setattr(exterior_rays, "Occluder", occluder)
     s = scatter_cli.sample(scene, n, seed=seed, exterior=True, attributes=["face", "object"], **options)
     surface = load_surface(scene)
     counts, areas, exterior = [], [], []
@@ -109,7 +109,7 @@ def classify_cells(name, occluder_class, n=20000, seed=3):
 
 @pytest.mark.parametrize("name", SCENE_NAMES)
 def test_classifier_drops_under_1e3_of_exterior_and_keeps_no_hidden(name):
-    dropped, kept_hidden, exterior = classify_cells(name, visibility.Occluder)
+    dropped, kept_hidden, exterior = classify_cells(name, exterior_rays.Occluder)
     assert kept_hidden == 0
     assert dropped <= LEVEL * exterior
 
@@ -123,7 +123,7 @@ def test_normal_rays_cast_together_in_face_order_give_the_same_verdicts(broken):
     changed = 0
     for name in ("car", "cup", "bowl"):
         surface = load_surface(getattr(es, name)()[0])
-        occluder = visibility.Occluder(surface)
+        occluder = exterior_rays.Occluder(surface)
         chunk = SamplePlan(surface).draw(0, 20000, 4)
         alone = classify(occluder, chunk, 4)
         normals = occluder.face_normals(chunk.face, chunk.instance)
@@ -149,7 +149,7 @@ def test_per_face_verdict_from_a_few_points_is_unsound():
     box = es.cuboid([-0.5, -0.5, 0.0], [0.5, 0.5, 1.0])
 
     surface = load_surface(triangles_mesh(np.concatenate([big, box])))
-    occluder = visibility.Occluder(surface)
+    occluder = exterior_rays.Occluder(surface)
     bary = np.array([[0.8, 0.1, 0.1], [0.1, 0.8, 0.1], [0.1, 0.1, 0.8], [1 / 3, 1 / 3, 1 / 3]])
     probes = bary @ big[0]
     normals = occluder.face_normals(np.zeros(4, np.int64), np.zeros(4, np.int64))
@@ -189,7 +189,7 @@ def two_spheres():
 @pytest.mark.parametrize("occluder, fails", [(None, False), (TooFar, True)])
 def test_no_point_inside_the_other_sphere_by_winding_number(occluder, fails, monkeypatch):
     if occluder is not None:
-        monkeypatch.setattr(visibility, "Occluder", occluder)
+        monkeypatch.setattr(exterior_rays, "Occluder", occluder)
     scene, ball, moved = two_spheres()
     s = scatter_cli.sample(scene, 10000, seed=4, exterior=True, attributes=["object"], precision="float64")
     tri = ball.vertices[ball.faces]
@@ -303,7 +303,7 @@ def test_real_mesh_all_exterior_and_uniform(name):
     counts = np.bincount(bins[s.attributes["face"]], minlength=50)
     expected = n * np.bincount(bins, weights=area, minlength=50) / area.sum()
     assert stats.chisquare(counts, expected).pvalue > LEVEL
-    many = visibility.Occluder(surface, design_size=1024)
+    many = exterior_rays.Occluder(surface, design_size=1024)
     from scatter_cli.sampling import RawChunk
 
     chunk = RawChunk(0, s.points, s.attributes["face"], np.zeros(n, np.int64), None)
@@ -319,7 +319,7 @@ def test_cad_part_points_all_exterior_by_many_more_rays():
     s = scatter_cli.sample(path, 10000, seed=3, exterior=True, attributes=["face"], precision="float64")
     surface = load_surface(path)
     chunk = RawChunk(0, s.points, s.attributes["face"], np.zeros(len(s.points), np.int64), None)
-    assert classify(visibility.Occluder(surface, design_size=1024), chunk, 77)[0].all()
+    assert classify(exterior_rays.Occluder(surface, design_size=1024), chunk, 77)[0].all()
 
 
 def test_bounded_source_short_of_exterior_points_says_so():

@@ -17,7 +17,8 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli import enclosure, native, pairs, rayscene, readers, sampling, stable, thinning, visibility
+from scatter_cli import (distance, enclosure, exterior_rays, native, pairs, parity, rayscene, readers, sampling,
+                         stable, thinning, winding)
 from scatter_cli.loaders import load_surface
 from scatter_cli.surface import Geometry, Instance, Surface
 
@@ -28,12 +29,14 @@ REQUIRED = os.environ.get("SCATTER_REQUIRE_KERNELS", "") not in ("", "0")
 
 # Where each kernel is held: switching it off sets these to None.
 SWITCHES = {
-    "_csampling": [(sampling, "_kernel"), (visibility, "_kernel")],
+    "_csampling": [(sampling, "_kernel"), (exterior_rays, "_kernel")],
     "_cthinning": [(pairs, "_kernel")],
     "_cstable": [(stable, "_kernel")],
     "_creaders": [(readers, "_kernel")],
     "_cenclosure": [(enclosure, "_kernel")],
     "_cembree": [(rayscene, "_kernel")],
+    "_cwinding": [(winding, "_kernel")],
+    "_cvolume": [(distance, "_kernel"), (parity, "_kernel")],
 }
 
 
@@ -74,6 +77,7 @@ MESHES = {
     "colors": lambda: str(SAMPLES / "boxvertexcolors.glb"),
     "textured": lambda: str(SAMPLES / "boxtextured.glb"),
     "koala": lambda: str(SAMPLES / "koala.obj"),
+    "hemisphere": lambda: str(SAMPLES / "hemisphere.off"),
 }
 
 
@@ -125,7 +129,7 @@ def normals_case(seed, center):
     def run():
         v, f = awkward_mesh(seed)
         with np.errstate(all="ignore"):
-            return {"normals": visibility.face_normals(v, f, center).tobytes()}
+            return {"normals": exterior_rays.face_normals(v, f, center).tobytes()}
 
     return run
 
@@ -257,6 +261,48 @@ def enclosure_case(scene):
     return run
 
 
+# -- volume labels (_cwinding, _cvolume) ------------------------------------------------------
+
+
+def volume_points(tri, n=3000, seed=5):
+    """Points around triangles (T, 3, 3): uniform in the grown box, and some on the corners
+    and edge midpoints themselves (where rays and distances tie)."""
+    lo, hi = tri.reshape(-1, 3).min(0), tri.reshape(-1, 3).max(0)
+    grow = 0.2 * (hi - lo).max()
+    box = np.random.default_rng(seed).uniform(lo - grow, hi + grow, (n, 3))
+    return np.concatenate([box, tri[:50].reshape(-1, 3), (tri[:50, 0] + tri[:50, 1]) / 2])
+
+
+def volume_triangles(name):
+    if name == "scene":
+        from scatter_cli.pipeline import plan_surface
+        from scatter_cli.volume import world_triangles
+
+        return world_triangles(plan_surface(load_surface(SAMPLES / "cesiummilktruck.glb"))[0])[0]
+    mesh = load_surface(SAMPLES / name)
+    g = mesh.geometries[0]
+    return g.vertices[g.faces]
+
+
+def winding_case(name, **kw):
+    def run():
+        tri = volume_triangles(name)
+        return {"w": winding.winding_numbers(winding.WindingTree(tri), volume_points(tri), **kw).tobytes()}
+
+    return run
+
+
+def distance_case(name):
+    def run():
+        tri = volume_triangles(name)
+        tree = distance.TriangleTree.from_triangles(tri)
+        d, c, f = distance.closest_points(tree, volume_points(tri))
+        inside = parity.parity_inside(tree, volume_points(tri), rays=5)
+        return {"d": d.tobytes(), "c": c.tobytes(), "f": f.tobytes(), "inside": inside.tobytes()}
+
+    return run
+
+
 SAMPLING_OPTIONS = [("skull", {}), ("skull", dict(method="stratified")), ("skull", dict(method="sobol")),
                     ("skull", dict(attributes="face,bary,normal", precision="float32")),
                     ("degenerate", dict(attributes="face,bary")), ("instances", dict(attributes="face,object,normal")),
@@ -292,6 +338,16 @@ CASES = {
     },
     "_cenclosure": {s: enclosure_case(s) for s in ("box_in_box", "double_shell", "car", "cup", "spheres")},
     "_cembree": {s: rays_case(s) for s in ("box_in_box", "car", "cup")},
+    "_cwinding": {
+        **{f"winding-{n}": winding_case(n) for n in ("icosahedron_binary.stl", "hemisphere.off", "scene")},
+        "winding-order-1": winding_case("moebius-160-10.ply", order=1, accuracy=3.0),
+        "sample-volume": lambda: sample_bytes("hemisphere", volume=True, count=2000, attributes="winding,inside"),
+    },
+    "_cvolume": {
+        **{f"distance-{n}": distance_case(n) for n in ("icosahedron_binary.stl", "narrow_triangles.obj", "scene")},
+        "sample-near": lambda: sample_bytes("hemisphere", near=(0.02,), count=2000, sign="parity",
+                                            attributes="sdf,inside,closest,face"),
+    },
 }
 
 

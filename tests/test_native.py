@@ -47,7 +47,7 @@ def test_scatter_numpy_switches_them_off(monkeypatch):
 
 
 _HELD = """
-from scatter_cli import enclosure, pairs, rayscene, readers, sampling, stable, visibility
+from scatter_cli import enclosure, pairs, rayscene, readers, sampling, stable, exterior_rays
 print(sum(m._kernel is not None for m in (enclosure, pairs, rayscene, readers, sampling, stable, visibility)))
 """
 

@@ -19,7 +19,7 @@ import trimesh
 import scatter_cli
 from scatter_cli import plyread
 from scatter_cli.loaders import load_surface, read_mesh
-from scatter_cli.visuals import VertexTables, uv_table, vertex_normal_table, weighted_vertex_normals
+from scatter_cli.surface_data import VertexTables, uv_table, vertex_normal_table, weighted_vertex_normals
 
 from .conftest import run_scatter, run_user
 from .loadmemory import load_memory

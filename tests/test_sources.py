@@ -57,7 +57,7 @@ def _dart_thrown(want_bary):
 
 def _exterior(want_bary, method="random", **how):
     from scatter_cli.exterior import ExteriorSource, ExteriorSubset
-    from scatter_cli.visibility import Occluder
+    from scatter_cli.exterior_rays import Occluder
 
     plan = SamplePlan(surface("cesiummilktruck.glb"))
     occluder = Occluder(plan.surface)

@@ -16,7 +16,7 @@ from .conftest import run_scatter, triangles_mesh
 
 pytest.importorskip("embreex")
 import scatter_cli  # noqa: E402
-from scatter_cli import visibility  # noqa: E402
+from scatter_cli import exterior_rays  # noqa: E402
 from scatter_cli.exterior import classify  # noqa: E402
 from scatter_cli.stable import StableSource  # noqa: E402
 from scatter_cli.loaders import load_surface  # noqa: E402
@@ -105,7 +105,7 @@ def test_the_n_earliest_exterior_arrivals_in_arrival_order():
     surface = load_surface(mesh)
     stream = StableSource(surface, 3, stream=True)
     chunk = stream.draw(0, 8000)
-    kept, _ = classify(visibility.Occluder(surface), chunk, 3, stream.ray_uniforms(0, 8000))
+    kept, _ = classify(exterior_rays.Occluder(surface), chunk, 3, stream.ray_uniforms(0, 8000))
     assert 3000 < kept.sum() < 8000
     assert chunk.points[kept][:3000].tobytes() == out.points.tobytes()
     longer = exterior_run(tri, 3500)

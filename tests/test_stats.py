@@ -1,4 +1,4 @@
-"""Tests for the statistics of scatter check: scatter_cli.exact, .chisquare and .uniformity.
+"""Tests for the statistics of scatter check: scatter_cli.surface_measures, .chisquare and .uniformity.
 
 Statistical tests use fixed seeds and the significance level ALPHA; every
 bound below is one that a wrong formula would exceed.
@@ -12,7 +12,7 @@ import pytest
 import trimesh
 from scipy import stats as sps
 
-from scatter_cli import chisquare, exact, uniformity
+from scatter_cli import chisquare, surface_measures, uniformity
 
 from . import exact_reference
 
@@ -216,7 +216,7 @@ def test_slab_counts_convention():
     edges = np.array([0.0, 1.0, 2.0, 3.0])
     hts = np.array([-1.0, 0.0, 0.5, 1.0, 1.5, 3.0, 4.0])
     pts = np.column_stack((np.zeros_like(hts), np.zeros_like(hts), hts))
-    assert exact.slab_counts(pts, [0, 0, 2.0], edges).tolist() == [4, 1, 2]
+    assert surface_measures.slab_counts(pts, [0, 0, 2.0], edges).tolist() == [4, 1, 2]
 
 
 # ---------------------------------------------------------------------------
@@ -244,8 +244,8 @@ def test_surface_moments_exact_square_and_cube():
 
 def test_surface_covariance_survives_large_offsets():
     tri, areas = arrays(capsule())
-    mean0, cov0 = exact.surface_covariance(tri, areas)
-    mean1, cov1 = exact.surface_covariance(tri + 1e8, areas)
+    mean0, cov0 = surface_measures.surface_covariance(tri, areas)
+    mean1, cov1 = surface_measures.surface_covariance(tri + 1e8, areas)
     assert np.allclose(mean1 - 1e8, mean0, atol=1e-6)
     assert np.allclose(cov1, cov0, atol=1e-6 * np.abs(cov0).max())
 
@@ -258,7 +258,7 @@ def test_surface_moments_against_monte_carlo():
     tri, areas = arrays(mesh)
     mean, second = exact_reference.surface_moments(tri, areas)
     rng = np.random.default_rng(10)
-    pairs = exact.COV_PAIRS
+    pairs = surface_measures.COV_PAIRS
     n, chunk = 10**7, 10**6
     s1 = np.zeros(3)
     s2 = np.zeros(len(pairs))
@@ -304,7 +304,7 @@ def test_moment_z_scores_flat_mesh_is_finite():
 
 @pytest.mark.parametrize("order", range(1, 11))
 def test_triangle_quadrature_exact_to_its_degree(order):
-    nodes, weights = exact.triangle_quadrature(order)
+    nodes, weights = surface_measures.triangle_quadrature(order)
     assert nodes.shape == (order * (order + 1), 3) and weights.shape == (order * (order + 1),)
     assert np.all(nodes >= 0) and np.allclose(nodes.sum(axis=1), 1.0, atol=1e-15)
     assert np.all(weights > 0) and weights.sum() == pytest.approx(1.0, rel=1e-14)
@@ -322,7 +322,7 @@ def test_triangle_quadrature_exact_to_its_degree(order):
 def test_surface_integral_reproduces_moments():
     tri, areas = arrays(capsule())
     mean, second = exact_reference.surface_moments(tri, areas)
-    got = exact.surface_integral(lambda p: np.column_stack((p, p[:, [0, 1, 2]] * p[:, [0, 0, 2]])), tri, areas, 2)
+    got = surface_measures.surface_integral(lambda p: np.column_stack((p, p[:, [0, 1, 2]] * p[:, [0, 0, 2]])), tri, areas, 2)
     total = areas.sum()
     assert np.allclose(got[:3] / total, mean, atol=1e-13)
     assert np.allclose(got[3:] / total, [second[0, 0], second[0, 1], second[2, 2]], rtol=1e-12)
@@ -347,15 +347,15 @@ def test_surface_integral_converges_for_smooth_function():
     mesh = trimesh.creation.icosphere(subdivisions=2)
     mesh.apply_scale([1.0, 0.7, 1.3])
     tri, areas = arrays(mesh)
-    f = lambda p: exact.smooth_test_function(p, mesh.bounds)
-    values = np.array([exact.surface_integral(f, tri, areas, order) for order in range(1, 9)])
+    f = lambda p: surface_measures.smooth_test_function(p, mesh.bounds)
+    values = np.array([surface_measures.surface_integral(f, tri, areas, order) for order in range(1, 9)])
     errors = np.abs(values[:-1] - values[-1])
     assert errors[-1] < 1e-12 * abs(values[-1])
     assert np.all(errors[1:5] < errors[0:4])  # monotone while above round-off
     # independent reference: a 64-fold finer split of the same surface, low order
     fine = subdivide(tri, 3)
     fine_areas = 0.5 * np.linalg.norm(np.cross(fine[:, 1] - fine[:, 0], fine[:, 2] - fine[:, 0]), axis=1)
-    assert exact.surface_integral(f, fine, fine_areas, 3) == pytest.approx(values[-1], rel=1e-9)
+    assert surface_measures.surface_integral(f, fine, fine_areas, 3) == pytest.approx(values[-1], rel=1e-9)
     # and Monte Carlo: z-score within the ALPHA bound
     rng = np.random.default_rng(13)
     sample = f(sample_uniform(tri, areas, 10**6, rng)) * areas.sum()
@@ -366,8 +366,8 @@ def test_surface_integral_converges_for_smooth_function():
 def test_smooth_test_function_is_scale_free():
     pts = np.random.default_rng(14).uniform(-1, 1, (100, 3))
     bounds = np.array([[-1.0, -1, -1], [1, 1, 1]])
-    a = exact.smooth_test_function(pts, bounds)
-    b = exact.smooth_test_function(pts * 1e3 + 5e6, bounds * 1e3 + 5e6)
+    a = surface_measures.smooth_test_function(pts, bounds)
+    b = surface_measures.smooth_test_function(pts * 1e3 + 5e6, bounds * 1e3 + 5e6)
     assert a.shape == (100,) and np.allclose(a, b, atol=1e-9)
     assert np.ptp(a) > 0.5
 
@@ -413,9 +413,9 @@ def test_fourth_moments_rule_agrees_with_the_product_rule():
     order-2 product rule) is off by far more."""
     rng = np.random.default_rng(1)
     tri, areas = rng.normal(size=(50, 3, 3)), rng.random(50) + 0.1
-    i = np.array([p[0] for p in exact.COV_PAIRS])
-    j = np.array([p[1] for p in exact.COV_PAIRS])
+    i = np.array([p[0] for p in surface_measures.COV_PAIRS])
+    j = np.array([p[1] for p in surface_measures.COV_PAIRS])
     f = lambda p: p[:, i] ** 2 * p[:, j] ** 2  # noqa: E731
-    want = exact.surface_integral(f, tri, areas, order=3) / areas.sum()
-    assert np.allclose(exact.fourth_central_moments(tri, areas), want, rtol=1e-13, atol=0)
-    assert not np.allclose(exact.surface_integral(f, tri, areas, order=2) / areas.sum(), want, rtol=1e-6, atol=0)
+    want = surface_measures.surface_integral(f, tri, areas, order=3) / areas.sum()
+    assert np.allclose(surface_measures.fourth_central_moments(tri, areas), want, rtol=1e-13, atol=0)
+    assert not np.allclose(surface_measures.surface_integral(f, tri, areas, order=2) / areas.sum(), want, rtol=1e-6, atol=0)
