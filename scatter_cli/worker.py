@@ -193,7 +193,7 @@ class WorkerProcess:
                 self.kill(f"timed out after {timeout:g} s")
                 raise WorkerLost(self._death())
             if max_memory is not None:
-                rss = resident_bytes(self.proc.pid)
+                rss = resident_bytes(self.proc.pid, private=True)
                 if rss > max_memory * 2**20:
                     self.kill(f"exceeded --max-memory {max_memory:g} MB (resident {rss / 2**20:.0f} MB)")
                     raise WorkerLost(self._death())
@@ -333,7 +333,16 @@ def _close_files_from(low):
                 pass
 
 
-def resident_bytes(pid) -> int:
+def resident_bytes(pid, private=False) -> int:
+    """Resident memory of process ``pid`` in bytes; ``private``: only the pages it does not
+    share (not libraries, nor what a forked worker still shares with the process that
+    forked it, which would otherwise count that process's memory against each mesh)."""
+    if private:
+        try:
+            with open(f"/proc/{pid}/smaps_rollup") as f:
+                return sum(int(line.split()[1]) for line in f if line.startswith("Private_")) * 1024
+        except (OSError, ValueError, IndexError):
+            pass  # no smaps_rollup (Linux before 4.14): every resident page
     try:
         with open(f"/proc/{pid}/statm") as f:
             return int(f.read().split()[1]) * _PAGE

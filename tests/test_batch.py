@@ -144,3 +144,21 @@ def test_a_worker_killed_mid_batch_fails_its_mesh_alone(tmp_path, meshes, worker
     assert "fifo.csv.ply" in records[1]["error"] and "SIGKILL" in records[1]["error"]
     assert outputs(tmp_path / "out") == ref
     assert no_temporary_files(tmp_path)
+
+
+def test_a_forked_worker_is_not_charged_for_the_memory_it_shares(tmp_path, monkeypatch):
+    """A worker forked from a large process (a program calling scatter_cli.batch) shares
+    that process's pages: --max-memory counts the worker's own, so a small mesh passes a
+    limit below the parent's size. Counting every resident page fails it."""
+    import numpy as np
+
+    monkeypatch.setattr(worker, "can_fork", lambda: True)
+    ballast = np.ones(300 * 2**20 // 8)  # 300 MB resident in this process, shared with the fork
+    args = dict(count=2_000_000, max_memory=200, jobs=1)  # long enough to be polled
+    records = scatter_cli.batch([str(SAMPLES / "icosahedron_binary.stl")], str(tmp_path / "{stem}.ply"), **args)
+    assert [r["status"] for r in records] == ["written"], records
+    real = worker.resident_bytes
+    monkeypatch.setattr(worker, "resident_bytes", lambda pid, private=False: real(pid))
+    records = scatter_cli.batch([str(SAMPLES / "icosahedron_binary.stl")], str(tmp_path / "again" / "{stem}.ply"), **args)
+    assert records[0]["status"] == "failed" and "--max-memory" in records[0]["error"]
+    del ballast
