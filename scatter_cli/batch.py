@@ -24,9 +24,10 @@ ENGINES = ("local", "dask")
 
 class Inputs:
     """The meshes of a batch in input order: paths, held once, and the folder each was
-    found under (for ``{rel}``)."""
+    found under (for ``{rel}``). Folders are searched for files with ``suffixes``."""
 
-    def __init__(self):
+    def __init__(self, suffixes=MESH_SUFFIXES):
+        self.suffixes = suffixes
         self.paths = []
         self.roots = []  # folders given as INPUT
         self.root_of = array.array("i")  # per path: index into roots, -1 for a file given directly
@@ -41,7 +42,7 @@ class Inputs:
         found = []
         for top, dirs, files in os.walk(folder):
             dirs.sort()
-            found.extend(os.path.join(top, f) for f in files if os.path.splitext(f)[1].lower() in MESH_SUFFIXES)
+            found.extend(os.path.join(top, f) for f in files if os.path.splitext(f)[1].lower() in self.suffixes)
         found.sort(key=lambda p: os.path.relpath(p, folder).split(os.sep))
         for p in found:
             self.add_file(p, root)

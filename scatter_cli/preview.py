@@ -47,21 +47,6 @@ class Sheets(list):
     inputs: int
 
 
-class PreviewInputs(Inputs):
-    """``batch``'s input list, searching folders for point files as well as meshes."""
-
-    def add_folder(self, folder):
-        self.roots.append(folder)
-        root = len(self.roots) - 1
-        found = []
-        for top, dirs, files in os.walk(folder):
-            dirs.sort()
-            found.extend(os.path.join(top, f) for f in files if os.path.splitext(f)[1].lower() in FOLDER_SUFFIXES)
-        found.sort(key=lambda p: os.path.relpath(p, folder).split(os.sep))
-        for p in found:
-            self.add_file(p, root)
-
-
 def preview(inputs, output, *, size=256, columns=None, views=("iso",), per_page=100, from_list=None, warn=None,
             **sample_options) -> list[str]:
     """Write contact sheets of ``inputs`` (point files, meshes, folders) to ``output``, a
@@ -170,7 +155,7 @@ def default_columns(cells, views):
 
 
 def collect(inputs, from_list=None) -> Inputs:
-    found = PreviewInputs()
+    found = Inputs(FOLDER_SUFFIXES)
     for item in [inputs] if isinstance(inputs, (str, os.PathLike)) else inputs or ():
         item = os.fspath(item)
         if os.path.isdir(item):
