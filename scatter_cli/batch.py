@@ -14,7 +14,7 @@ import os
 import sys
 import time
 
-from .errors import ScatterUsageError
+from .errors import ScatterError, ScatterUsageError
 from .inputs import MESH_SUFFIXES
 from .options import SampleOptions
 
@@ -31,6 +31,16 @@ class Inputs:
         self.paths = []
         self.roots = []  # folders given as INPUT
         self.root_of = array.array("i")  # per path: index into roots, -1 for a file given directly
+
+    def add(self, item):
+        """An INPUT: a folder (searched), or a file; a folder that does not exist is an error."""
+        item = os.fspath(item)
+        if os.path.isdir(item):
+            self.add_folder(item)
+        elif item.endswith(("/", os.sep)):
+            raise ScatterError(f"{item}: no such folder")
+        else:
+            self.add_file(item)
 
     def add_file(self, path, root=-1):
         self.paths.append(path)
@@ -81,11 +91,7 @@ def _open_list(path):
 def collect_inputs(inputs=(), from_list=None) -> Inputs:
     found = Inputs()
     for item in ([inputs] if isinstance(inputs, (str, os.PathLike)) else inputs or ()):
-        item = os.fspath(item)
-        if os.path.isdir(item):
-            found.add_folder(item)
-        else:
-            found.add_file(item)
+        found.add(item)
     if from_list is not None:
         found.add_list(os.fspath(from_list))
     if not len(found):

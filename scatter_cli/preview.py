@@ -157,11 +157,7 @@ def default_columns(cells, views):
 def collect(inputs, from_list=None) -> Inputs:
     found = Inputs(FOLDER_SUFFIXES)
     for item in [inputs] if isinstance(inputs, (str, os.PathLike)) else inputs or ():
-        item = os.fspath(item)
-        if os.path.isdir(item):
-            found.add_folder(item)
-        else:
-            found.add_file(item)
+        found.add(item)
     if from_list is not None:
         found.add_list(os.fspath(from_list))
     if not len(found):

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from .conftest import SAMPLES, popen_user, run_scatter, scatter_command
+from .conftest import SAMPLES, popen_user, run_scatter, run_user, scatter_command
 from .batchtools import alive, outputs, parent_of, reader_fd, wait_for_reader, warning_meshes
 
 MESHES = ["icosahedron_binary.stl", "moebius-160-10.ply", "hemisphere.off", "narrow_triangles.obj"]
@@ -250,3 +250,12 @@ def test_a_rerun_clears_what_a_batch_killed_with_sigkill_left(tmp_path):
 def children(pid):
     """The pids of the processes whose parent is ``pid``."""
     return [int(p) for p in filter(str.isdigit, os.listdir("/proc")) if alive(int(p)) and parent_of(int(p)) == pid]
+
+
+def test_a_folder_that_does_not_exist_is_named(tmp_path):
+    """`scatter batch nope/ -o x/{rel}.ply`: the missing folder, not the empty {rel} it would
+    have given (a file that does not exist fails alone, as before)."""
+    proc = run_user(scatter_command("batch", "nope/", "-o", "x/{rel}.ply"), cwd=tmp_path)
+    lines = proc.stderr.decode().strip().splitlines()
+    assert proc.returncode == 1 and lines == ["error: nope/: no such folder"]
+    assert not (tmp_path / "x").exists()
