@@ -148,17 +148,20 @@ def test_a_worker_killed_mid_batch_fails_its_mesh_alone(tmp_path, meshes, worker
 
 def test_a_forked_worker_is_not_charged_for_the_memory_it_shares(tmp_path, monkeypatch):
     """A worker forked from a large process (a program calling scatter_cli.batch) shares
-    that process's pages: --max-memory counts the worker's own, so a small mesh passes a
-    limit below the parent's size. Counting every resident page fails it."""
+    that process's pages: --max-memory counts the worker's own. The worker waits on a FIFO
+    nobody writes, so its memory is polled until --timeout: it must time out, not be
+    charged for its parent's 300 MB. Counting every resident page fails it for memory."""
     import numpy as np
 
     monkeypatch.setattr(worker, "can_fork", lambda: True)
+    fifo = tmp_path / "waits.ply"
+    os.mkfifo(fifo)
     ballast = np.ones(300 * 2**20 // 8)  # 300 MB resident in this process, shared with the fork
-    args = dict(count=2_000_000, max_memory=200, jobs=1)  # long enough to be polled
-    records = scatter_cli.batch([str(SAMPLES / "icosahedron_binary.stl")], str(tmp_path / "{stem}.ply"), **args)
-    assert [r["status"] for r in records] == ["written"], records
+    args = dict(count=100, max_memory=200, timeout=2, jobs=1)
+    records = scatter_cli.batch([str(fifo)], str(tmp_path / "out" / "{stem}.ply"), **args)
+    assert "timed out" in records[0]["error"], records
     real = worker.resident_bytes
     monkeypatch.setattr(worker, "resident_bytes", lambda pid, private=False: real(pid))
-    records = scatter_cli.batch([str(SAMPLES / "icosahedron_binary.stl")], str(tmp_path / "again" / "{stem}.ply"), **args)
-    assert records[0]["status"] == "failed" and "--max-memory" in records[0]["error"]
+    records = scatter_cli.batch([str(fifo)], str(tmp_path / "again" / "{stem}.ply"), **args)
+    assert "--max-memory" in records[0]["error"], records
     del ballast

@@ -47,12 +47,13 @@ def test_scatter_numpy_switches_them_off(monkeypatch):
 
 
 _HELD = """
-from scatter_cli import enclosure, pairs, rayscene, readers, sampling, stable, exterior_rays
-print(sum(m._kernel is not None for m in (enclosure, pairs, rayscene, readers, sampling, stable, visibility)))
+from scatter_cli import distance, enclosure, exterior_rays, pairs, parity, rayscene, readers, sampling, stable, winding
+print(sum(m._kernel is not None for m in (enclosure, pairs, rayscene, readers, sampling, stable, exterior_rays,
+                                         winding, distance, parity)))
 """
 
 
-@pytest.mark.parametrize("switch,held", [("1", 0), ("", 7)])
+@pytest.mark.parametrize("switch,held", [("1", 0), ("", 10)])
 def test_every_module_looks_its_kernel_up_once_through_native(switch, held):
     """Each module holds its kernel from its import: SCATTER_NUMPY=1 leaves every one None
     (the paired case: unset, every one is there)."""
