@@ -1,6 +1,7 @@
 """Shared fixtures: small meshes built in code and the sample meshes of the repo."""
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +15,12 @@ from benchmarks.hardcheck import spread_triangles, triangles_mesh  # noqa: F401 
 # Property tests explore a fixed sequence of examples: a CI run is reproducible.
 settings.register_profile("scatter", derandomize=True, database=None, deadline=None)
 settings.load_profile("scatter")
+
+# A user's shell starts a command with SIGINT at its default. A test run started in the
+# background (``pytest &``) ignores SIGINT, and its children would inherit that; with
+# Python's own handler here, each child starts with the default again.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples"

@@ -3,6 +3,7 @@ processes on 127.0.0.1, started here and torn down after."""
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -50,16 +51,21 @@ def start_cluster(workers, scheduler_env=None, home=None):
 def start_worker(address, home=None):
     """A one-thread `dask worker` process for the scheduler at ``address``, working in the
     folder ``home`` (default: a new one), not the tests' (as on another machine)."""
+    own = home is None
     home = home or tempfile.mkdtemp(prefix="dask-worker-")
-    return popen_user([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--no-nanny",
+    proc = popen_user([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1", "--no-nanny",
                        "--no-dashboard", "--host", "127.0.0.1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                       cwd=home, env={"PYTHONPATH": str(ROOT)})
+    proc.own_home = home if own else None
+    return proc
 
 
 def stop(procs):
     for p in reversed(procs):
         p.kill()
         p.wait()
+        if getattr(p, "own_home", None):
+            shutil.rmtree(p.own_home, ignore_errors=True)
 
 
 @pytest.fixture(scope="module")

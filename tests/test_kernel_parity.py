@@ -324,7 +324,7 @@ CASES = {
         **{f"thin-{n}": thinning_case(n) for n in point_sets()},
         **{f"pairs-{n}": pairs_case(n) for n in ("sphere", "clustered", "far")},
         "sample-poisson": lambda: sample_bytes("koala", seed=3, attributes="face", poisson=True, count=3000),
-        "sample-radius": lambda: sample_bytes("koala", seed=3, attributes="face", radius=0.02),
+        "sample-radius": lambda: sample_bytes("koala", seed=3, attributes="face", radius=0.04),
     },
     "_cstable": {
         "truck": stable_case("cesiummilktruck.glb", count=5000),
