@@ -13,10 +13,11 @@ import numpy as np
 # Upper bound on the entries of one (faces x values) work matrix; each chunk
 # holds a handful of such temporaries, so this keeps them to tens of MB.
 CHUNK_ENTRIES = 1 << 21
-# Bisection steps between two narrowings of the faces each bracket involves.
-NARROW_EVERY = 2
 # Bisection steps of the slabs scatter check counts in.
 SLAB_ITERATIONS = 12
+# Relative distance between the area at a bisection step and its target below which the
+# step is decided by the face-by-face sum rather than the bracket's quadratic.
+NEAR_TIE = 1e-12
 
 # Unordered coordinate pairs for second central moments: xx, yy, zz, xy, xz, yz.
 COV_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -51,10 +52,34 @@ def _kept(tri, areas):
     tri = np.asarray(tri, dtype=float)
     areas = np.asarray(areas, dtype=float)
     keep = areas > 0
-    tri, areas = tri[keep], areas[keep]
+    if not keep.all():
+        tri, areas = tri[keep], areas[keep]
     if len(tri) == 0:
         raise ValueError("surface has zero area")
-    return tri, areas, 0.5 * (tri.min(axis=(0, 1)) + tri.max(axis=(0, 1)))
+    lo, hi = _box(tri)
+    return tri, areas, 0.5 * (lo + hi)
+
+
+def _box(tri):
+    """Lowest and highest coordinates (3,), (3,) of the corners of tri (F, 3, 3) (column by
+    column: a reduction across rows of an (n, 3) array is many times slower)."""
+    corners = tri.reshape(-1, 3)
+    return (np.array([corners[:, k].min() for k in range(3)]),
+            np.array([corners[:, k].max() for k in range(3)]))
+
+
+def _sorted_heights(centred, d):
+    """Vertex heights (F, 3) along d of the faces ``centred`` (F, 3, 3), each row sorted
+    (a sorting network: the same values as np.sort, a fraction of its time)."""
+    h = (centred.reshape(-1, 3) @ d).reshape(-1, 3)
+    a, b, c = h[:, 0], h[:, 1], h[:, 2]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    out = np.empty_like(h)
+    np.minimum(lo, c, out=out[:, 0])
+    mid = np.maximum(lo, c)
+    np.minimum(mid, hi, out=out[:, 1])
+    np.maximum(mid, hi, out=out[:, 2])
+    return out
 
 
 def _chunks(n_rows, row_size, budget=CHUNK_ENTRIES):
@@ -81,8 +106,9 @@ class _Sorted:
     bounds the area function cheaply, area(h2 <= t) <= A(t) <= area(h0 <= t)."""
 
     def __init__(self, h, areas):
-        o0, o2 = np.argsort(h[:, 0], kind="stable"), np.argsort(h[:, 2], kind="stable")
-        self.order0 = o0
+        # Ties (faces sharing their lowest or highest vertex) in any order: it changes
+        # the running sums in the last bit only.
+        o0, o2 = np.argsort(h[:, 0]), np.argsort(h[:, 2])
         self.h0, self.h2 = h[o0, 0], h[o2, 2]
         self.cum0 = np.concatenate(([0.0], np.cumsum(areas[o0])))
         self.cum2 = np.concatenate(([0.0], np.cumsum(areas[o2])))
@@ -104,68 +130,118 @@ class _Sorted:
 
 
 def _solve_heights(h, areas, targets, iterations, pad=0.0):
-    """Heights (m,) where the area function reaches each of targets (m,), by
-    vectorised bisection, and the area function for heights (m,) each no more
-    than ``pad`` above its solution.  Each bracket only involves the faces
-    straddling it, and every few halvings the faces a bracket has left behind are
-    dropped (those wholly below it join its base area), so the work shrinks to the
-    faces that cross each solution."""
+    """Heights (m,) where the area function reaches each of targets (m,, ascending), by
+    vectorised bisection, and the area function for heights (m,) each no more than
+    ``pad`` above its solution.  Each bracket only involves the faces reaching into
+    it, and at every halving the faces it has left behind are dropped (those wholly
+    below join its base area) and the faces whose area below is one quadratic over
+    the whole bracket join its quadratic (:class:`_Pairs`), so the faces evaluated
+    one by one shrink to those with a vertex height inside the bracket."""
+    if np.any(np.diff(targets) < 0):
+        raise ValueError("targets must be ascending")
     lo0 = float(h[:, 0].min())
     extent = float(h[:, 2].max()) - lo0
     table = _Sorted(h, areas)
     lo, hi = table.bracket(targets, lo0 - extent)
     pairs = _Pairs(h, areas, table, lo, hi + pad)
+    tie = NEAR_TIE * float(areas.sum())
     for step in range(iterations):
-        if step and step % NARROW_EVERY == 0:
+        if step:  # the pairs were gathered for the first bracket
             pairs.narrow(lo, hi + pad)
         mid = 0.5 * (lo + hi)
-        below = pairs.area_at(mid) < targets
+        got = pairs.area_at(mid)
+        near = np.abs(got - targets) <= tie
+        if near.any():  # the quadratics' rounding could decide these: sum face by face
+            got = np.where(near, pairs.exact_area_at(mid), got)
+        below = got < targets
         lo = np.where(below, mid, lo)
         hi = np.where(below, hi, mid)
     pairs.narrow(lo, hi + pad)
-    return hi, pairs.area_at
+    return hi, pairs.exact_area_at
 
 
 class _Pairs:
     """The (target, face) pairs of the faces that reach into each bracket lo (m,) ..
-    hi (m,) (highest vertex above lo, lowest at or below hi), with what the area
-    function needs of each face gathered once, and ``base`` (m,): the area of the
-    faces wholly below each bracket."""
+    hi (m,) (highest vertex above lo, lowest at or below hi; both ascending), with
+    what the area function needs of each face gathered once. Per bracket, ``base``
+    (m,): the area of the faces wholly below it, and ``quad`` (3, m): the summed
+    quadratic a + b u + c u^2 (u = t - lo) of the faces whose area below t is one
+    closed form over the whole bracket; ``kept``: those faces, for the exact sum."""
+
+    FIELDS = ("owner", "h0", "h1", "h2", "area")
 
     def __init__(self, h, areas, table, lo, hi):
-        order, h0 = table.order0, table.h0
-        h2 = h[order, 2]
-        owners, faces = [], []
-        for k, (a, b) in enumerate(zip(lo.tolist(), hi.tolist())):  # a few dozen targets
-            top = int(np.searchsorted(h0, b, side="right"))
-            got = order[:top][h2[:top] > a]
-            faces.append(got)
-            owners.append(np.full(len(got), k, dtype=np.int64))
-        faces = np.concatenate(faces)
-        self.owner, self.base = np.concatenate(owners), table.area_below(lo)
+        # A face reaches into the brackets k with hi_k >= h0 and lo_k < h2: a run of k,
+        # as lo and hi ascend.
+        first = np.searchsorted(hi, h[:, 0], side="left")
+        n = np.maximum(np.searchsorted(lo, h[:, 2], side="left") - first, 0)
+        faces = np.repeat(np.arange(len(h)), n)
+        starts = np.cumsum(n) - n
+        self.owner = np.repeat(first - starts, n) + np.arange(len(faces))
         self.h0, self.h1, self.h2 = (np.ascontiguousarray(h[faces, c]) for c in range(3))
         self.area = areas[faces]
+        self.base = table.area_below(lo)
+        self.lo = np.asarray(lo, dtype=float).copy()
+        self.quad = np.zeros((3, len(lo)))
+        self.kept = []
 
     def narrow(self, lo, hi):
-        """Keep the pairs of the brackets lo .. hi inside the old ones; the faces now
-        wholly below lo join the base."""
-        below = self.h2 <= lo[self.owner]
-        self.base = self.base + np.bincount(self.owner[below], self.area[below], minlength=len(lo))
-        keep = np.flatnonzero(~below & (self.h0 <= hi[self.owner]))
-        for name in ("owner", "h0", "h1", "h2", "area"):
+        """Keep the pairs of the brackets lo .. hi inside the old ones that still have a
+        vertex height inside: the faces now wholly below lo join the base, those whose
+        area below is one closed form from lo to hi join the quadratic."""
+        a, b, c = self.quad
+        du = lo - self.lo
+        self.quad = np.array([a + du * (b + du * c), b + 2.0 * c * du, c])
+        self.lo = lo
+        o = self.owner
+        lo_o, hi_o = lo[o], hi[o]
+        below = self.h2 <= lo_o
+        lower = (self.h0 <= lo_o) & (hi_o < self.h1)
+        upper = (self.h1 <= lo_o) & (hi_o < self.h2)
+        m = len(lo)
+        self.base = self.base + np.bincount(o[below], self.area[below], minlength=m)
+        self._absorb(lower, self.h0 - lo_o, (self.h1 - self.h0) * (self.h2 - self.h0), 1.0, m)
+        self._absorb(upper, self.h2 - lo_o, (self.h2 - self.h0) * (self.h2 - self.h1), -1.0, m)
+        keep = ~(below | lower | upper) & (self.h0 <= hi_o)
+        for name in self.FIELDS:
             setattr(self, name, getattr(self, name)[keep])
+
+    def _absorb(self, which, e, den, sign, m):
+        """Add to the quadratics the faces ``which`` whose area below t is area (t - h0)^2
+        / den (sign 1, e = h0 - lo) or area (1 - (h2 - t)^2 / den) (sign -1, e = h2 - lo):
+        sign area / den (u - e)^2 (+ area for sign -1)."""
+        idx = np.flatnonzero(which)
+        if not len(idx):
+            return
+        o, area = self.owner[idx], self.area[idx]
+        w, e = sign * area / den[idx], e[idx]
+        const = w * e * e + (area if sign < 0 else 0.0)
+        self.quad += np.stack([np.bincount(o, v, minlength=m) for v in (const, -2.0 * w * e, w)])
+        self.kept.append(tuple(getattr(self, name)[idx] for name in self.FIELDS))
 
     def __len__(self):
         return len(self.owner)
 
     def area_at(self, t):
-        """The area below heights t (m,), in blocks of CHUNK_ENTRIES pairs."""
-        out = self.base.copy()
-        for s in range(0, len(self.owner), CHUNK_ENTRIES):
+        """The area below heights t (m,), each inside its bracket."""
+        u = t - self.lo
+        a, b, c = self.quad
+        return self.base + (a + u * (b + u * c)) + self._sum(self.owner, self.h0, self.h1, self.h2, self.area, t)
+
+    def exact_area_at(self, t):
+        """The area below heights t (m,), each inside its bracket, summed face by face."""
+        parts = [tuple(getattr(self, name) for name in self.FIELDS), *self.kept]
+        cols = [np.concatenate(c) for c in zip(*parts)]
+        return self.base + self._sum(*cols, t)
+
+    @staticmethod
+    def _sum(owner, h0, h1, h2, area, t):
+        out = np.zeros(len(t))
+        for s in range(0, len(owner), CHUNK_ENTRIES):
             cut = slice(s, s + CHUNK_ENTRIES)
-            o = self.owner[cut]
-            frac = _below_fraction(self.h0[cut], self.h1[cut], self.h2[cut], t[o])
-            out += np.bincount(o, self.area[cut] * frac, minlength=len(t))
+            o = owner[cut]
+            frac = _below_fraction(h0[cut], h1[cut], h2[cut], t[o])
+            out += np.bincount(o, area[cut] * frac, minlength=len(t))
         return out
 
 
@@ -231,7 +307,7 @@ def slabs(tri, areas, directions, k, iterations=SLAB_ITERATIONS, progress=None):
     for i, d in enumerate(dirs):  # a handful of directions
         if progress:
             progress(i, len(dirs))
-        h, off = np.sort(centred @ d, axis=1), float(ref @ d)
+        h, off = _sorted_heights(centred, d), float(ref @ d)
         inner, below = _split(h, areas, int(k), iterations, 2.0 * tol)
         top = float(h[:, 2].max())
         keep = inner < top - tol
@@ -252,7 +328,7 @@ def centred_moments(tri, areas):
     tri, areas, ref = _kept(tri, areas)
     v = tri - ref
     w = areas / areas.sum()
-    s = v.sum(axis=1)
+    s = v[:, 0] + v[:, 1] + v[:, 2]
     mean = w @ (s / 3.0)
     # Per triangle E[x x^T] = (sum_i v_i v_i^T + s s^T) / 12, s = v0 + v1 + v2.
     corners = v.reshape(-1, 3)
@@ -274,11 +350,12 @@ def fourth_central_moments(tri_c, areas):
     j = np.array([p[1] for p in COV_PAIRS])
     tri_c = np.asarray(tri_c, dtype=float)
     areas = np.asarray(areas, dtype=float)
-    total = np.zeros(len(COV_PAIRS))
+    total = np.zeros((3, 3))
     for sl in _chunks(len(tri_c), len(DEGREE4_WEIGHTS), budget=1 << 18):
-        sq = np.matmul(DEGREE4_NODES, tri_c[sl]) ** 2  # (f, 6, 3): the rule's points, squared
-        total += np.einsum("fq,fqp->p", areas[sl, None] * DEGREE4_WEIGHTS, sq[..., i] * sq[..., j])
-    return total / areas.sum()
+        sq = (np.matmul(DEGREE4_NODES, tri_c[sl]) ** 2).reshape(-1, 3)  # the rule's points, squared
+        w = (areas[sl, None] * DEGREE4_WEIGHTS).ravel()
+        total += (sq * w[:, None]).T @ sq  # [i, j]: sum of w x_i^2 x_j^2
+    return total[i, j] / areas.sum()
 
 
 # ---------------------------------------------------------------------------
