@@ -4,7 +4,16 @@ the origin. Built on :mod:`scatter_cli.surface_measures`'s closed forms per tria
 
 import numpy as np
 
-from scatter_cli.surface_measures import _below_fraction, _chunks, _edges, _kept, _split, _unit, centred_moments
+from scatter_cli.surface_measures import (
+    _below_fraction,
+    _chunks,
+    _edges,
+    _kept,
+    _Sorted,
+    _split,
+    _unit,
+    centred_moments,
+)
 
 
 def _heights(tri, ref, d):
@@ -83,3 +92,18 @@ def surface_moments(tri, areas):
     ref, mean, cov, _, _ = centred_moments(tri, areas)
     mu = ref + mean
     return mu, cov + np.outer(mu, mu)
+
+
+def bisection_heights(h, areas, targets, iterations, pad=0.0):
+    """The straightforward twin of ``surface_measures._solve_heights``: the same brackets
+    and halvings, each halving evaluating every face's closed form at every target;
+    returns the heights (m,) and the area function, face by face over every face."""
+    lo0 = float(h[:, 0].min())
+    extent = float(h[:, 2].max()) - lo0
+    lo, hi = _Sorted(h, areas).bracket(targets, lo0 - extent)
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        below = cdf_from_heights(h, areas, mid) < targets
+        lo = np.where(below, mid, lo)
+        hi = np.where(below, hi, mid)
+    return hi, lambda t: cdf_from_heights(h, areas, t)
