@@ -1,5 +1,5 @@
-"""Exact quantities of a piecewise-flat surface: the area below a height, equal-area
-slabs, moments and quadrature.
+"""Exact quantities of a piecewise-flat surface: equal-area slabs (their heights found by
+:mod:`scatter_cli.slab_heights`), moments and quadrature.
 
 A surface is ``tri`` ``(F, 3, 3) float64`` (vertex ``k`` of face ``f`` is ``tri[f, k]``)
 and ``areas`` ``(F,) float64``; faces of zero area contribute nothing. Everything is a
@@ -10,14 +10,15 @@ holds what only the tests use).
 
 import numpy as np
 
+from .slab_heights import below_fraction as _below_fraction
+from .slab_heights import solve_heights as _solve_heights
+
 # Upper bound on the entries of one (faces x values) work matrix; each chunk
 # holds a handful of such temporaries, so this keeps them to tens of MB.
 CHUNK_ENTRIES = 1 << 21
-# Bisection steps of the slabs scatter check counts in.
+# The slabs scatter check counts in reach their target areas to 2^-SLAB_ITERATIONS of a
+# slab's area (or, at a jump of the area, that fraction of their first bracket).
 SLAB_ITERATIONS = 12
-# Relative distance between the area at a bisection step and its target below which the
-# step is decided by the face-by-face sum rather than the bracket's quadratic.
-NEAR_TIE = 1e-12
 
 # Unordered coordinate pairs for second central moments: xx, yy, zz, xy, xz, yz.
 COV_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
@@ -71,7 +72,8 @@ def _box(tri):
 def _sorted_heights(centred, d):
     """Vertex heights (F, 3) along d of the faces ``centred`` (F, 3, 3), each row sorted
     (a sorting network: the same values as np.sort, a fraction of its time)."""
-    h = (centred.reshape(-1, 3) @ d).reshape(-1, 3)
+    v = centred.reshape(-1, 3)
+    h = (v[:, 0] * d[0] + v[:, 1] * d[1] + v[:, 2] * d[2]).reshape(-1, 3)
     a, b, c = h[:, 0], h[:, 1], h[:, 2]
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     out = np.empty_like(h)
@@ -86,163 +88,6 @@ def _chunks(n_rows, row_size, budget=CHUNK_ENTRIES):
     step = max(1, budget // max(1, row_size))
     for start in range(0, n_rows, step):
         yield slice(start, min(n_rows, start + step))
-
-
-def _below_fraction(h0, h1, h2, t):
-    """Fraction of a triangle with sorted vertex heights h0 <= h1 <= h2 lying
-    at height <= t (all arguments broadcast)."""
-    # Each branch is used only where its denominator is positive (h0 <= t < h1
-    # needs h1 > h0; h1 <= t < h2 needs h2 > h1), so the substituted 1.0 never
-    # reaches the result; a face flat in the direction becomes a step.
-    den_lo = (h1 - h0) * (h2 - h0)
-    den_hi = (h2 - h0) * (h2 - h1)
-    lower = (t - h0) ** 2 / np.where(den_lo > 0, den_lo, 1.0)
-    upper = 1.0 - (h2 - t) ** 2 / np.where(den_hi > 0, den_hi, 1.0)
-    return np.where(t >= h2, 1.0, np.where(t >= h1, upper, np.where(t >= h0, lower, 0.0)))
-
-
-class _Sorted:
-    """Faces sorted by lowest and by highest vertex height, with running areas:
-    bounds the area function cheaply, area(h2 <= t) <= A(t) <= area(h0 <= t)."""
-
-    def __init__(self, h, areas):
-        # Ties (faces sharing their lowest or highest vertex) in any order: it changes
-        # the running sums in the last bit only.
-        o0, o2 = np.argsort(h[:, 0]), np.argsort(h[:, 2])
-        self.h0, self.h2 = h[o0, 0], h[o2, 2]
-        self.cum0 = np.concatenate(([0.0], np.cumsum(areas[o0])))
-        self.cum2 = np.concatenate(([0.0], np.cumsum(areas[o2])))
-
-    def bracket(self, targets, floor):
-        """(lo, hi) per target with A(lo) < target <= A(hi) (up to rounding)."""
-        i_hi = np.minimum(np.searchsorted(self.cum2[1:], targets, side="left"), len(self.h2) - 1)
-        hi = self.h2[i_hi]
-        # The first face whose start lifts the upper bound to the target; lo is
-        # the next lower distinct start height, where even the bound is short.
-        i_lo = np.minimum(np.searchsorted(self.cum0[1:], targets, side="left"), len(self.h0) - 1)
-        j = np.searchsorted(self.h0, self.h0[i_lo], side="left")
-        lo = np.where(j > 0, self.h0[np.maximum(j - 1, 0)], floor)
-        return np.minimum(lo, hi), hi
-
-    def area_below(self, t):
-        """Area of faces lying wholly at height <= t."""
-        return self.cum2[np.searchsorted(self.h2, t, side="right")]
-
-
-def _solve_heights(h, areas, targets, iterations, pad=0.0):
-    """Heights (m,) where the area function reaches each of targets (m,, ascending), by
-    vectorised bisection, and the area function for heights (m,) each no more than
-    ``pad`` above its solution.  Each bracket only involves the faces reaching into
-    it, and at every halving the faces it has left behind are dropped (those wholly
-    below join its base area) and the faces whose area below is one quadratic over
-    the whole bracket join its quadratic (:class:`_Pairs`), so the faces evaluated
-    one by one shrink to those with a vertex height inside the bracket."""
-    if np.any(np.diff(targets) < 0):
-        raise ValueError("targets must be ascending")
-    lo0 = float(h[:, 0].min())
-    extent = float(h[:, 2].max()) - lo0
-    table = _Sorted(h, areas)
-    lo, hi = table.bracket(targets, lo0 - extent)
-    pairs = _Pairs(h, areas, table, lo, hi + pad)
-    tie = NEAR_TIE * float(areas.sum())
-    for step in range(iterations):
-        if step:  # the pairs were gathered for the first bracket
-            pairs.narrow(lo, hi + pad)
-        mid = 0.5 * (lo + hi)
-        got = pairs.area_at(mid)
-        near = np.abs(got - targets) <= tie
-        if near.any():  # the quadratics' rounding could decide these: sum face by face
-            got = np.where(near, pairs.exact_area_at(mid), got)
-        below = got < targets
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
-    pairs.narrow(lo, hi + pad)
-    return hi, pairs.exact_area_at
-
-
-class _Pairs:
-    """The (target, face) pairs of the faces that reach into each bracket lo (m,) ..
-    hi (m,) (highest vertex above lo, lowest at or below hi; both ascending), with
-    what the area function needs of each face gathered once. Per bracket, ``base``
-    (m,): the area of the faces wholly below it, and ``quad`` (3, m): the summed
-    quadratic a + b u + c u^2 (u = t - lo) of the faces whose area below t is one
-    closed form over the whole bracket; ``kept``: those faces, for the exact sum."""
-
-    FIELDS = ("owner", "h0", "h1", "h2", "area")
-
-    def __init__(self, h, areas, table, lo, hi):
-        # A face reaches into the brackets k with hi_k >= h0 and lo_k < h2: a run of k,
-        # as lo and hi ascend.
-        first = np.searchsorted(hi, h[:, 0], side="left")
-        n = np.maximum(np.searchsorted(lo, h[:, 2], side="left") - first, 0)
-        faces = np.repeat(np.arange(len(h)), n)
-        starts = np.cumsum(n) - n
-        self.owner = np.repeat(first - starts, n) + np.arange(len(faces))
-        self.h0, self.h1, self.h2 = (np.ascontiguousarray(h[faces, c]) for c in range(3))
-        self.area = areas[faces]
-        self.base = table.area_below(lo)
-        self.lo = np.asarray(lo, dtype=float).copy()
-        self.quad = np.zeros((3, len(lo)))
-        self.kept = []
-
-    def narrow(self, lo, hi):
-        """Keep the pairs of the brackets lo .. hi inside the old ones that still have a
-        vertex height inside: the faces now wholly below lo join the base, those whose
-        area below is one closed form from lo to hi join the quadratic."""
-        a, b, c = self.quad
-        du = lo - self.lo
-        self.quad = np.array([a + du * (b + du * c), b + 2.0 * c * du, c])
-        self.lo = lo
-        o = self.owner
-        lo_o, hi_o = lo[o], hi[o]
-        below = self.h2 <= lo_o
-        lower = (self.h0 <= lo_o) & (hi_o < self.h1)
-        upper = (self.h1 <= lo_o) & (hi_o < self.h2)
-        m = len(lo)
-        self.base = self.base + np.bincount(o[below], self.area[below], minlength=m)
-        self._absorb(lower, self.h0 - lo_o, (self.h1 - self.h0) * (self.h2 - self.h0), 1.0, m)
-        self._absorb(upper, self.h2 - lo_o, (self.h2 - self.h0) * (self.h2 - self.h1), -1.0, m)
-        keep = ~(below | lower | upper) & (self.h0 <= hi_o)
-        for name in self.FIELDS:
-            setattr(self, name, getattr(self, name)[keep])
-
-    def _absorb(self, which, e, den, sign, m):
-        """Add to the quadratics the faces ``which`` whose area below t is area (t - h0)^2
-        / den (sign 1, e = h0 - lo) or area (1 - (h2 - t)^2 / den) (sign -1, e = h2 - lo):
-        sign area / den (u - e)^2 (+ area for sign -1)."""
-        idx = np.flatnonzero(which)
-        if not len(idx):
-            return
-        o, area = self.owner[idx], self.area[idx]
-        w, e = sign * area / den[idx], e[idx]
-        const = w * e * e + (area if sign < 0 else 0.0)
-        self.quad += np.stack([np.bincount(o, v, minlength=m) for v in (const, -2.0 * w * e, w)])
-        self.kept.append(tuple(getattr(self, name)[idx] for name in self.FIELDS))
-
-    def __len__(self):
-        return len(self.owner)
-
-    def area_at(self, t):
-        """The area below heights t (m,), each inside its bracket."""
-        u = t - self.lo
-        a, b, c = self.quad
-        return self.base + (a + u * (b + u * c)) + self._sum(self.owner, self.h0, self.h1, self.h2, self.area, t)
-
-    def exact_area_at(self, t):
-        """The area below heights t (m,), each inside its bracket, summed face by face."""
-        parts = [tuple(getattr(self, name) for name in self.FIELDS), *self.kept]
-        cols = [np.concatenate(c) for c in zip(*parts)]
-        return self.base + self._sum(*cols, t)
-
-    @staticmethod
-    def _sum(owner, h0, h1, h2, area, t):
-        out = np.zeros(len(t))
-        for s in range(0, len(owner), CHUNK_ENTRIES):
-            cut = slice(s, s + CHUNK_ENTRIES)
-            o = owner[cut]
-            frac = _below_fraction(h0[cut], h1[cut], h2[cut], t[o])
-            out += np.bincount(o, area[cut] * frac, minlength=len(t))
-        return out
 
 
 def _split(h, areas, k, iterations=48, least_nudge=0.0):
@@ -293,8 +138,9 @@ def slabs(tri, areas, directions, k, iterations=SLAB_ITERATIONS, progress=None):
     face, so the face's points fall below it whatever their rounding; interior edges
     within :func:`rounding` of the highest height or of the edge below are dropped, so
     that no slab of zero probability lies where a rounded point of the surface can
-    fall (j <= k). The bisection stops at 2^-iterations of its bracket: the edges only
-    need to be near equal-area, the probabilities are exact for the edges found.
+    fall (j <= k). The area below each edge is within 2^-iterations of a slab of its
+    target (:func:`slab_heights.solve_heights`): the edges only need to be near
+    equal-area, the probabilities are exact for the edges found.
     ``progress(i, m)`` is called before direction i of m.
     """
     dirs = np.asarray(directions, dtype=float).reshape(-1, 3)

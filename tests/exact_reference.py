@@ -9,7 +9,6 @@ from scatter_cli.surface_measures import (
     _chunks,
     _edges,
     _kept,
-    _Sorted,
     _split,
     _unit,
     centred_moments,
@@ -94,16 +93,14 @@ def surface_moments(tri, areas):
     return mu, cov + np.outer(mu, mu)
 
 
-def bisection_heights(h, areas, targets, iterations, pad=0.0):
-    """The straightforward twin of ``surface_measures._solve_heights``: the same brackets
-    and halvings, each halving evaluating every face's closed form at every target;
-    returns the heights (m,) and the area function, face by face over every face."""
-    lo0 = float(h[:, 0].min())
-    extent = float(h[:, 2].max()) - lo0
-    lo, hi = _Sorted(h, areas).bracket(targets, lo0 - extent)
-    for _ in range(iterations):
-        mid = 0.5 * (lo + hi)
-        below = cdf_from_heights(h, areas, mid) < targets
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
-    return hi, lambda t: cdf_from_heights(h, areas, t)
+
+def with_direct_areas(solve):
+    """A twin of the slab solver ``solve`` (``surface_measures._solve_heights``): the
+    heights it finds, with the area below any height summed over every face's closed
+    form (no bracket, no narrowing, no quadratic)."""
+
+    def solver(h, areas, targets, iterations, pad=0.0):
+        hi, _ = solve(h, areas, targets, iterations, pad)
+        return hi, lambda t: cdf_from_heights(h, areas, t)
+
+    return solver

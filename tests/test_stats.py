@@ -220,7 +220,7 @@ def test_slab_counts_convention():
 
 
 # ---------------------------------------------------------------------------
-# the exact slabs against the straightforward bisection
+# the exact slabs against every face's closed form
 
 
 def _face_areas(tri):
@@ -254,42 +254,70 @@ def _same_slabs(a, b, tol=1e-13):
     )
 
 
-def _reference_slabs(tri, monkeypatch, solve=exact_reference.bisection_heights):
-    with monkeypatch.context() as m:
-        m.setattr(surface_measures, "_solve_heights", solve)
+def _slabs(tri, monkeypatch=None, solve=None):
+    with monkeypatch.context() if monkeypatch else _no_patch() as m:
+        if solve:
+            m.setattr(surface_measures, "_solve_heights", solve)
         return surface_measures.slabs(tri, _face_areas(tri), uniformity.default_directions(), 32)
 
 
+class _no_patch:
+    def __enter__(self):
+        return None
+
+    def __exit__(self, *exc):
+        return False
+
+
+def _direct(solve=None):
+    return exact_reference.with_direct_areas(solve or surface_measures._solve_heights)
+
+
 @pytest.mark.parametrize("name", ["terrain", "soup", "rounded soup", "far sphere"])
-def test_exact_slabs_equal_the_straightforward_bisection(name, monkeypatch):
-    """The exact slabs (faces dropped, joined to the base or to each bracket's quadratic
-    at every halving) have the edges of the straightforward bisection (every face's closed
-    form at every halving), bit for bit, and its probabilities within 1e-13: at a million
+def test_exact_slab_areas_equal_every_faces_sum(name, monkeypatch):
+    """The slabs' probabilities (the area below each edge from the faces gathered per
+    bracket: wholly below, or the closed form of each face crossing) equal the area below
+    the same edges summed over every face's closed form within 1e-13: at a million
     points a share off by 1e-13 moves an expected count by 1e-7, far below what the
-    chi-square test can see."""
+    chi-square test can see. And the slabs hold equal areas: each within 2^-12 of a
+    slab of its 1/32 (SLAB_ITERATIONS), none merged."""
     tri = _slab_mesh(name)
-    fast = surface_measures.slabs(tri, _face_areas(tri), uniformity.default_directions(), 32)
-    assert _same_slabs(fast, _reference_slabs(tri, monkeypatch))
+    fast = _slabs(tri)
+    assert _same_slabs(fast, _slabs(tri, monkeypatch, _direct()))
+    for _, edges, prob in fast:
+        assert len(prob) == 32
+        assert np.abs(prob * 32 - 1).max() <= 2.0**-surface_measures.SLAB_ITERATIONS
 
 
-def test_the_slab_comparison_fails_a_wrong_area_and_an_off_by_one_slab(monkeypatch):
-    """The comparison above fails an area function missing part of one face (2e-13 of
-    the area: twice its tolerance), a bisection one halving short (edges off by a
-    step) and probabilities shifted by one slab."""
+def test_the_slab_checks_fail_a_wrong_area_and_an_off_by_one_slab(monkeypatch):
+    """The checks above fail an area function missing part of one face (2e-13 of the
+    area: twice the tolerance), probabilities shifted by one slab, edges shifted by one
+    target (a slab of twice the area next to one of none) and a solver stopped early."""
     tri = _slab_mesh("terrain")
-    fast = surface_measures.slabs(tri, _face_areas(tri), uniformity.default_directions(), 32)
+    fast = _slabs(tri)
     total = _face_areas(tri).sum()
+    solve = surface_measures._solve_heights
 
     def wrong_area(h, areas, targets, iterations, pad=0.0):
-        hi, area_at = exact_reference.bisection_heights(h, areas, targets, iterations, pad)
+        hi, area_at = _direct(solve)(h, areas, targets, iterations, pad)
         return hi, lambda t: area_at(t) - np.where(np.arange(len(t)) == 5, 2e-13 * total, 0.0)
 
-    def short(h, areas, targets, iterations, pad=0.0):
-        return exact_reference.bisection_heights(h, areas, targets, iterations - 1, pad)
+    def shifted(h, areas, targets, iterations, pad=0.0):
+        hi, area_at = solve(h, areas, targets, iterations, pad)
+        return np.r_[hi[1:], hi[-1:]], area_at
 
-    assert not _same_slabs(fast, _reference_slabs(tri, monkeypatch, wrong_area))
-    assert not _same_slabs(fast, _reference_slabs(tri, monkeypatch, short))
+    def early(h, areas, targets, iterations, pad=0.0):
+        return solve(h, areas, targets, 4, pad)
+
+    def equal(slabs):
+        return all(len(p) == 32 and np.abs(p * 32 - 1).max() <= 2.0**-surface_measures.SLAB_ITERATIONS
+                   for _, _, p in slabs)
+
+    assert _same_slabs(fast, _slabs(tri, monkeypatch, _direct())) and equal(fast)
+    assert not _same_slabs(fast, _slabs(tri, monkeypatch, wrong_area))
     assert not _same_slabs(fast, [(d, e, np.roll(p, 1)) for d, e, p in fast])
+    assert not equal(_slabs(tri, monkeypatch, shifted))
+    assert not equal(_slabs(tri, monkeypatch, early))
 
 
 @pytest.mark.parametrize("name", ["box", "three boxes", "torus"])
