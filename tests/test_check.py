@@ -207,3 +207,21 @@ def test_check_shows_its_stages_on_a_terminal():
     text = tty.getvalue()
     assert "\rcheck: sampling with scatter..." in text and "\rcheck: exact regions, direction 1/7..." in text
     assert text.endswith("\r" + " " * len("check: exact regions, direction 1/7...") + "\r")
+
+
+def test_check_reads_a_binary_ply_as_sample_does_without_trimesh(monkeypatch, tmp_path):
+    """check reads its mesh as ``scatter sample MESH`` does: a binary PLY through the fast
+    reader, without importing trimesh (a second or more of its run); reading it through
+    trimesh, as check did, fails here."""
+    import trimesh
+
+    from scatter_cli import loaders
+
+    path = tmp_path / "terrain.ply"
+    tri = _terrain(30)
+    trimesh.Trimesh(tri.reshape(-1, 3), np.arange(len(tri) * 3).reshape(-1, 3), process=False).export(path)
+    monkeypatch.setattr(loaders, "_import_trimesh", lambda: pytest.fail("check imported trimesh"))
+    lines = []
+    assert run_check(path, count=4000, seed=1, out=lines.append) == 0, "\n".join(lines)
+    with pytest.raises(pytest.fail.Exception):
+        loaders.load_surface(path)
