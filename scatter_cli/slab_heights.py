@@ -132,15 +132,16 @@ def _guess(h, areas, targets, lo0, hi0):
     j = np.clip(np.searchsorted(grid, targets, side="left"), 1, nb + 1)
     gap = grid[j] - grid[j - 1]
     part = np.where(gap > 0, (targets - grid[j - 1]) / np.where(gap > 0, gap, 1.0), 1.0)
-    guess = lo0 + width * (j - 1 + np.clip(part, 0.0, 1.0))
+    guess = np.minimum(lo0 + width * (j - 1 + np.clip(part, 0.0, 1.0)), hi0)
     return np.maximum.accumulate(guess), GUESS_HALF_WIDTH * width
 
 
-def _bracket(h, areas, targets, lo, hi, lo0, hi0, pad):
-    """Brackets lo < hi (m,, ascending) with A(lo) < target <= A(hi), widened from the
-    given ones where they miss, the exact A at their ends and their :class:`_Pairs`."""
-    floor = lo0 - (hi0 - lo0)  # A is 0 there
-    while True:
+def _bracket(h, areas, targets, lo, hi, lo0, hi0, pad, tries=4):
+    """Brackets lo < hi (m,, ascending) with A(lo) < target <= A(hi), from the given ones
+    (lo < hi): an end that misses moves out by twice the bracket's width, at the last
+    try to the end of the range; the exact A at their ends and their :class:`_Pairs`."""
+    floor = lo0 - (hi0 - lo0)  # A is 0 there and total at hi0
+    for attempt in range(tries + 1):
         lo = np.minimum.accumulate(np.maximum(lo, floor)[::-1])[::-1]
         hi = np.maximum.accumulate(np.minimum(hi, hi0))
         pairs = _Pairs(h, areas, lo, hi + pad)
@@ -148,10 +149,12 @@ def _bracket(h, areas, targets, lo, hi, lo0, hi0, pad):
         a_lo, a_hi = pairs.area_at(lo), pairs.area_at(hi)
         low, high = a_lo >= targets, a_hi < targets
         if not (low.any() or high.any()):
-            return lo, hi, a_lo, a_hi, pairs
+            break
         span = hi - lo
-        lo = np.where(low, np.where(lo - 4.0 * span > lo0, lo - 4.0 * span, floor), lo)
-        hi = np.where(high, hi + 4.0 * span, hi)
+        wide = attempt + 1 == tries
+        lo = np.where(low, floor if wide else lo - 2.0 * span, lo)
+        hi = np.where(high, hi0 if wide else hi + 2.0 * span, hi)
+    return lo, hi, a_lo, a_hi, pairs
 
 
 class _Pairs:
