@@ -148,7 +148,7 @@ def _bracket(h, areas, targets, lo, hi, lo0, hi0, pad, tries=4):
         pairs.narrow(lo, hi + pad)
         a_lo, a_hi = pairs.area_at(lo), pairs.area_at(hi)
         low, high = a_lo >= targets, a_hi < targets
-        if not (low.any() or high.any()):
+        if not (low.any() or high.any()) or attempt == tries:
             break
         span = hi - lo
         wide = attempt + 1 == tries

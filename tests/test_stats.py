@@ -320,6 +320,25 @@ def test_the_slab_checks_fail_a_wrong_area_and_an_off_by_one_slab(monkeypatch):
     assert not equal(_slabs(tri, monkeypatch, early))
 
 
+def test_exact_slabs_survive_a_wrong_first_guess(monkeypatch):
+    """Brackets around a wrong first guess (every target guessed at the lowest height)
+    widen until they hold their targets: the same equal-area slabs with exact areas.
+    Brackets that are not widened (a single try) leave slabs that are not."""
+    import functools
+
+    from scatter_cli import slab_heights
+
+    tri = _slab_mesh("terrain")
+    monkeypatch.setattr(slab_heights, "_guess",
+                        lambda h, areas, targets, lo0, hi0: (np.full(len(targets), lo0), 1e-3 * (hi0 - lo0)))
+    got = _slabs(tri)
+    assert _same_slabs(got, _slabs(tri, monkeypatch, _direct()))
+    assert all(len(p) == 32 and np.abs(p * 32 - 1).max() <= 2.0**-surface_measures.SLAB_ITERATIONS for _, _, p in got)
+    monkeypatch.setattr(slab_heights, "_bracket", functools.partial(slab_heights._bracket, tries=0))
+    assert not all(len(p) == 32 and np.abs(p * 32 - 1).max() <= 2.0**-surface_measures.SLAB_ITERATIONS
+                   for _, _, p in _slabs(tri))
+
+
 @pytest.mark.parametrize("name", ["box", "three boxes", "torus"])
 def test_exact_slab_probabilities_are_the_shares_of_their_edges(name):
     """On symmetric meshes a halving can land on its target within rounding, where either
