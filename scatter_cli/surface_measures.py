@@ -10,7 +10,6 @@ holds what only the tests use).
 
 import numpy as np
 
-from .slab_heights import below_fraction as _below_fraction
 from .slab_heights import solve_heights as _solve_heights
 
 # Upper bound on the entries of one (faces x values) work matrix; each chunk

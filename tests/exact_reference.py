@@ -1,11 +1,12 @@
 """Exact quantities of a surface that only the tests use: the area below a height,
 equal-area slabs of exactly 1/k each and their probabilities, the second moment about
-the origin. Built on :mod:`scatter_cli.surface_measures`'s closed forms per triangle."""
+the origin. Built on the closed forms per triangle of :mod:`scatter_cli.surface_measures`
+and :mod:`scatter_cli.slab_heights`."""
 
 import numpy as np
 
+from scatter_cli.slab_heights import below_fraction as _below_fraction
 from scatter_cli.surface_measures import (
-    _below_fraction,
     _chunks,
     _edges,
     _kept,
