@@ -1,5 +1,5 @@
-"""Exact quantities of a piecewise-flat surface: the area below a height, equal-area
-slabs, moments and quadrature.
+"""Exact quantities of a piecewise-flat surface: equal-area slabs (their heights found by
+:mod:`scatter_cli.slab_heights`), moments and quadrature.
 
 A surface is ``tri`` ``(F, 3, 3) float64`` (vertex ``k`` of face ``f`` is ``tri[f, k]``)
 and ``areas`` ``(F,) float64``; faces of zero area contribute nothing. Everything is a
@@ -10,12 +10,13 @@ holds what only the tests use).
 
 import numpy as np
 
+from .slab_heights import solve_heights as _solve_heights
+
 # Upper bound on the entries of one (faces x values) work matrix; each chunk
 # holds a handful of such temporaries, so this keeps them to tens of MB.
 CHUNK_ENTRIES = 1 << 21
-# Bisection steps between two narrowings of the faces each bracket involves.
-NARROW_EVERY = 2
-# Bisection steps of the slabs scatter check counts in.
+# The slabs scatter check counts in reach their target areas to 2^-SLAB_ITERATIONS of a
+# slab's area (or, at a jump of the area, that fraction of their first bracket).
 SLAB_ITERATIONS = 12
 
 # Unordered coordinate pairs for second central moments: xx, yy, zz, xy, xz, yz.
@@ -51,122 +52,41 @@ def _kept(tri, areas):
     tri = np.asarray(tri, dtype=float)
     areas = np.asarray(areas, dtype=float)
     keep = areas > 0
-    tri, areas = tri[keep], areas[keep]
+    if not keep.all():
+        tri, areas = tri[keep], areas[keep]
     if len(tri) == 0:
         raise ValueError("surface has zero area")
-    return tri, areas, 0.5 * (tri.min(axis=(0, 1)) + tri.max(axis=(0, 1)))
+    lo, hi = _box(tri)
+    return tri, areas, 0.5 * (lo + hi)
+
+
+def _box(tri):
+    """Lowest and highest coordinates (3,), (3,) of the corners of tri (F, 3, 3) (column by
+    column: a reduction across rows of an (n, 3) array is many times slower)."""
+    corners = tri.reshape(-1, 3)
+    return (np.array([corners[:, k].min() for k in range(3)]),
+            np.array([corners[:, k].max() for k in range(3)]))
+
+
+def _sorted_heights(centred, d):
+    """Vertex heights (F, 3) along d of the faces ``centred`` (F, 3, 3), each row sorted
+    (a sorting network: the same values as np.sort, a fraction of its time)."""
+    v = centred.reshape(-1, 3)
+    h = (v[:, 0] * d[0] + v[:, 1] * d[1] + v[:, 2] * d[2]).reshape(-1, 3)
+    a, b, c = h[:, 0], h[:, 1], h[:, 2]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    out = np.empty_like(h)
+    np.minimum(lo, c, out=out[:, 0])
+    mid = np.maximum(lo, c)
+    np.minimum(mid, hi, out=out[:, 1])
+    np.maximum(mid, hi, out=out[:, 2])
+    return out
 
 
 def _chunks(n_rows, row_size, budget=CHUNK_ENTRIES):
     step = max(1, budget // max(1, row_size))
     for start in range(0, n_rows, step):
         yield slice(start, min(n_rows, start + step))
-
-
-def _below_fraction(h0, h1, h2, t):
-    """Fraction of a triangle with sorted vertex heights h0 <= h1 <= h2 lying
-    at height <= t (all arguments broadcast)."""
-    # Each branch is used only where its denominator is positive (h0 <= t < h1
-    # needs h1 > h0; h1 <= t < h2 needs h2 > h1), so the substituted 1.0 never
-    # reaches the result; a face flat in the direction becomes a step.
-    den_lo = (h1 - h0) * (h2 - h0)
-    den_hi = (h2 - h0) * (h2 - h1)
-    lower = (t - h0) ** 2 / np.where(den_lo > 0, den_lo, 1.0)
-    upper = 1.0 - (h2 - t) ** 2 / np.where(den_hi > 0, den_hi, 1.0)
-    return np.where(t >= h2, 1.0, np.where(t >= h1, upper, np.where(t >= h0, lower, 0.0)))
-
-
-class _Sorted:
-    """Faces sorted by lowest and by highest vertex height, with running areas:
-    bounds the area function cheaply, area(h2 <= t) <= A(t) <= area(h0 <= t)."""
-
-    def __init__(self, h, areas):
-        o0, o2 = np.argsort(h[:, 0], kind="stable"), np.argsort(h[:, 2], kind="stable")
-        self.order0 = o0
-        self.h0, self.h2 = h[o0, 0], h[o2, 2]
-        self.cum0 = np.concatenate(([0.0], np.cumsum(areas[o0])))
-        self.cum2 = np.concatenate(([0.0], np.cumsum(areas[o2])))
-
-    def bracket(self, targets, floor):
-        """(lo, hi) per target with A(lo) < target <= A(hi) (up to rounding)."""
-        i_hi = np.minimum(np.searchsorted(self.cum2[1:], targets, side="left"), len(self.h2) - 1)
-        hi = self.h2[i_hi]
-        # The first face whose start lifts the upper bound to the target; lo is
-        # the next lower distinct start height, where even the bound is short.
-        i_lo = np.minimum(np.searchsorted(self.cum0[1:], targets, side="left"), len(self.h0) - 1)
-        j = np.searchsorted(self.h0, self.h0[i_lo], side="left")
-        lo = np.where(j > 0, self.h0[np.maximum(j - 1, 0)], floor)
-        return np.minimum(lo, hi), hi
-
-    def area_below(self, t):
-        """Area of faces lying wholly at height <= t."""
-        return self.cum2[np.searchsorted(self.h2, t, side="right")]
-
-
-def _solve_heights(h, areas, targets, iterations, pad=0.0):
-    """Heights (m,) where the area function reaches each of targets (m,), by
-    vectorised bisection, and the area function for heights (m,) each no more
-    than ``pad`` above its solution.  Each bracket only involves the faces
-    straddling it, and every few halvings the faces a bracket has left behind are
-    dropped (those wholly below it join its base area), so the work shrinks to the
-    faces that cross each solution."""
-    lo0 = float(h[:, 0].min())
-    extent = float(h[:, 2].max()) - lo0
-    table = _Sorted(h, areas)
-    lo, hi = table.bracket(targets, lo0 - extent)
-    pairs = _Pairs(h, areas, table, lo, hi + pad)
-    for step in range(iterations):
-        if step and step % NARROW_EVERY == 0:
-            pairs.narrow(lo, hi + pad)
-        mid = 0.5 * (lo + hi)
-        below = pairs.area_at(mid) < targets
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
-    pairs.narrow(lo, hi + pad)
-    return hi, pairs.area_at
-
-
-class _Pairs:
-    """The (target, face) pairs of the faces that reach into each bracket lo (m,) ..
-    hi (m,) (highest vertex above lo, lowest at or below hi), with what the area
-    function needs of each face gathered once, and ``base`` (m,): the area of the
-    faces wholly below each bracket."""
-
-    def __init__(self, h, areas, table, lo, hi):
-        order, h0 = table.order0, table.h0
-        h2 = h[order, 2]
-        owners, faces = [], []
-        for k, (a, b) in enumerate(zip(lo.tolist(), hi.tolist())):  # a few dozen targets
-            top = int(np.searchsorted(h0, b, side="right"))
-            got = order[:top][h2[:top] > a]
-            faces.append(got)
-            owners.append(np.full(len(got), k, dtype=np.int64))
-        faces = np.concatenate(faces)
-        self.owner, self.base = np.concatenate(owners), table.area_below(lo)
-        self.h0, self.h1, self.h2 = (np.ascontiguousarray(h[faces, c]) for c in range(3))
-        self.area = areas[faces]
-
-    def narrow(self, lo, hi):
-        """Keep the pairs of the brackets lo .. hi inside the old ones; the faces now
-        wholly below lo join the base."""
-        below = self.h2 <= lo[self.owner]
-        self.base = self.base + np.bincount(self.owner[below], self.area[below], minlength=len(lo))
-        keep = np.flatnonzero(~below & (self.h0 <= hi[self.owner]))
-        for name in ("owner", "h0", "h1", "h2", "area"):
-            setattr(self, name, getattr(self, name)[keep])
-
-    def __len__(self):
-        return len(self.owner)
-
-    def area_at(self, t):
-        """The area below heights t (m,), in blocks of CHUNK_ENTRIES pairs."""
-        out = self.base.copy()
-        for s in range(0, len(self.owner), CHUNK_ENTRIES):
-            cut = slice(s, s + CHUNK_ENTRIES)
-            o = self.owner[cut]
-            frac = _below_fraction(self.h0[cut], self.h1[cut], self.h2[cut], t[o])
-            out += np.bincount(o, self.area[cut] * frac, minlength=len(t))
-        return out
 
 
 def _split(h, areas, k, iterations=48, least_nudge=0.0):
@@ -217,8 +137,9 @@ def slabs(tri, areas, directions, k, iterations=SLAB_ITERATIONS, progress=None):
     face, so the face's points fall below it whatever their rounding; interior edges
     within :func:`rounding` of the highest height or of the edge below are dropped, so
     that no slab of zero probability lies where a rounded point of the surface can
-    fall (j <= k). The bisection stops at 2^-iterations of its bracket: the edges only
-    need to be near equal-area, the probabilities are exact for the edges found.
+    fall (j <= k). The area below each edge is within 2^-iterations of a slab of its
+    target (:func:`slab_heights.solve_heights`): the edges only need to be near
+    equal-area, the probabilities are exact for the edges found.
     ``progress(i, m)`` is called before direction i of m.
     """
     dirs = np.asarray(directions, dtype=float).reshape(-1, 3)
@@ -231,7 +152,7 @@ def slabs(tri, areas, directions, k, iterations=SLAB_ITERATIONS, progress=None):
     for i, d in enumerate(dirs):  # a handful of directions
         if progress:
             progress(i, len(dirs))
-        h, off = np.sort(centred @ d, axis=1), float(ref @ d)
+        h, off = _sorted_heights(centred, d), float(ref @ d)
         inner, below = _split(h, areas, int(k), iterations, 2.0 * tol)
         top = float(h[:, 2].max())
         keep = inner < top - tol
@@ -252,7 +173,7 @@ def centred_moments(tri, areas):
     tri, areas, ref = _kept(tri, areas)
     v = tri - ref
     w = areas / areas.sum()
-    s = v.sum(axis=1)
+    s = v[:, 0] + v[:, 1] + v[:, 2]
     mean = w @ (s / 3.0)
     # Per triangle E[x x^T] = (sum_i v_i v_i^T + s s^T) / 12, s = v0 + v1 + v2.
     corners = v.reshape(-1, 3)
@@ -274,11 +195,12 @@ def fourth_central_moments(tri_c, areas):
     j = np.array([p[1] for p in COV_PAIRS])
     tri_c = np.asarray(tri_c, dtype=float)
     areas = np.asarray(areas, dtype=float)
-    total = np.zeros(len(COV_PAIRS))
+    total = np.zeros((3, 3))
     for sl in _chunks(len(tri_c), len(DEGREE4_WEIGHTS), budget=1 << 18):
-        sq = np.matmul(DEGREE4_NODES, tri_c[sl]) ** 2  # (f, 6, 3): the rule's points, squared
-        total += np.einsum("fq,fqp->p", areas[sl, None] * DEGREE4_WEIGHTS, sq[..., i] * sq[..., j])
-    return total / areas.sum()
+        sq = (np.matmul(DEGREE4_NODES, tri_c[sl]) ** 2).reshape(-1, 3)  # the rule's points, squared
+        w = (areas[sl, None] * DEGREE4_WEIGHTS).ravel()
+        total += (sq * w[:, None]).T @ sq  # [i, j]: sum of w x_i^2 x_j^2
+    return total[i, j] / areas.sum()
 
 
 # ---------------------------------------------------------------------------

@@ -30,7 +30,8 @@ class ExactMoments:
     def __init__(self, tri, areas):
         ref, mean, self.cov, tri_k, areas_k = surface_measures.centred_moments(tri, areas)
         self.centre = ref + mean
-        self.scale = float(np.ptp(tri_k.reshape(-1, 3), axis=0).max())
+        lo, hi = surface_measures._box(tri_k)
+        self.scale = float((hi - lo).max())
         self.fourth = surface_measures.fourth_central_moments(tri_k - self.centre, areas_k)
 
 

@@ -1,10 +1,19 @@
 """Exact quantities of a surface that only the tests use: the area below a height,
 equal-area slabs of exactly 1/k each and their probabilities, the second moment about
-the origin. Built on :mod:`scatter_cli.surface_measures`'s closed forms per triangle."""
+the origin. Built on the closed forms per triangle of :mod:`scatter_cli.surface_measures`
+and :mod:`scatter_cli.slab_heights`."""
 
 import numpy as np
 
-from scatter_cli.surface_measures import _below_fraction, _chunks, _edges, _kept, _split, _unit, centred_moments
+from scatter_cli.slab_heights import below_fraction as _below_fraction
+from scatter_cli.surface_measures import (
+    _chunks,
+    _edges,
+    _kept,
+    _split,
+    _unit,
+    centred_moments,
+)
 
 
 def _heights(tri, ref, d):
@@ -83,3 +92,16 @@ def surface_moments(tri, areas):
     ref, mean, cov, _, _ = centred_moments(tri, areas)
     mu = ref + mean
     return mu, cov + np.outer(mu, mu)
+
+
+
+def with_direct_areas(solve):
+    """A twin of the slab solver ``solve`` (``surface_measures._solve_heights``): the
+    heights it finds, with the area below any height summed over every face's closed
+    form (no bracket, no narrowing, no quadratic)."""
+
+    def solver(h, areas, targets, iterations, pad=0.0):
+        hi, _ = solve(h, areas, targets, iterations, pad)
+        return hi, lambda t: cdf_from_heights(h, areas, t)
+
+    return solver

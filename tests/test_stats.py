@@ -220,6 +220,142 @@ def test_slab_counts_convention():
 
 
 # ---------------------------------------------------------------------------
+# the exact slabs against every face's closed form
+
+
+def _face_areas(tri):
+    return 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+
+
+def _slab_mesh(name):
+    """Meshes where no halving lands on its target within rounding: a noisy terrain (many
+    faces crossing every level), a triangle soup, a soup of coordinates rounded to 0.1
+    (faces flat along the axes: jumps of the area) and a sphere far from the origin."""
+    rng = np.random.default_rng(5)
+    if name == "terrain":
+        n = 40
+        x, y = np.meshgrid(np.linspace(0, 10, n), np.linspace(0, 10, n))
+        z = np.sin(x / 2) * np.cos(y / 3) + rng.normal(0, 0.05, x.shape)
+        i = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
+        faces = np.r_[np.c_[i, i + 1, i + n], np.c_[i + 1, i + n + 1, i + n]]
+        return np.c_[x.ravel(), y.ravel(), z.ravel()][faces]
+    if name == "soup":
+        return rng.normal(size=(600, 3, 3))
+    if name == "rounded soup":
+        return np.round(rng.normal(size=(600, 3, 3)), 1)
+    return np.array(trimesh.creation.icosphere(3).triangles) * 1e3 + 5e6
+
+
+def _same_slabs(a, b, tol=1e-13):
+    """Whether two ``surface_measures.slabs`` results have the same edges, bit for bit, and
+    probabilities within tol."""
+    return len(a) == len(b) and all(
+        np.array_equal(ea, eb) and np.allclose(pa, pb, rtol=0, atol=tol) for (_, ea, pa), (_, eb, pb) in zip(a, b)
+    )
+
+
+def _slabs(tri, monkeypatch=None, solve=None):
+    with monkeypatch.context() if monkeypatch else _no_patch() as m:
+        if solve:
+            m.setattr(surface_measures, "_solve_heights", solve)
+        return surface_measures.slabs(tri, _face_areas(tri), uniformity.default_directions(), 32)
+
+
+class _no_patch:
+    def __enter__(self):
+        return None
+
+    def __exit__(self, *exc):
+        return False
+
+
+def _direct(solve=None):
+    return exact_reference.with_direct_areas(solve or surface_measures._solve_heights)
+
+
+@pytest.mark.parametrize("name", ["terrain", "soup", "rounded soup", "far sphere"])
+def test_exact_slab_areas_equal_every_faces_sum(name, monkeypatch):
+    """The slabs' probabilities (the area below each edge from the faces gathered per
+    bracket: wholly below, or the closed form of each face crossing) equal the area below
+    the same edges summed over every face's closed form within 1e-13: at a million
+    points a share off by 1e-13 moves an expected count by 1e-7, far below what the
+    chi-square test can see. And the slabs hold equal areas: each within 2^-12 of a
+    slab of its 1/32 (SLAB_ITERATIONS), none merged."""
+    tri = _slab_mesh(name)
+    fast = _slabs(tri)
+    assert _same_slabs(fast, _slabs(tri, monkeypatch, _direct()))
+    for _, edges, prob in fast:
+        assert len(prob) == 32
+        assert np.abs(prob * 32 - 1).max() <= 2.0**-surface_measures.SLAB_ITERATIONS
+
+
+def test_the_slab_checks_fail_a_wrong_area_and_an_off_by_one_slab(monkeypatch):
+    """The checks above fail an area function missing part of one face (2e-13 of the
+    area: twice the tolerance), probabilities shifted by one slab, edges shifted by one
+    target (a slab of twice the area next to one of none) and a solver stopped early."""
+    tri = _slab_mesh("terrain")
+    fast = _slabs(tri)
+    total = _face_areas(tri).sum()
+    solve = surface_measures._solve_heights
+
+    def wrong_area(h, areas, targets, iterations, pad=0.0):
+        hi, area_at = _direct(solve)(h, areas, targets, iterations, pad)
+        return hi, lambda t: area_at(t) - np.where(np.arange(len(t)) == 5, 2e-13 * total, 0.0)
+
+    def shifted(h, areas, targets, iterations, pad=0.0):
+        hi, area_at = solve(h, areas, targets, iterations, pad)
+        return np.r_[hi[1:], hi[-1:]], area_at
+
+    def early(h, areas, targets, iterations, pad=0.0):
+        return solve(h, areas, targets, 4, pad)
+
+    def equal(slabs):
+        return all(len(p) == 32 and np.abs(p * 32 - 1).max() <= 2.0**-surface_measures.SLAB_ITERATIONS
+                   for _, _, p in slabs)
+
+    assert _same_slabs(fast, _slabs(tri, monkeypatch, _direct())) and equal(fast)
+    assert not _same_slabs(fast, _slabs(tri, monkeypatch, wrong_area))
+    assert not _same_slabs(fast, [(d, e, np.roll(p, 1)) for d, e, p in fast])
+    assert not equal(_slabs(tri, monkeypatch, shifted))
+    assert not equal(_slabs(tri, monkeypatch, early))
+
+
+def test_exact_slabs_survive_a_wrong_first_guess(monkeypatch):
+    """Brackets around a wrong first guess (every target guessed at the lowest height)
+    widen until they hold their targets: the same equal-area slabs with exact areas.
+    Brackets that are not widened (a single try) leave slabs that are not."""
+    import functools
+
+    from scatter_cli import slab_heights
+
+    tri = _slab_mesh("terrain")
+    monkeypatch.setattr(slab_heights, "_guess",
+                        lambda h, areas, targets, lo0, hi0: (np.full(len(targets), lo0), 1e-3 * (hi0 - lo0)))
+    got = _slabs(tri)
+    assert _same_slabs(got, _slabs(tri, monkeypatch, _direct()))
+    assert all(len(p) == 32 and np.abs(p * 32 - 1).max() <= 2.0**-surface_measures.SLAB_ITERATIONS for _, _, p in got)
+    monkeypatch.setattr(slab_heights, "_bracket", functools.partial(slab_heights._bracket, tries=0))
+    assert not all(len(p) == 32 and np.abs(p * 32 - 1).max() <= 2.0**-surface_measures.SLAB_ITERATIONS
+                   for _, _, p in _slabs(tri))
+
+
+@pytest.mark.parametrize("name", ["box", "three boxes", "torus"])
+def test_exact_slab_probabilities_are_the_shares_of_their_edges(name):
+    """On symmetric meshes a halving can land on its target within rounding, where either
+    neighbouring step is an equally good edge; whichever is found, its probabilities are
+    the exact shares of the slabs between the edges (every face's closed form)."""
+    if name == "torus":
+        tri = np.array(trimesh.creation.torus(2, 0.5).triangles)
+    else:
+        count = 3 if name == "three boxes" else 1
+        tri = np.concatenate([trimesh.creation.box().apply_translation((3 * i, 0, 0.5 * i)).triangles
+                              for i in range(count)])
+    areas = _face_areas(tri)
+    for d, edges, prob in surface_measures.slabs(tri, areas, uniformity.default_directions(), 32):
+        assert np.allclose(prob, exact_reference.slab_probabilities(tri, areas, d, edges), rtol=0, atol=1e-13)
+
+
+# ---------------------------------------------------------------------------
 # moments
 
 
