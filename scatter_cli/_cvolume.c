@@ -275,8 +275,280 @@ static inline double box_d2(const Tree *t, int64_t i, const double *p)
 static int64_t faces_tested, nodes_opened;
 #endif
 
+
+/* ---- the wide tree that closest() walks ----
+ *
+ * Built at each call from the heap tree: a node holds the boxes of four descendants two
+ * levels down (one level for the root when the depth is odd), in float rounded outward,
+ * side by side so that one vector operation tests all four; the leaves (of the heap tree)
+ * hold the boxes of their faces the same way, four at a time. Rounding a box outward only
+ * grows it, and every rounded operation of the box distance (a difference, the larger of
+ * two, a square, a sum) is monotone, so the computed distance to a grown box is never more
+ * than the one to the box itself: a box is skipped only when the double box of the heap
+ * tree would be, and that holds only boxes farther than the best distance plus ``tol``.
+ * Testing the boxes two levels down without the one between skips less, never more. */
+
+typedef double v4d __attribute__((vector_size(32)));
+/* the walk compiled twice, chosen at load: for AVX2 (the vectors in one register) and plain */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__)
+#define TARGETS __attribute__((target_clones("avx2", "default")))
+#else
+#define TARGETS
+#endif
+typedef float v4f __attribute__((vector_size(16)));
+typedef int64_t v4l __attribute__((vector_size(32)));
+
+typedef struct {
+    v4f lo[3], hi[3]; /* four boxes, by axis; an empty one: lo +inf, hi -inf */
+} Box4;
+
+typedef struct {
+    Box4 box;
+    int64_t child[4]; /* >= 0: a wide node; < 0: ~j, leaf j of the heap tree */
+} Wide;
+
+/* Four faces: their boxes, and the disks holding them (centre, unit normal, radius; a
+ * radius of +inf and a zero normal for a thin or tiny face, whose normal rounding may
+ * tilt, or a slot without a face). A face lies in its disk, so its distance is at least
+ * the disk's: sqrt(h^2 + max(0, l - r)^2), h the height over the disk's plane, l the
+ * distance from the centre along the plane. The rounding of that (the normal of a face
+ * that is not thin is within some 20 ulp of exact, each other step a few ulp of the
+ * point's distance from the centre) is under 1e-14 times the largest coordinate of the
+ * points and the surface, a hundredth of ``tol``: the disk is tested against the best
+ * distance plus twice ``tol``, and so skips only faces farther than the best plus tol. */
+typedef struct {
+    Box4 box;
+    v4d c[3], n[3], r;
+} Faces4;
+
+typedef struct {
+    Wide *nodes;      /* nodes[0] is the root's */
+    Faces4 *faces;    /* per leaf j (and an empty leaf ``leaves``): quads faces j * quads ... */
+    int64_t quads;    /* quads of faces in a leaf: ceil(leaf / 4) */
+    int64_t count, root; /* nodes made; the root's reference (a node, or ~0 for a single leaf) */
+    int depth;        /* of the heap tree: leaves = 2^depth */
+} WideTree;
+
+/* x rounded to float, down (up > 0: up) when it is not exact */
+static inline float outward(double x, int up)
+{
+    float f = (float)x;
+    if (up ? (double)f < x : (double)f > x)
+        f = nextafterf(f, up ? INFINITY : -INFINITY);
+    return f;
+}
+
+static void box_lane(Box4 *b, int lane, const double *lo, const double *hi)
+{
+    int empty = !(lo[0] <= hi[0] && lo[1] <= hi[1] && lo[2] <= hi[2]);
+    for (int k = 0; k < 3; k++) {
+        b->lo[k][lane] = empty ? INFINITY : outward(lo[k], 0);
+        b->hi[k][lane] = empty ? -INFINITY : outward(hi[k], 1);
+    }
+}
+
+static void box_empty(Box4 *b)
+{
+    for (int k = 0; k < 3; k++)
+        for (int lane = 0; lane < 4; lane++)
+            b->lo[k][lane] = INFINITY, b->hi[k][lane] = -INFINITY;
+}
+
+/* the wide node of heap node i at depth d; its index */
+static int64_t wide_node(const Tree *t, WideTree *w, int64_t i, int d)
+{
+    int64_t at = w->count++;
+    int step = (w->depth - d) % 2 ? 1 : 2;
+    int64_t first = step == 1 ? 2 * i + 1 : 4 * i + 3;
+    Wide node;
+    box_empty(&node.box);
+    for (int lane = 0; lane < 4; lane++)
+        node.child[lane] = ~t->leaves; /* the empty leaf */
+    for (int lane = 0; lane < 2 * step; lane++) {
+        int64_t c = first + lane;
+        box_lane(&node.box, lane, t->lo + 3 * c, t->hi + 3 * c);
+        if (node.box.lo[0][lane] > node.box.hi[0][lane])
+            continue; /* empty */
+        node.child[lane] = d + step == w->depth ? ~(c - (t->leaves - 1)) : wide_node(t, w, c, d + step);
+    }
+    w->nodes[at] = node;
+    return at;
+}
+
+/* lane of q: the disk of face f (9 doubles), none when f is NULL */
+static void disk_lane(Faces4 *q, int lane, const double *f)
+{
+    for (int k = 0; k < 3; k++)
+        q->c[k][lane] = 0.0, q->n[k][lane] = 0.0;
+    q->r[lane] = INFINITY;
+    if (!f)
+        return;
+    const double *a = f, *b = f + 3, *c = f + 6;
+    double ab[3], ac[3], bc[3], n[3], g[3], r2 = 0;
+    for (int k = 0; k < 3; k++)
+        ab[k] = b[k] - a[k], ac[k] = c[k] - a[k], bc[k] = c[k] - b[k], g[k] = (a[k] + b[k] + c[k]) / 3.0;
+    n[0] = ab[1] * ac[2] - ab[2] * ac[1], n[1] = ab[2] * ac[0] - ab[0] * ac[2], n[2] = ab[0] * ac[1] - ab[1] * ac[0];
+    double nn = dot(n, n), longest = dot(ab, ab);
+    longest = dot(ac, ac) > longest ? dot(ac, ac) : longest;
+    longest = dot(bc, bc) > longest ? dot(bc, bc) : longest;
+    /* not thin (distance.THIN), nor so small that the products lose bits, nor overflowing */
+    if (!(nn > 1e-250 && nn < 1e250 && nn >= 0.01 * longest * longest))
+        return;
+    for (int v = 0; v < 3; v++) {
+        double d[3] = {f[3 * v] - g[0], f[3 * v + 1] - g[1], f[3 * v + 2] - g[2]};
+        r2 = dot(d, d) > r2 ? dot(d, d) : r2;
+    }
+    double len = sqrt(nn);
+    for (int k = 0; k < 3; k++)
+        q->c[k][lane] = g[k], q->n[k][lane] = n[k] / len;
+    q->r[lane] = sqrt(r2);
+}
+
+static void wide_free(WideTree *w)
+{
+    free(w->nodes), free(w->faces);
+}
+
+/* the wide tree of t; 0 when out of memory */
+static int wide_tree(const Tree *t, WideTree *w)
+{
+    int depth = 0;
+    while (((int64_t)1 << depth) < t->leaves)
+        depth++;
+    w->depth = depth, w->quads = (t->leaf + 3) / 4, w->count = 0;
+    w->nodes = aligned_alloc(64, sizeof(Wide) * (size_t)t->leaves);
+    w->faces = aligned_alloc(64, sizeof(Faces4) * (size_t)((t->leaves + 1) * w->quads));
+    if (!w->nodes || !w->faces) {
+        wide_free(w);
+        return 0;
+    }
+    for (int64_t j = 0; j <= t->leaves; j++)
+        for (int64_t q = 0; q < w->quads; q++) {
+            Faces4 *fq = w->faces + j * w->quads + q;
+            Box4 *b = &fq->box;
+            box_empty(b);
+            for (int lane = 0; lane < 4; lane++)
+                disk_lane(fq, lane, NULL);
+            for (int lane = 0; lane < 4; lane++) {
+                int64_t s = j * t->leaf + 4 * q + lane;
+                if (4 * q + lane >= t->leaf || s >= t->nf)
+                    break;
+                const double *f = t->tri + 9 * s;
+                double lo[3], hi[3];
+                for (int k = 0; k < 3; k++) {
+                    lo[k] = f[k] < f[3 + k] ? f[k] : f[3 + k], hi[k] = f[k] < f[3 + k] ? f[3 + k] : f[k];
+                    lo[k] = f[6 + k] < lo[k] ? f[6 + k] : lo[k], hi[k] = f[6 + k] > hi[k] ? f[6 + k] : hi[k];
+                }
+                box_lane(b, lane, lo, hi);
+                disk_lane(fq, lane, f);
+            }
+        }
+    w->root = depth == 0 ? ~(int64_t)0 : wide_node(t, w, 0, 0);
+    return 1;
+}
+
+/* squared distances from p to the four boxes of b, each computed as box_d2 does (an empty
+ * box: +inf) */
+__attribute__((always_inline)) static inline v4d box4_d2(const Box4 *b, const double *p)
+{
+    v4d s = {0, 0, 0, 0};
+    for (int k = 0; k < 3; k++) {
+        v4d lo = __builtin_convertvector(b->lo[k], v4d) - p[k], hi = p[k] - __builtin_convertvector(b->hi[k], v4d);
+        v4l m = lo > hi;
+        v4d g = (v4d)(((v4l)lo & m) | ((v4l)hi & ~m));
+        g = (v4d)((v4l)g & (g > 0));
+        s += g * g;
+    }
+    return s;
+}
+
+/* squared distances from p to the disks of the four faces of q (0 where there is none) */
+__attribute__((always_inline)) static inline v4d disk4_d2(const Faces4 *q, const double *p)
+{
+    v4d v0 = p[0] - q->c[0], v1 = p[1] - q->c[1], v2 = p[2] - q->c[2];
+    v4d h = q->n[0] * v0 + q->n[1] * v1 + q->n[2] * v2;
+    v4d l0 = v0 - h * q->n[0], l1 = v1 - h * q->n[1], l2 = v2 - h * q->n[2];
+    v4d l = l0 * l0 + l1 * l1 + l2 * l2;
+    for (int lane = 0; lane < 4; lane++)
+        l[lane] = sqrt(l[lane]);
+    v4d g = l - q->r;
+    g = (v4d)((v4l)g & (g > 0));
+    return h * h + g * g;
+}
+
+/* the closest face of p; *slot: on entry a slot whose face starts the search (or -1),
+ * on return the slot of the answer */
+TARGETS static void closest_one(const Tree *t, const WideTree *w, const double *p, double tol, double *dist, double *cq,
+                        int64_t *face, int64_t *slot)
+{
+    double best = INFINITY, bound = INFINITY, disk = INFINITY, q[3], bq[3] = {NAN, NAN, NAN};
+    int64_t bestf = INT64_MAX, bests = -1, stack[4 * MAX_DEPTH + 8];
+    double sd[4 * MAX_DEPTH + 8];
+    if (*slot >= 0) {
+        best = closest_on(t->tri + 9 * *slot, t->thin[*slot], p, bq), bestf = t->order[*slot], bests = *slot;
+        double r = sqrt(best) + tol, rd = r + tol;
+        bound = r * r, disk = rd * rd;
+    }
+    int top = 0;
+    stack[0] = w->root, sd[0] = box_d2(t, 0, p), top = 1;
+    while (top) {
+        top--;
+        int64_t ref = stack[top];
+        if (sd[top] > bound)
+            continue;
+        if (ref < 0) {
+            int64_t j = ~ref, s0 = j * t->leaf, s1 = s0 + t->leaf;
+            s1 = s1 < t->nf ? s1 : t->nf;
+            for (int64_t qd = 0; qd < w->quads && s0 + 4 * qd < s1; qd++) {
+                const Faces4 *fq = w->faces + j * w->quads + qd;
+                v4d fd = box4_d2(&fq->box, p), dd = disk4_d2(fq, p);
+                for (int lane = 0; lane < 4; lane++) {
+                    int64_t s = s0 + 4 * qd + lane;
+                    if (s >= s1)
+                        break;
+                    if (fd[lane] > bound || dd[lane] > disk)
+                        continue;
+#ifdef COUNT
+                    __atomic_fetch_add(&faces_tested, 1, __ATOMIC_RELAXED);
+#endif
+                    double d2 = closest_on(t->tri + 9 * s, t->thin[s], p, q);
+                    int64_t f = t->order[s];
+                    if (d2 < best || (d2 == best && f < bestf)) {
+                        best = d2, bestf = f, bests = s, bq[0] = q[0], bq[1] = q[1], bq[2] = q[2];
+                        double r = sqrt(best) + tol, rd = r + tol;
+                        bound = r * r, disk = rd * rd;
+                    }
+                }
+            }
+            continue;
+        }
+#ifdef COUNT
+        __atomic_fetch_add(&nodes_opened, 1, __ATOMIC_RELAXED);
+#endif
+        const Wide *n = w->nodes + ref;
+        v4d d = box4_d2(&n->box, p);
+        /* the children within the bound, the nearest on top */
+        int64_t cr[4];
+        double cd[4];
+        int m = 0;
+        for (int lane = 0; lane < 4; lane++) {
+            if (d[lane] > bound)
+                continue;
+            int at = m++;
+            while (at > 0 && cd[at - 1] < d[lane])
+                cd[at] = cd[at - 1], cr[at] = cr[at - 1], at--;
+            cd[at] = d[lane], cr[at] = n->child[lane];
+        }
+        for (int k = 0; k < m; k++)
+            stack[top] = cr[k], sd[top++] = cd[k];
+    }
+    *dist = sqrt(best), *face = bestf, *slot = bests;
+    cq[0] = bq[0], cq[1] = bq[1], cq[2] = bq[2];
+}
+
 typedef struct {
     Tree t;
+    const WideTree *w;
     const double *points;
     const int64_t *visit; /* the points in this order (near ones in turn) */
     double tol;
@@ -285,67 +557,6 @@ typedef struct {
     int64_t n;
 } Closest;
 
-/* the closest face of p; *slot: on entry a slot whose face starts the search (or -1),
- * on return the slot of the answer */
-static void closest_one(const Tree *t, const double *p, double tol, double *dist, double *cq, int64_t *face,
-                        int64_t *slot)
-{
-    double best = INFINITY, bound = INFINITY, q[3], bq[3] = {NAN, NAN, NAN};
-    int64_t bestf = INT64_MAX, bests = -1, stack[2 * MAX_DEPTH + 4];
-    double sd[2 * MAX_DEPTH + 4];
-    if (*slot >= 0) {
-        best = closest_on(t->tri + 9 * *slot, t->thin[*slot], p, bq), bestf = t->order[*slot], bests = *slot;
-        double r = sqrt(best) + tol;
-        bound = r * r;
-    }
-    int top = 0;
-    stack[0] = 0, sd[0] = box_d2(t, 0, p), top = 1;
-    while (top) {
-        top--;
-        int64_t node = stack[top];
-        if (sd[top] > bound)
-            continue;
-        if (node >= t->leaves - 1) {
-            int64_t s0 = (node - (t->leaves - 1)) * t->leaf, s1 = s0 + t->leaf;
-            s1 = s1 < t->nf ? s1 : t->nf;
-            for (int64_t s = s0; s < s1; s++) {
-                if (face_d2(t->tri + 9 * s, p) > bound)
-                    continue;
-#ifdef COUNT
-                __atomic_fetch_add(&faces_tested, 1, __ATOMIC_RELAXED);
-#endif
-                double d2 = closest_on(t->tri + 9 * s, t->thin[s], p, q);
-                int64_t f = t->order[s];
-                if (d2 < best || (d2 == best && f < bestf)) {
-                    best = d2, bestf = f, bests = s, bq[0] = q[0], bq[1] = q[1], bq[2] = q[2];
-                    double r = sqrt(best) + tol;
-                    bound = r * r;
-                }
-            }
-            continue;
-        }
-        int64_t l = 2 * node + 1, r = l + 1;
-#ifdef COUNT
-        __atomic_fetch_add(&nodes_opened, 1, __ATOMIC_RELAXED);
-#endif
-        double dl = box_d2(t, l, p), dr = box_d2(t, r, p);
-        /* the nearer child on top */
-        if (dl <= dr) {
-            if (dr <= bound)
-                stack[top] = r, sd[top++] = dr;
-            if (dl <= bound)
-                stack[top] = l, sd[top++] = dl;
-        } else {
-            if (dl <= bound)
-                stack[top] = l, sd[top++] = dl;
-            if (dr <= bound)
-                stack[top] = r, sd[top++] = dr;
-        }
-    }
-    *dist = sqrt(best), *face = bestf, *slot = bests;
-    cq[0] = bq[0], cq[1] = bq[1], cq[2] = bq[2];
-}
-
 static void closest_job(void *ctx, int k, int count)
 {
     Closest *c = ctx;
@@ -353,7 +564,7 @@ static void closest_job(void *ctx, int k, int count)
     share(c->n, k, count, &i0, &i1);
     for (int64_t j = i0; j < i1; j++) {
         int64_t i = c->visit[j];
-        closest_one(&c->t, c->points + 3 * i, c->tol, c->dist + i, c->closest + 3 * i, c->face + i, &slot);
+        closest_one(&c->t, c->w, c->points + 3 * i, c->tol, c->dist + i, c->closest + 3 * i, c->face + i, &slot);
     }
 }
 
@@ -412,11 +623,18 @@ static PyObject *closest(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "closest: tol must be finite and >= 0");
         return NULL;
     }
-    Closest c = {t, PyArray_DATA(pts), PyArray_DATA(visit), tol, PyArray_DATA(dist), PyArray_DATA(cl), PyArray_DATA(face), n};
-    int count = n < THREAD_POINTS ? 1 : threads;
+    WideTree w;
+    Closest c = {t, &w, PyArray_DATA(pts), PyArray_DATA(visit), tol, PyArray_DATA(dist), PyArray_DATA(cl), PyArray_DATA(face), n};
+    int count = n < THREAD_POINTS ? 1 : threads, ok;
     Py_BEGIN_ALLOW_THREADS
-    in_parallel(count, closest_job, &c);
+    ok = wide_tree(&t, &w);
+    if (ok) {
+        in_parallel(count, closest_job, &c);
+        wide_free(&w);
+    }
     Py_END_ALLOW_THREADS
+    if (!ok)
+        return PyErr_NoMemory();
 #ifdef COUNT
     fprintf(stderr, "faces tested %g nodes opened %g per point\n", (double)faces_tested / n, (double)nodes_opened / n);
     faces_tested = nodes_opened = 0;
