@@ -321,12 +321,28 @@ typedef struct {
     v4d c[3], n[3], r;
 } Faces4;
 
+/* The cylinders holding a wide node's four children (for children of at most CYLINDER
+ * faces; the others and empty ones: radius and half height +inf): an axis (c, n, unit n)
+ * and, over the children's corners, the greatest distance from the axis (r) and from the
+ * plane through c across it (t). A face lies in the cylinder of its node, so its
+ * distance is at least the cylinder's, sqrt(max(0, |h| - t)^2 + max(0, l - r)^2) for a
+ * point at height h over that plane and distance l from the axis; rounding moves that by
+ * less than 1e-14 times the largest coordinate, and it is tested as the disks are
+ * (against the best distance plus twice ``tol``). */
+typedef struct {
+    v4d c[3], n[3], r, t;
+} Cyl4;
+
+#define CYLINDER 64
+
 typedef struct {
     Wide *nodes;      /* nodes[0] is the root's */
+    Cyl4 *cyl;        /* per node */
     Faces4 *faces;    /* per leaf j (and an empty leaf ``leaves``): quads faces j * quads ... */
     int64_t quads;    /* quads of faces in a leaf: ceil(leaf / 4) */
     int64_t count, root; /* nodes made; the root's reference (a node, or ~0 for a single leaf) */
     int depth;        /* of the heap tree: leaves = 2^depth */
+    int64_t nf, leaves, leaf; /* of the heap tree it was made from */
 } WideTree;
 
 /* x rounded to float, down (up > 0: up) when it is not exact */
@@ -355,9 +371,48 @@ static void box_empty(Box4 *b)
 }
 
 /* the wide node of heap node i at depth d; its index */
+/* lane of y: the cylinder of slots s0 .. s1 - 1 of t about the centre of box lo, hi, none
+ * when there are more than CYLINDER of them */
+static void cylinder_lane(const Tree *t, Cyl4 *y, int lane, int64_t s0, int64_t s1, const double *lo, const double *hi)
+{
+    for (int k = 0; k < 3; k++)
+        y->c[k][lane] = 0.0, y->n[k][lane] = 0.0;
+    y->r[lane] = y->t[lane] = INFINITY;
+    s1 = s1 < t->nf ? s1 : t->nf;
+    if (s1 - s0 > CYLINDER || s1 <= s0)
+        return;
+    double n[3] = {0, 0, 0}, c[3], r2 = 0, h = 0;
+    for (int64_t s = s0; s < s1; s++) {
+        const double *f = t->tri + 9 * s;
+        double ab[3], ac[3];
+        for (int k = 0; k < 3; k++)
+            ab[k] = f[3 + k] - f[k], ac[k] = f[6 + k] - f[k];
+        n[0] += ab[1] * ac[2] - ab[2] * ac[1], n[1] += ab[2] * ac[0] - ab[0] * ac[2], n[2] += ab[0] * ac[1] - ab[1] * ac[0];
+    }
+    double nn = dot(n, n);
+    if (!(nn > 1e-250 && nn < 1e250))
+        return;
+    double len = sqrt(nn);
+    for (int k = 0; k < 3; k++)
+        n[k] /= len, c[k] = lo[k] * 0.5 + hi[k] * 0.5;
+    for (int64_t s = s0; s < s1; s++)
+        for (int v = 0; v < 3; v++) {
+            const double *x = t->tri + 9 * s + 3 * v;
+            double u[3] = {x[0] - c[0], x[1] - c[1], x[2] - c[2]}, e = dot(n, u);
+            double l[3] = {u[0] - e * n[0], u[1] - e * n[1], u[2] - e * n[2]};
+            h = fabs(e) > h ? fabs(e) : h, r2 = dot(l, l) > r2 ? dot(l, l) : r2;
+        }
+    for (int k = 0; k < 3; k++)
+        y->c[k][lane] = c[k], y->n[k][lane] = n[k];
+    y->r[lane] = sqrt(r2), y->t[lane] = h;
+}
+
 static int64_t wide_node(const Tree *t, WideTree *w, int64_t i, int d)
 {
     int64_t at = w->count++;
+    Cyl4 *y = w->cyl + at;
+    for (int lane = 0; lane < 4; lane++)
+        cylinder_lane(t, y, lane, 0, 0, NULL, NULL);
     int step = (w->depth - d) % 2 ? 1 : 2;
     int64_t first = step == 1 ? 2 * i + 1 : 4 * i + 3;
     Wide node;
@@ -370,6 +425,8 @@ static int64_t wide_node(const Tree *t, WideTree *w, int64_t i, int d)
         if (node.box.lo[0][lane] > node.box.hi[0][lane])
             continue; /* empty */
         node.child[lane] = d + step == w->depth ? ~(c - (t->leaves - 1)) : wide_node(t, w, c, d + step);
+        int64_t span = (int64_t)1 << (w->depth - d - step), first_leaf = (c + 1) * span - t->leaves;
+        cylinder_lane(t, y, lane, first_leaf * t->leaf, (first_leaf + span) * t->leaf, t->lo + 3 * c, t->hi + 3 * c);
     }
     w->nodes[at] = node;
     return at;
@@ -406,7 +463,7 @@ static void disk_lane(Faces4 *q, int lane, const double *f)
 
 static void wide_free(WideTree *w)
 {
-    free(w->nodes), free(w->faces);
+    free(w->nodes), free(w->faces), free(w->cyl);
 }
 
 /* the wide tree of t; 0 when out of memory */
@@ -416,9 +473,14 @@ static int wide_tree(const Tree *t, WideTree *w)
     while (((int64_t)1 << depth) < t->leaves)
         depth++;
     w->depth = depth, w->quads = (t->leaf + 3) / 4, w->count = 0;
-    w->nodes = aligned_alloc(64, sizeof(Wide) * (size_t)t->leaves);
+    w->nf = t->nf, w->leaves = t->leaves, w->leaf = t->leaf;
+    int64_t count = 1; /* wide nodes: the root, then at depths d0, d0 + 2, ... under the leaves' */
+    for (int d = depth % 2 ? 1 : 2; d < depth; d += 2)
+        count += (int64_t)1 << d;
+    w->nodes = aligned_alloc(64, sizeof(Wide) * (size_t)count);
+    w->cyl = aligned_alloc(64, sizeof(Cyl4) * (size_t)count);
     w->faces = aligned_alloc(64, sizeof(Faces4) * (size_t)((t->leaves + 1) * w->quads));
-    if (!w->nodes || !w->faces) {
+    if (!w->nodes || !w->faces || !w->cyl) {
         wide_free(w);
         return 0;
     }
@@ -476,6 +538,20 @@ __attribute__((always_inline)) static inline v4d disk4_d2(const Faces4 *q, const
     return h * h + g * g;
 }
 
+/* squared distances from p to the four cylinders of y */
+__attribute__((always_inline)) static inline v4d cyl4_d2(const Cyl4 *y, const double *p)
+{
+    v4d v0 = p[0] - y->c[0], v1 = p[1] - y->c[1], v2 = p[2] - y->c[2];
+    v4d h = y->n[0] * v0 + y->n[1] * v1 + y->n[2] * v2;
+    v4d l0 = v0 - h * y->n[0], l1 = v1 - h * y->n[1], l2 = v2 - h * y->n[2];
+    v4d l = l0 * l0 + l1 * l1 + l2 * l2;
+    for (int lane = 0; lane < 4; lane++)
+        l[lane] = sqrt(l[lane]);
+    v4d a = (v4d)((v4l)h & ~(v4l){INT64_MIN, INT64_MIN, INT64_MIN, INT64_MIN}) - y->t, g = l - y->r;
+    a = (v4d)((v4l)a & (a > 0)), g = (v4d)((v4l)g & (g > 0));
+    return a * a + g * g;
+}
+
 /* the closest face of p; *slot: on entry a slot whose face starts the search (or -1),
  * on return the slot of the answer */
 TARGETS static void closest_one(const Tree *t, const WideTree *w, const double *p, double tol, double *dist, double *cq,
@@ -526,13 +602,13 @@ TARGETS static void closest_one(const Tree *t, const WideTree *w, const double *
         __atomic_fetch_add(&nodes_opened, 1, __ATOMIC_RELAXED);
 #endif
         const Wide *n = w->nodes + ref;
-        v4d d = box4_d2(&n->box, p);
+        v4d d = box4_d2(&n->box, p), dy = cyl4_d2(w->cyl + ref, p);
         /* the children within the bound, the nearest on top */
         int64_t cr[4];
         double cd[4];
         int m = 0;
         for (int lane = 0; lane < 4; lane++) {
-            if (d[lane] > bound)
+            if (d[lane] > bound || dy[lane] > disk)
                 continue;
             int at = m++;
             while (at > 0 && cd[at - 1] < d[lane])
@@ -600,21 +676,64 @@ static int get_out(PyObject *obj, int type, npy_intp size, PyArrayObject **out, 
     return 1;
 }
 
+#define WIDE "scatter_cli._cvolume.wide"
+
+static void wide_release(PyObject *capsule)
+{
+    WideTree *w = PyCapsule_GetPointer(capsule, WIDE);
+    if (w) {
+        wide_free(w);
+        free(w);
+    }
+}
+
+PyDoc_STRVAR(wide_doc, "wide(triangles (F,9) f8, order (F,) i8, thin (F,) u1, lo (N,3) f8, hi (N,3) f8, leaf) -> the wide "
+                       "tree that closest() walks, made once for a tree (an opaque object).");
+
+static PyObject *wide_py(PyObject *self, PyObject *args)
+{
+    PyObject *otri, *oorder, *othin, *olo, *ohi;
+    long long leaf;
+    Tree t;
+    if (!PyArg_ParseTuple(args, "OOOOOL", &otri, &oorder, &othin, &olo, &ohi, &leaf) ||
+        !get_tree(otri, oorder, othin, olo, ohi, leaf, &t))
+        return NULL;
+    WideTree *w = malloc(sizeof(WideTree));
+    int ok = 0;
+    if (w) {
+        Py_BEGIN_ALLOW_THREADS
+        ok = wide_tree(&t, w);
+        Py_END_ALLOW_THREADS
+    }
+    if (!ok) {
+        free(w);
+        return PyErr_NoMemory();
+    }
+    PyObject *capsule = PyCapsule_New(w, WIDE, wide_release);
+    if (!capsule) {
+        wide_free(w);
+        free(w);
+    }
+    return capsule;
+}
+
 PyDoc_STRVAR(closest_doc, "closest(triangles (F,9) f8, order (F,) i8, thin (F,) u1, lo (N,3) f8, hi (N,3) f8, leaf, points (n,3) f8, "
-                          "visit (n,) i8, tol, distance (n,) f8, closest (n,3) f8, face (n,) i8, threads): distance._closest_numpy "
-                          "into the three output arrays.");
+                          "visit (n,) i8, tol, distance (n,) f8, closest (n,3) f8, face (n,) i8, threads[, wide]): "
+                          "distance._closest_numpy into the three output arrays. ``wide``: wide() of the same arrays (made "
+                          "at the call when absent or None; one of another tree of the same sizes gives wrong answers, "
+                          "never a read out of bounds).");
 
 static PyObject *closest(PyObject *self, PyObject *args)
 {
-    PyObject *otri, *oorder, *othin, *olo, *ohi, *opts, *ovisit, *odist, *oclosest, *oface;
+    PyObject *otri, *oorder, *othin, *olo, *ohi, *opts, *ovisit, *odist, *oclosest, *oface, *owide = Py_None;
     long long leaf;
     double tol;
     int threads;
     Tree t;
     PyArrayObject *pts, *visit, *dist, *cl, *face;
     npy_intp n;
-    if (!PyArg_ParseTuple(args, "OOOOOLOOdOOOi", &otri, &oorder, &othin, &olo, &ohi, &leaf, &opts, &ovisit, &tol,
-                          &odist, &oclosest, &oface, &threads) ||
+    if (!PyArg_ParseTuple(args, "OOOOOLOOdOOOi|O", &otri, &oorder, &othin, &olo, &ohi, &leaf, &opts, &ovisit, &tol,
+                          &odist, &oclosest, &oface, &threads, &owide) ||
         !get_tree(otri, oorder, othin, olo, ohi, leaf, &t) || !get_points(opts, &pts, &n) || !get_visit(ovisit, n, &visit) ||
         !get_out(odist, NPY_FLOAT64, n, &dist, "distance") || !get_out(oclosest, NPY_FLOAT64, 3 * n, &cl, "closest") ||
         !get_out(oface, NPY_INT64, n, &face, "face"))
@@ -623,14 +742,25 @@ static PyObject *closest(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "closest: tol must be finite and >= 0");
         return NULL;
     }
-    WideTree w;
-    Closest c = {t, &w, PyArray_DATA(pts), PyArray_DATA(visit), tol, PyArray_DATA(dist), PyArray_DATA(cl), PyArray_DATA(face), n};
-    int count = n < THREAD_POINTS ? 1 : threads, ok;
+    WideTree own, *w = &own;
+    if (owide != Py_None) {
+        w = PyCapsule_GetPointer(owide, WIDE);
+        if (!w)
+            return NULL;
+        if (w->nf != t.nf || w->leaves != t.leaves || w->leaf != t.leaf) {
+            PyErr_SetString(PyExc_ValueError, "closest: the wide tree is another tree's");
+            return NULL;
+        }
+    }
+    Closest c = {t, w, PyArray_DATA(pts), PyArray_DATA(visit), tol, PyArray_DATA(dist), PyArray_DATA(cl), PyArray_DATA(face), n};
+    int count = n < THREAD_POINTS ? 1 : threads, ok = 1;
     Py_BEGIN_ALLOW_THREADS
-    ok = wide_tree(&t, &w);
+    if (w == &own)
+        ok = wide_tree(&t, &own);
     if (ok) {
         in_parallel(count, closest_job, &c);
-        wide_free(&w);
+        if (w == &own)
+            wide_free(&own);
     }
     Py_END_ALLOW_THREADS
     if (!ok)
@@ -924,6 +1054,7 @@ static PyObject *order_py(PyObject *self, PyObject *args)
 
 static PyMethodDef methods[] = {
     {"order", order_py, METH_VARARGS, order_doc},
+    {"wide", wide_py, METH_VARARGS, wide_doc},
     {"closest", closest, METH_VARARGS, closest_doc},
     {"crossings", crossings_py, METH_VARARGS, crossings_doc},
     {NULL, NULL, 0, NULL},

@@ -95,6 +95,17 @@ class TriangleTree:
         self.lo, self.hi = node_boxes(self.triangles, LEAF)
         self.leaf = LEAF
         self.scale = float(np.abs(tri).max())
+        self._wide = None
+
+    def wide(self):
+        """The kernel's own form of the tree (made at the first query, not pickled), or None
+        without the kernel."""
+        if self._wide is None and _kernel is not None:
+            self._wide = _kernel.wide(self.triangles, self.order, self.thin, self.lo, self.hi, self.leaf)
+        return self._wide
+
+    def __getstate__(self):
+        return {**self.__dict__, "_wide": None}
 
     @property
     def face_count(self):
@@ -211,7 +222,8 @@ def closest_points(tree, points):
         for i in range(0, n, CHUNK):
             part = points[i:i + CHUNK]
             _kernel.closest(tree.triangles, tree.order, tree.thin, tree.lo, tree.hi, tree.leaf, part, visit_order(part),
-                            tol, dist[i:i + CHUNK], closest[i:i + CHUNK], face[i:i + CHUNK], native.worker_count())
+                            tol, dist[i:i + CHUNK], closest[i:i + CHUNK], face[i:i + CHUNK], native.worker_count(),
+                            tree.wide())
     else:
         for i in range(0, n, BLOCK):
             dist[i:i + BLOCK], closest[i:i + BLOCK], face[i:i + BLOCK] = _closest_numpy(tree, points[i:i + BLOCK], tol)
