@@ -12,7 +12,8 @@
  * rays have an odd count. Boxes are grown by ``tol`` for the rays.
  *
  * Every float64 operation is the NumPy code's, in its order (built with -ffp-contract=off).
- * The points are split between threads in fixed ranges; the GIL is released meanwhile.
+ * closest() hands blocks of points to the threads as they finish the last; crossings()
+ * splits the points between them in fixed ranges. The GIL is released meanwhile.
  * Arrays are checked: a wrong shape, a non-finite value or an index out of range raises.
  */
 #define PY_SSIZE_T_CLEAN
@@ -631,16 +632,26 @@ typedef struct {
     double *dist, *closest;
     int64_t *face;
     int64_t n;
+    int64_t next; /* the next block of the visit to take (atomic) */
 } Closest;
+
+/* points a thread takes at a time (in visit order): threads that finish early take more */
+#define CLOSEST_BLOCK 1024
 
 static void closest_job(void *ctx, int k, int count)
 {
     Closest *c = ctx;
-    int64_t i0, i1, slot = -1;
-    share(c->n, k, count, &i0, &i1);
-    for (int64_t j = i0; j < i1; j++) {
-        int64_t i = c->visit[j];
-        closest_one(&c->t, c->w, c->points + 3 * i, c->tol, c->dist + i, c->closest + 3 * i, c->face + i, &slot);
+    int64_t slot = -1; /* where the walk starts: any slot gives the same answer */
+    (void)k, (void)count;
+    for (;;) {
+        int64_t i0 = __atomic_fetch_add(&c->next, 1, __ATOMIC_RELAXED) * CLOSEST_BLOCK;
+        if (i0 >= c->n)
+            return;
+        int64_t i1 = i0 + CLOSEST_BLOCK < c->n ? i0 + CLOSEST_BLOCK : c->n;
+        for (int64_t j = i0; j < i1; j++) {
+            int64_t i = c->visit[j];
+            closest_one(&c->t, c->w, c->points + 3 * i, c->tol, c->dist + i, c->closest + 3 * i, c->face + i, &slot);
+        }
     }
 }
 
@@ -752,7 +763,7 @@ static PyObject *closest(PyObject *self, PyObject *args)
             return NULL;
         }
     }
-    Closest c = {t, w, PyArray_DATA(pts), PyArray_DATA(visit), tol, PyArray_DATA(dist), PyArray_DATA(cl), PyArray_DATA(face), n};
+    Closest c = {t, w, PyArray_DATA(pts), PyArray_DATA(visit), tol, PyArray_DATA(dist), PyArray_DATA(cl), PyArray_DATA(face), n, 0};
     int count = n < THREAD_POINTS ? 1 : threads, ok = 1;
     Py_BEGIN_ALLOW_THREADS
     if (w == &own)
