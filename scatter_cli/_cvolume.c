@@ -21,6 +21,7 @@
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
 #include <numpy/arrayobject.h>
 #include "_ckernel.h"
+#include "_cmorton.h"
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -1063,8 +1064,35 @@ static PyObject *order_py(PyObject *self, PyObject *args)
     return (PyObject *)out;
 }
 
+PyDoc_STRVAR(visit_doc, "visit(points (n,3) f8) -> (n,) i8: distance.visit_order (the points along a Morton curve).");
+
+static PyObject *visit_py(PyObject *self, PyObject *args)
+{
+    PyObject *opts;
+    PyArrayObject *pts;
+    npy_intp n;
+    if (!PyArg_ParseTuple(args, "O", &opts) || !get_points(opts, &pts, &n))
+        return NULL;
+    PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){n}, NPY_INT64);
+    uint64_t *code = malloc(sizeof(uint64_t) * (size_t)(n > 0 ? n : 1));
+    int ok = out && code;
+    if (ok) {
+        Py_BEGIN_ALLOW_THREADS
+        morton10(PyArray_DATA(pts), n, code);
+        ok = stable_order(code, n, 30, PyArray_DATA(out));
+        Py_END_ALLOW_THREADS
+    }
+    free(code);
+    if (!ok) {
+        Py_XDECREF(out);
+        return PyErr_NoMemory();
+    }
+    return (PyObject *)out;
+}
+
 static PyMethodDef methods[] = {
     {"order", order_py, METH_VARARGS, order_doc},
+    {"visit", visit_py, METH_VARARGS, visit_doc},
     {"wide", wide_py, METH_VARARGS, wide_doc},
     {"closest", closest, METH_VARARGS, closest_doc},
     {"crossings", crossings_py, METH_VARARGS, crossings_doc},

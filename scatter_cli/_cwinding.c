@@ -16,6 +16,7 @@
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
 #include <numpy/arrayobject.h>
 #include "_ckernel.h"
+#include "_cmorton.h"
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -328,8 +329,59 @@ static PyObject *winding(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+PyDoc_STRVAR(morton_doc, "morton(points (n, 3) float64) -> (n,) uint64: winding._morton's codes.");
+
+static PyObject *morton_py(PyObject *self, PyObject *args)
+{
+    PyObject *op;
+    PyArrayObject *pa;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "O", &op) || !get2(op, NPY_FLOAT64, 3, &pa, "points"))
+        return NULL;
+    npy_intp n = PyArray_DIM(pa, 0);
+    PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){n}, NPY_UINT64);
+    if (!out)
+        return NULL;
+    Py_BEGIN_ALLOW_THREADS
+    morton21(PyArray_DATA(pa), n, PyArray_DATA(out));
+    Py_END_ALLOW_THREADS
+    return (PyObject *)out;
+}
+
+PyDoc_STRVAR(order_doc, "order(codes (n,) uint64) -> (n,) int64: np.argsort(codes, kind=\"stable\") (codes below 2^63).");
+
+static PyObject *order_py(PyObject *self, PyObject *args)
+{
+    PyObject *oc;
+    PyArrayObject *ca;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "O", &oc) || !get(oc, NPY_UINT64, -1, &ca, "codes"))
+        return NULL;
+    npy_intp n = PyArray_SIZE(ca);
+    const uint64_t *c = PyArray_DATA(ca);
+    for (npy_intp i = 0; i < n; i++)
+        if (c[i] >> 63) {
+            PyErr_SetString(PyExc_ValueError, "codes: not below 2^63");
+            return NULL;
+        }
+    PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){n}, NPY_INT64);
+    if (!out)
+        return NULL;
+    int ok;
+    Py_BEGIN_ALLOW_THREADS
+    ok = stable_order(c, n, 63, PyArray_DATA(out));
+    Py_END_ALLOW_THREADS
+    if (!ok) {
+        Py_DECREF(out);
+        return PyErr_NoMemory();
+    }
+    return (PyObject *)out;
+}
+
 static PyMethodDef methods[] = {
     {"winding", winding, METH_VARARGS, winding_doc},
+    {"morton", morton_py, METH_VARARGS, morton_doc},
+    {"order", order_py, METH_VARARGS, order_doc},
     {NULL, NULL, 0, NULL},
 };
 

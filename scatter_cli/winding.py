@@ -74,7 +74,7 @@ class WindingTree:
         tri, an = tri[keep], an[keep]
         centroid = (tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0
         codes = _morton(centroid)
-        order = np.argsort(codes, kind="stable")
+        order = _stable_order(codes)
         self.face, tri, an, centroid = self.face[order], tri[order], an[order], centroid[order]
         self.triangles = np.ascontiguousarray(tri.reshape(-1, 9))
         start, end, skip = _layout(codes[order], LEAF)
@@ -99,7 +99,7 @@ def winding_numbers(tree: WindingTree, points, *, accuracy: float = ACCURACY, or
     out = np.zeros(len(points))
     for at in range(0, len(points), CHUNK):
         # in Morton order: neighbouring points walk the same nodes (the sums do not change)
-        near = at + np.argsort(_morton(points[at:at + CHUNK]), kind="stable")
+        near = at + _stable_order(_morton(points[at:at + CHUNK]))
         part = points[near]
         if _kernel is not None:
             w = np.empty(len(part))
@@ -124,7 +124,9 @@ def _spread(x):
 
 def _morton(p):
     """(n,) uint64 Morton codes of ``p`` (n, 3) float64 on a 2^21 grid over the box of
-    its finite rows (the others: 0)."""
+    its finite rows (the others: 0). The kernel's ``morton`` computes the same codes."""
+    if _kernel is not None:
+        return _kernel.morton(np.ascontiguousarray(p, dtype=np.float64))
     finite = np.isfinite(p).all(axis=1)
     if not finite.any():
         return np.zeros(len(p), np.uint64)
@@ -133,6 +135,14 @@ def _morton(p):
         rel = (np.where(finite[:, None], p, lo) - lo) / (hi - lo)
     q = (np.nan_to_num(np.clip(rel, 0.0, 1.0), nan=0.0) * (2.0**21 - 1)).astype(np.uint64)
     return (_spread(q[:, 0]) << np.uint64(2)) | (_spread(q[:, 1]) << np.uint64(1)) | _spread(q[:, 2])
+
+
+def _stable_order(codes):
+    """(n,) int64: np.argsort(codes, kind="stable") of ``codes`` (n,) uint64 (Morton codes,
+    below 2^63), by the kernel's radix sort when built."""
+    if _kernel is not None:
+        return _kernel.order(codes)
+    return np.argsort(codes, kind="stable")
 
 
 def _top_bit(x):

@@ -403,3 +403,25 @@ def test_fuzz_kernel_against_numpy_and_brute_force(seed, faces, scale, degenerat
     # brute force at unit scale (scale is not a power of two: exact to 1e-15)
     assert np.all(np.abs(d / scale - brute_distance(tri / scale, points / scale)) <= 1e-9 * extent / scale)
     assert np.all(pair_distance(tri[face] / scale, q / scale) <= 1e-9 * extent / scale)
+
+
+@needs_kernel
+@settings(max_examples=60, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(0, 3000), scale=st.sampled_from([1e-100, 1.0, 1e100]),
+       flat=st.booleans(), tied=st.booleans())
+def test_kernel_visit_order_is_numpys(seed, n, scale, flat, tied):
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(n, 3)) * scale
+    if flat:
+        p[:, 1] = 0.5  # one axis without extent
+    if tied:
+        p = np.round(p / scale * 2) * scale / 2
+    got = KERNEL.visit(np.ascontiguousarray(p))
+    saved, distance._kernel = distance._kernel, None
+    try:
+        want = distance.visit_order(p)
+    finally:
+        distance._kernel = saved
+    assert got.tobytes() == want.tobytes()
+    with pytest.raises(ValueError):
+        KERNEL.visit(np.array([[0.0, np.nan, 0.0]]))
