@@ -246,20 +246,6 @@ static double closest_on(const double *t, int thin, const double *p, double *q)
     return isnan(dd) ? INFINITY : dd;
 }
 
-/* squared distance from p to the box of triangle t: no more than its distance */
-static inline double face_d2(const double *t, const double *p)
-{
-    double s = 0;
-    for (int k = 0; k < 3; k++) {
-        double lo = t[k] < t[3 + k] ? t[k] : t[3 + k], hi = t[k] < t[3 + k] ? t[3 + k] : t[k];
-        lo = t[6 + k] < lo ? t[6 + k] : lo, hi = t[6 + k] > hi ? t[6 + k] : hi;
-        double g = lo - p[k] > p[k] - hi ? lo - p[k] : p[k] - hi;
-        g = g > 0 ? g : 0.0;
-        s += g * g;
-    }
-    return s;
-}
-
 /* squared distance from p to box i (+inf for an empty box) */
 static inline double box_d2(const Tree *t, int64_t i, const double *p)
 {
@@ -290,9 +276,12 @@ static int64_t faces_tested, nodes_opened;
  * tree would be, and that holds only boxes farther than the best distance plus ``tol``.
  * Testing the boxes two levels down without the one between skips less, never more. */
 
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wpsabi" /* vectors pass only between inlined functions */
+#endif
 typedef double v4d __attribute__((vector_size(32)));
 /* the walk compiled twice, chosen at load: for AVX2 (the vectors in one register) and plain */
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__)
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__GLIBC__) /* (ifunc) */
 #define TARGETS __attribute__((target_clones("avx2", "default")))
 #else
 #define TARGETS

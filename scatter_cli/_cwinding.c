@@ -31,63 +31,6 @@ static const double PIO2 = 1.5707963267948966, PIO4 = 0.7853981633974483, PI = 3
 static const double MOREBITS = 6.123233995736765886130e-17, HALF_MOREBITS = 0.5 * 6.123233995736765886130e-17;
 static const double TAN3PIO8 = 2.41421356237309504880;
 
-/* winding.atan2 for one pair */
-static inline double atan2_(double y, double x)
-{
-    double ay = fabs(y), ax = fabs(x), t, arg, z, a;
-    t = ax == 0 ? INFINITY : ay / ax; /* (NaN stays NaN) */
-    int small = t <= 0.66, large = t > TAN3PIO8;
-    arg = small ? t : large ? 1.0 / t : (t - 1.0) / (t + 1.0);
-    z = arg * arg;
-    z = z * ((((-8.750608600031904122785e-01 * z + -1.615753718733365076637e+01) * z + -7.500855792314704667340e+01) * z +
-              -1.228866684490136173410e+02) * z + -6.485021904942025371773e+01) /
-        (((((z + 2.485846490142306297962e+01) * z + 1.650270098316988542046e+02) * z + 4.328810604912902668951e+02) * z +
-          4.853903996359136964868e+02) * z + 1.945506571482613964425e+02);
-    z = arg * z + arg;
-    a = small ? z : large ? PIO2 - z + MOREBITS : PIO4 + z + HALF_MOREBITS;
-    if (ay == 0)
-        a = 0.0;
-    if (x < 0)
-        a = PI - a;
-    return y < 0 ? -a : a;
-}
-
-/* winding._triangle_terms for one triangle t[9] and point q[3] */
-static inline double triangle_term(const double *t, const double *q)
-{
-    double ax = t[0] - q[0], ay = t[1] - q[1], az = t[2] - q[2];
-    double bx = t[3] - q[0], by = t[4] - q[1], bz = t[5] - q[2];
-    double cx = t[6] - q[0], cy = t[7] - q[1], cz = t[8] - q[2];
-    double la = sqrt(ax * ax + ay * ay + az * az);
-    double lb = sqrt(bx * bx + by * by + bz * bz);
-    double lc = sqrt(cx * cx + cy * cy + cz * cz);
-    double det = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx);
-    double ab = ax * bx + ay * by + az * bz;
-    double bc = bx * cx + by * cy + bz * cz;
-    double ca = cx * ax + cy * ay + cz * az;
-    double den = la * lb * lc + ab * lc + bc * la + ca * lb;
-    return atan2_(det, den) * INV2PI;
-}
-
-/* winding._far_terms for one node f and offset r (centre - point), d2 = |r|^2 */
-static inline double far_term(const double *f, double rx, double ry, double rz, double d2, int order)
-{
-    double id2 = 1.0 / d2;
-    double id3 = id2 / sqrt(d2);
-    double w = (f[4] * rx + f[5] * ry + f[6] * rz) * id3;
-    if (order >= 1) {
-        double quad = (f[8] * rx + f[11] * ry + f[12] * rz) * rx + (f[9] * ry + f[13] * rz) * ry + f[10] * rz * rz;
-        w = w + (f[7] - 3.0 * quad * id2) * id3;
-    }
-    if (order >= 2) {
-        double lin = f[14] * rx + f[15] * ry + f[16] * rz;
-        double cub = (f[17] * rx + f[20] * ry + f[21] * rz) * (rx * rx) + (f[18] * ry + f[22] * rx + f[23] * rz) * (ry * ry) +
-                     (f[19] * rz + f[24] * rx + f[25] * ry) * (rz * rz) + f[26] * rx * ry * rz;
-        w = w + (7.5 * cub * id2 - 1.5 * lin) * id2 * id3;
-    }
-    return w * INV4PI;
-}
-
 /* what the walk reads at every node, in one cache line: the centre, the squared
  * distance beyond which the node is far ((accuracy * radius)^2, as the NumPy path
  * computes it), and the links */
@@ -114,10 +57,13 @@ typedef struct {
  * (the other lanes compute but keep their sum). Every lane does the scalar code's
  * float64 operations in its order, so the sums are the same bytes. */
 
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wpsabi" /* vectors pass only between inlined functions */
+#endif
 typedef double v4d __attribute__((vector_size(32)));
 typedef int64_t v4l __attribute__((vector_size(32)));
 
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__)
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__GLIBC__) /* (ifunc) */
 #define TARGETS __attribute__((target_clones("avx2", "default")))
 #else
 #define TARGETS
@@ -136,7 +82,7 @@ INLINE v4d sqrt4(v4d x)
 
 INLINE v4d abs4(v4d x) { return (v4d)((v4l)x & (v4l){INT64_MAX, INT64_MAX, INT64_MAX, INT64_MAX}); }
 
-/* atan2_ lane by lane */
+/* winding.atan2, lane by lane */
 INLINE v4d atan2_4(v4d y, v4d x)
 {
     v4d ay = abs4(y), ax = abs4(x), t, arg, z, a;
@@ -155,7 +101,7 @@ INLINE v4d atan2_4(v4d y, v4d x)
     return pick(y < 0, -a, a);
 }
 
-/* triangle_term lane by lane */
+/* winding._triangle_terms, lane by lane */
 INLINE v4d triangle_term4(const double *t, v4d qx, v4d qy, v4d qz)
 {
     v4d ax = t[0] - qx, ay = t[1] - qy, az = t[2] - qz;
@@ -172,7 +118,7 @@ INLINE v4d triangle_term4(const double *t, v4d qx, v4d qy, v4d qz)
     return atan2_4(det, den) * INV2PI;
 }
 
-/* far_term lane by lane */
+/* winding._far_terms, lane by lane */
 INLINE v4d far_term4(const double *f, v4d rx, v4d ry, v4d rz, v4d d2, int order)
 {
     v4d id2 = 1.0 / d2;
@@ -191,7 +137,7 @@ INLINE v4d far_term4(const double *f, v4d rx, v4d ry, v4d rz, v4d d2, int order)
     return w * INV4PI;
 }
 
-/* winding_at for the points q[0..3] (m of them real, the rest copies of q[0]) into out */
+/* the winding numbers at the points q[0..3] (m of them real, the rest copies of q[0]) into out */
 TARGETS static void winding_4(const Work *w, const double *q, int64_t m, double *out)
 {
     v4d qx, qy, qz, acc = {0, 0, 0, 0};
