@@ -12,7 +12,8 @@
  * rays have an odd count. Boxes are grown by ``tol`` for the rays.
  *
  * Every float64 operation is the NumPy code's, in its order (built with -ffp-contract=off).
- * The points are split between threads in fixed ranges; the GIL is released meanwhile.
+ * closest() hands blocks of points to the threads as they finish the last; crossings()
+ * splits the points between them in fixed ranges. The GIL is released meanwhile.
  * Arrays are checked: a wrong shape, a non-finite value or an index out of range raises.
  */
 #define PY_SSIZE_T_CLEAN
@@ -20,6 +21,7 @@
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
 #include <numpy/arrayobject.h>
 #include "_ckernel.h"
+#include "_cmorton.h"
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -244,20 +246,6 @@ static double closest_on(const double *t, int thin, const double *p, double *q)
     return isnan(dd) ? INFINITY : dd;
 }
 
-/* squared distance from p to the box of triangle t: no more than its distance */
-static inline double face_d2(const double *t, const double *p)
-{
-    double s = 0;
-    for (int k = 0; k < 3; k++) {
-        double lo = t[k] < t[3 + k] ? t[k] : t[3 + k], hi = t[k] < t[3 + k] ? t[3 + k] : t[k];
-        lo = t[6 + k] < lo ? t[6 + k] : lo, hi = t[6 + k] > hi ? t[6 + k] : hi;
-        double g = lo - p[k] > p[k] - hi ? lo - p[k] : p[k] - hi;
-        g = g > 0 ? g : 0.0;
-        s += g * g;
-    }
-    return s;
-}
-
 /* squared distance from p to box i (+inf for an empty box) */
 static inline double box_d2(const Tree *t, int64_t i, const double *p)
 {
@@ -275,85 +263,385 @@ static inline double box_d2(const Tree *t, int64_t i, const double *p)
 static int64_t faces_tested, nodes_opened;
 #endif
 
+
+/* ---- the wide tree that closest() walks ----
+ *
+ * Built at each call from the heap tree: a node holds the boxes of four descendants two
+ * levels down (one level for the root when the depth is odd), in float rounded outward,
+ * side by side so that one vector operation tests all four; the leaves (of the heap tree)
+ * hold the boxes of their faces the same way, four at a time. Rounding a box outward only
+ * grows it, and every rounded operation of the box distance (a difference, the larger of
+ * two, a square, a sum) is monotone, so the computed distance to a grown box is never more
+ * than the one to the box itself: a box is skipped only when the double box of the heap
+ * tree would be, and that holds only boxes farther than the best distance plus ``tol``.
+ * Testing the boxes two levels down without the one between skips less, never more. */
+
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wpsabi" /* vectors pass only between inlined functions */
+#endif
+typedef double v4d __attribute__((vector_size(32)));
+/* the walk compiled twice, chosen at load: for AVX2 (the vectors in one register) and plain */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__GLIBC__) /* (ifunc) */
+#define TARGETS __attribute__((target_clones("avx2", "default")))
+#else
+#define TARGETS
+#endif
+typedef float v4f __attribute__((vector_size(16)));
+typedef int64_t v4l __attribute__((vector_size(32)));
+
+typedef struct {
+    v4f lo[3], hi[3]; /* four boxes, by axis; an empty one: lo +inf, hi -inf */
+} Box4;
+
+typedef struct {
+    Box4 box;
+    int64_t child[4]; /* >= 0: a wide node; < 0: ~j, leaf j of the heap tree */
+} Wide;
+
+/* Four faces: their boxes, and the disks holding them (centre, unit normal, radius; a
+ * radius of +inf and a zero normal for a thin or tiny face, whose normal rounding may
+ * tilt, or a slot without a face). A face lies in its disk, so its distance is at least
+ * the disk's: sqrt(h^2 + max(0, l - r)^2), h the height over the disk's plane, l the
+ * distance from the centre along the plane. The rounding of that (the normal of a face
+ * that is not thin is within some 20 ulp of exact, each other step a few ulp of the
+ * point's distance from the centre) is under 1e-14 times the largest coordinate of the
+ * points and the surface, a hundredth of ``tol``: the disk is tested against the best
+ * distance plus twice ``tol``, and so skips only faces farther than the best plus tol. */
+typedef struct {
+    Box4 box;
+    v4d c[3], n[3], r;
+} Faces4;
+
+/* The cylinders holding a wide node's four children (for children of at most CYLINDER
+ * faces; the others and empty ones: radius and half height +inf): an axis (c, n, unit n)
+ * and, over the children's corners, the greatest distance from the axis (r) and from the
+ * plane through c across it (t). A face lies in the cylinder of its node, so its
+ * distance is at least the cylinder's, sqrt(max(0, |h| - t)^2 + max(0, l - r)^2) for a
+ * point at height h over that plane and distance l from the axis; rounding moves that by
+ * less than 1e-14 times the largest coordinate, and it is tested as the disks are
+ * (against the best distance plus twice ``tol``). */
+typedef struct {
+    v4d c[3], n[3], r, t;
+} Cyl4;
+
+#define CYLINDER 64
+
+typedef struct {
+    Wide *nodes;      /* nodes[0] is the root's */
+    Cyl4 *cyl;        /* per node */
+    Faces4 *faces;    /* per leaf j (and an empty leaf ``leaves``): quads faces j * quads ... */
+    int64_t quads;    /* quads of faces in a leaf: ceil(leaf / 4) */
+    int64_t count, root; /* nodes made; the root's reference (a node, or ~0 for a single leaf) */
+    int depth;        /* of the heap tree: leaves = 2^depth */
+    int64_t nf, leaves, leaf; /* of the heap tree it was made from */
+} WideTree;
+
+/* x rounded to float, down (up > 0: up) when it is not exact */
+static inline float outward(double x, int up)
+{
+    float f = (float)x;
+    if (up ? (double)f < x : (double)f > x)
+        f = nextafterf(f, up ? INFINITY : -INFINITY);
+    return f;
+}
+
+static void box_lane(Box4 *b, int lane, const double *lo, const double *hi)
+{
+    int empty = !(lo[0] <= hi[0] && lo[1] <= hi[1] && lo[2] <= hi[2]);
+    for (int k = 0; k < 3; k++) {
+        b->lo[k][lane] = empty ? INFINITY : outward(lo[k], 0);
+        b->hi[k][lane] = empty ? -INFINITY : outward(hi[k], 1);
+    }
+}
+
+static void box_empty(Box4 *b)
+{
+    for (int k = 0; k < 3; k++)
+        for (int lane = 0; lane < 4; lane++)
+            b->lo[k][lane] = INFINITY, b->hi[k][lane] = -INFINITY;
+}
+
+/* the wide node of heap node i at depth d; its index */
+/* lane of y: the cylinder of slots s0 .. s1 - 1 of t about the centre of box lo, hi, none
+ * when there are more than CYLINDER of them */
+static void cylinder_lane(const Tree *t, Cyl4 *y, int lane, int64_t s0, int64_t s1, const double *lo, const double *hi)
+{
+    for (int k = 0; k < 3; k++)
+        y->c[k][lane] = 0.0, y->n[k][lane] = 0.0;
+    y->r[lane] = y->t[lane] = INFINITY;
+    s1 = s1 < t->nf ? s1 : t->nf;
+    if (s1 - s0 > CYLINDER || s1 <= s0)
+        return;
+    double n[3] = {0, 0, 0}, c[3], r2 = 0, h = 0;
+    for (int64_t s = s0; s < s1; s++) {
+        const double *f = t->tri + 9 * s;
+        double ab[3], ac[3];
+        for (int k = 0; k < 3; k++)
+            ab[k] = f[3 + k] - f[k], ac[k] = f[6 + k] - f[k];
+        n[0] += ab[1] * ac[2] - ab[2] * ac[1], n[1] += ab[2] * ac[0] - ab[0] * ac[2], n[2] += ab[0] * ac[1] - ab[1] * ac[0];
+    }
+    double nn = dot(n, n);
+    if (!(nn > 1e-250 && nn < 1e250))
+        return;
+    double len = sqrt(nn);
+    for (int k = 0; k < 3; k++)
+        n[k] /= len, c[k] = lo[k] * 0.5 + hi[k] * 0.5;
+    for (int64_t s = s0; s < s1; s++)
+        for (int v = 0; v < 3; v++) {
+            const double *x = t->tri + 9 * s + 3 * v;
+            double u[3] = {x[0] - c[0], x[1] - c[1], x[2] - c[2]}, e = dot(n, u);
+            double l[3] = {u[0] - e * n[0], u[1] - e * n[1], u[2] - e * n[2]};
+            h = fabs(e) > h ? fabs(e) : h, r2 = dot(l, l) > r2 ? dot(l, l) : r2;
+        }
+    for (int k = 0; k < 3; k++)
+        y->c[k][lane] = c[k], y->n[k][lane] = n[k];
+    y->r[lane] = sqrt(r2), y->t[lane] = h;
+}
+
+static int64_t wide_node(const Tree *t, WideTree *w, int64_t i, int d)
+{
+    int64_t at = w->count++;
+    Cyl4 *y = w->cyl + at;
+    for (int lane = 0; lane < 4; lane++)
+        cylinder_lane(t, y, lane, 0, 0, NULL, NULL);
+    int step = (w->depth - d) % 2 ? 1 : 2;
+    int64_t first = step == 1 ? 2 * i + 1 : 4 * i + 3;
+    Wide node;
+    box_empty(&node.box);
+    for (int lane = 0; lane < 4; lane++)
+        node.child[lane] = ~t->leaves; /* the empty leaf */
+    for (int lane = 0; lane < 2 * step; lane++) {
+        int64_t c = first + lane;
+        box_lane(&node.box, lane, t->lo + 3 * c, t->hi + 3 * c);
+        if (node.box.lo[0][lane] > node.box.hi[0][lane])
+            continue; /* empty */
+        node.child[lane] = d + step == w->depth ? ~(c - (t->leaves - 1)) : wide_node(t, w, c, d + step);
+        int64_t span = (int64_t)1 << (w->depth - d - step), first_leaf = (c + 1) * span - t->leaves;
+        cylinder_lane(t, y, lane, first_leaf * t->leaf, (first_leaf + span) * t->leaf, t->lo + 3 * c, t->hi + 3 * c);
+    }
+    w->nodes[at] = node;
+    return at;
+}
+
+/* lane of q: the disk of face f (9 doubles), none when f is NULL */
+static void disk_lane(Faces4 *q, int lane, const double *f)
+{
+    for (int k = 0; k < 3; k++)
+        q->c[k][lane] = 0.0, q->n[k][lane] = 0.0;
+    q->r[lane] = INFINITY;
+    if (!f)
+        return;
+    const double *a = f, *b = f + 3, *c = f + 6;
+    double ab[3], ac[3], bc[3], n[3], g[3], r2 = 0;
+    for (int k = 0; k < 3; k++)
+        ab[k] = b[k] - a[k], ac[k] = c[k] - a[k], bc[k] = c[k] - b[k], g[k] = (a[k] + b[k] + c[k]) / 3.0;
+    n[0] = ab[1] * ac[2] - ab[2] * ac[1], n[1] = ab[2] * ac[0] - ab[0] * ac[2], n[2] = ab[0] * ac[1] - ab[1] * ac[0];
+    double nn = dot(n, n), longest = dot(ab, ab);
+    longest = dot(ac, ac) > longest ? dot(ac, ac) : longest;
+    longest = dot(bc, bc) > longest ? dot(bc, bc) : longest;
+    /* not thin (distance.THIN), nor so small that the products lose bits, nor overflowing */
+    if (!(nn > 1e-250 && nn < 1e250 && nn >= 0.01 * longest * longest))
+        return;
+    for (int v = 0; v < 3; v++) {
+        double d[3] = {f[3 * v] - g[0], f[3 * v + 1] - g[1], f[3 * v + 2] - g[2]};
+        r2 = dot(d, d) > r2 ? dot(d, d) : r2;
+    }
+    double len = sqrt(nn);
+    for (int k = 0; k < 3; k++)
+        q->c[k][lane] = g[k], q->n[k][lane] = n[k] / len;
+    q->r[lane] = sqrt(r2);
+}
+
+static void wide_free(WideTree *w)
+{
+    free(w->nodes), free(w->faces), free(w->cyl);
+}
+
+/* the wide tree of t; 0 when out of memory */
+static int wide_tree(const Tree *t, WideTree *w)
+{
+    int depth = 0;
+    while (((int64_t)1 << depth) < t->leaves)
+        depth++;
+    w->depth = depth, w->quads = (t->leaf + 3) / 4, w->count = 0;
+    w->nf = t->nf, w->leaves = t->leaves, w->leaf = t->leaf;
+    int64_t count = 1; /* wide nodes: the root, then at depths d0, d0 + 2, ... under the leaves' */
+    for (int d = depth % 2 ? 1 : 2; d < depth; d += 2)
+        count += (int64_t)1 << d;
+    w->nodes = aligned_alloc(64, sizeof(Wide) * (size_t)count);
+    w->cyl = aligned_alloc(64, sizeof(Cyl4) * (size_t)count);
+    w->faces = aligned_alloc(64, sizeof(Faces4) * (size_t)((t->leaves + 1) * w->quads));
+    if (!w->nodes || !w->faces || !w->cyl) {
+        wide_free(w);
+        return 0;
+    }
+    for (int64_t j = 0; j <= t->leaves; j++)
+        for (int64_t q = 0; q < w->quads; q++) {
+            Faces4 *fq = w->faces + j * w->quads + q;
+            Box4 *b = &fq->box;
+            box_empty(b);
+            for (int lane = 0; lane < 4; lane++)
+                disk_lane(fq, lane, NULL);
+            for (int lane = 0; lane < 4; lane++) {
+                int64_t s = j * t->leaf + 4 * q + lane;
+                if (4 * q + lane >= t->leaf || s >= t->nf)
+                    break;
+                const double *f = t->tri + 9 * s;
+                double lo[3], hi[3];
+                for (int k = 0; k < 3; k++) {
+                    lo[k] = f[k] < f[3 + k] ? f[k] : f[3 + k], hi[k] = f[k] < f[3 + k] ? f[3 + k] : f[k];
+                    lo[k] = f[6 + k] < lo[k] ? f[6 + k] : lo[k], hi[k] = f[6 + k] > hi[k] ? f[6 + k] : hi[k];
+                }
+                box_lane(b, lane, lo, hi);
+                disk_lane(fq, lane, f);
+            }
+        }
+    w->root = depth == 0 ? ~(int64_t)0 : wide_node(t, w, 0, 0);
+    return 1;
+}
+
+/* squared distances from p to the four boxes of b, each computed as box_d2 does (an empty
+ * box: +inf) */
+__attribute__((always_inline)) static inline v4d box4_d2(const Box4 *b, const double *p)
+{
+    v4d s = {0, 0, 0, 0};
+    for (int k = 0; k < 3; k++) {
+        v4d lo = __builtin_convertvector(b->lo[k], v4d) - p[k], hi = p[k] - __builtin_convertvector(b->hi[k], v4d);
+        v4l m = lo > hi;
+        v4d g = (v4d)(((v4l)lo & m) | ((v4l)hi & ~m));
+        g = (v4d)((v4l)g & (g > 0));
+        s += g * g;
+    }
+    return s;
+}
+
+/* squared distances from p to the disks of the four faces of q (0 where there is none) */
+__attribute__((always_inline)) static inline v4d disk4_d2(const Faces4 *q, const double *p)
+{
+    v4d v0 = p[0] - q->c[0], v1 = p[1] - q->c[1], v2 = p[2] - q->c[2];
+    v4d h = q->n[0] * v0 + q->n[1] * v1 + q->n[2] * v2;
+    v4d l0 = v0 - h * q->n[0], l1 = v1 - h * q->n[1], l2 = v2 - h * q->n[2];
+    v4d l = l0 * l0 + l1 * l1 + l2 * l2;
+    for (int lane = 0; lane < 4; lane++)
+        l[lane] = sqrt(l[lane]);
+    v4d g = l - q->r;
+    g = (v4d)((v4l)g & (g > 0));
+    return h * h + g * g;
+}
+
+/* squared distances from p to the four cylinders of y */
+__attribute__((always_inline)) static inline v4d cyl4_d2(const Cyl4 *y, const double *p)
+{
+    v4d v0 = p[0] - y->c[0], v1 = p[1] - y->c[1], v2 = p[2] - y->c[2];
+    v4d h = y->n[0] * v0 + y->n[1] * v1 + y->n[2] * v2;
+    v4d l0 = v0 - h * y->n[0], l1 = v1 - h * y->n[1], l2 = v2 - h * y->n[2];
+    v4d l = l0 * l0 + l1 * l1 + l2 * l2;
+    for (int lane = 0; lane < 4; lane++)
+        l[lane] = sqrt(l[lane]);
+    v4d a = (v4d)((v4l)h & ~(v4l){INT64_MIN, INT64_MIN, INT64_MIN, INT64_MIN}) - y->t, g = l - y->r;
+    a = (v4d)((v4l)a & (a > 0)), g = (v4d)((v4l)g & (g > 0));
+    return a * a + g * g;
+}
+
+/* the closest face of p; *slot: on entry a slot whose face starts the search (or -1),
+ * on return the slot of the answer */
+TARGETS static void closest_one(const Tree *t, const WideTree *w, const double *p, double tol, double *dist, double *cq,
+                        int64_t *face, int64_t *slot)
+{
+    double best = INFINITY, bound = INFINITY, disk = INFINITY, q[3], bq[3] = {NAN, NAN, NAN};
+    int64_t bestf = INT64_MAX, bests = -1, stack[4 * MAX_DEPTH + 8];
+    double sd[4 * MAX_DEPTH + 8];
+    if (*slot >= 0) {
+        best = closest_on(t->tri + 9 * *slot, t->thin[*slot], p, bq), bestf = t->order[*slot], bests = *slot;
+        double r = sqrt(best) + tol, rd = r + tol;
+        bound = r * r, disk = rd * rd;
+    }
+    int top = 0;
+    stack[0] = w->root, sd[0] = box_d2(t, 0, p), top = 1;
+    while (top) {
+        top--;
+        int64_t ref = stack[top];
+        if (sd[top] > bound)
+            continue;
+        if (ref < 0) {
+            int64_t j = ~ref, s0 = j * t->leaf, s1 = s0 + t->leaf;
+            s1 = s1 < t->nf ? s1 : t->nf;
+            for (int64_t qd = 0; qd < w->quads && s0 + 4 * qd < s1; qd++) {
+                const Faces4 *fq = w->faces + j * w->quads + qd;
+                v4d fd = box4_d2(&fq->box, p), dd = disk4_d2(fq, p);
+                for (int lane = 0; lane < 4; lane++) {
+                    int64_t s = s0 + 4 * qd + lane;
+                    if (s >= s1)
+                        break;
+                    if (fd[lane] > bound || dd[lane] > disk)
+                        continue;
+#ifdef COUNT
+                    __atomic_fetch_add(&faces_tested, 1, __ATOMIC_RELAXED);
+#endif
+                    double d2 = closest_on(t->tri + 9 * s, t->thin[s], p, q);
+                    int64_t f = t->order[s];
+                    if (d2 < best || (d2 == best && f < bestf)) {
+                        best = d2, bestf = f, bests = s, bq[0] = q[0], bq[1] = q[1], bq[2] = q[2];
+                        double r = sqrt(best) + tol, rd = r + tol;
+                        bound = r * r, disk = rd * rd;
+                    }
+                }
+            }
+            continue;
+        }
+#ifdef COUNT
+        __atomic_fetch_add(&nodes_opened, 1, __ATOMIC_RELAXED);
+#endif
+        const Wide *n = w->nodes + ref;
+        v4d d = box4_d2(&n->box, p), dy = cyl4_d2(w->cyl + ref, p);
+        /* the children within the bound, the nearest on top */
+        int64_t cr[4];
+        double cd[4];
+        int m = 0;
+        for (int lane = 0; lane < 4; lane++) {
+            if (d[lane] > bound || dy[lane] > disk)
+                continue;
+            int at = m++;
+            while (at > 0 && cd[at - 1] < d[lane])
+                cd[at] = cd[at - 1], cr[at] = cr[at - 1], at--;
+            cd[at] = d[lane], cr[at] = n->child[lane];
+        }
+        for (int k = 0; k < m; k++)
+            stack[top] = cr[k], sd[top++] = cd[k];
+    }
+    *dist = sqrt(best), *face = bestf, *slot = bests;
+    cq[0] = bq[0], cq[1] = bq[1], cq[2] = bq[2];
+}
+
 typedef struct {
     Tree t;
+    const WideTree *w;
     const double *points;
     const int64_t *visit; /* the points in this order (near ones in turn) */
     double tol;
     double *dist, *closest;
     int64_t *face;
     int64_t n;
+    int64_t next; /* the next block of the visit to take (atomic) */
 } Closest;
 
-/* the closest face of p; *slot: on entry a slot whose face starts the search (or -1),
- * on return the slot of the answer */
-static void closest_one(const Tree *t, const double *p, double tol, double *dist, double *cq, int64_t *face,
-                        int64_t *slot)
-{
-    double best = INFINITY, bound = INFINITY, q[3], bq[3] = {NAN, NAN, NAN};
-    int64_t bestf = INT64_MAX, bests = -1, stack[2 * MAX_DEPTH + 4];
-    double sd[2 * MAX_DEPTH + 4];
-    if (*slot >= 0) {
-        best = closest_on(t->tri + 9 * *slot, t->thin[*slot], p, bq), bestf = t->order[*slot], bests = *slot;
-        double r = sqrt(best) + tol;
-        bound = r * r;
-    }
-    int top = 0;
-    stack[0] = 0, sd[0] = box_d2(t, 0, p), top = 1;
-    while (top) {
-        top--;
-        int64_t node = stack[top];
-        if (sd[top] > bound)
-            continue;
-        if (node >= t->leaves - 1) {
-            int64_t s0 = (node - (t->leaves - 1)) * t->leaf, s1 = s0 + t->leaf;
-            s1 = s1 < t->nf ? s1 : t->nf;
-            for (int64_t s = s0; s < s1; s++) {
-                if (face_d2(t->tri + 9 * s, p) > bound)
-                    continue;
-#ifdef COUNT
-                __atomic_fetch_add(&faces_tested, 1, __ATOMIC_RELAXED);
-#endif
-                double d2 = closest_on(t->tri + 9 * s, t->thin[s], p, q);
-                int64_t f = t->order[s];
-                if (d2 < best || (d2 == best && f < bestf)) {
-                    best = d2, bestf = f, bests = s, bq[0] = q[0], bq[1] = q[1], bq[2] = q[2];
-                    double r = sqrt(best) + tol;
-                    bound = r * r;
-                }
-            }
-            continue;
-        }
-        int64_t l = 2 * node + 1, r = l + 1;
-#ifdef COUNT
-        __atomic_fetch_add(&nodes_opened, 1, __ATOMIC_RELAXED);
-#endif
-        double dl = box_d2(t, l, p), dr = box_d2(t, r, p);
-        /* the nearer child on top */
-        if (dl <= dr) {
-            if (dr <= bound)
-                stack[top] = r, sd[top++] = dr;
-            if (dl <= bound)
-                stack[top] = l, sd[top++] = dl;
-        } else {
-            if (dl <= bound)
-                stack[top] = l, sd[top++] = dl;
-            if (dr <= bound)
-                stack[top] = r, sd[top++] = dr;
-        }
-    }
-    *dist = sqrt(best), *face = bestf, *slot = bests;
-    cq[0] = bq[0], cq[1] = bq[1], cq[2] = bq[2];
-}
+/* points a thread takes at a time (in visit order): threads that finish early take more */
+#define CLOSEST_BLOCK 1024
 
 static void closest_job(void *ctx, int k, int count)
 {
     Closest *c = ctx;
-    int64_t i0, i1, slot = -1;
-    share(c->n, k, count, &i0, &i1);
-    for (int64_t j = i0; j < i1; j++) {
-        int64_t i = c->visit[j];
-        closest_one(&c->t, c->points + 3 * i, c->tol, c->dist + i, c->closest + 3 * i, c->face + i, &slot);
+    int64_t slot = -1; /* where the walk starts: any slot gives the same answer */
+    (void)k, (void)count;
+    for (;;) {
+        int64_t i0 = __atomic_fetch_add(&c->next, 1, __ATOMIC_RELAXED) * CLOSEST_BLOCK;
+        if (i0 >= c->n)
+            return;
+        int64_t i1 = i0 + CLOSEST_BLOCK < c->n ? i0 + CLOSEST_BLOCK : c->n;
+        for (int64_t j = i0; j < i1; j++) {
+            int64_t i = c->visit[j];
+            closest_one(&c->t, c->w, c->points + 3 * i, c->tol, c->dist + i, c->closest + 3 * i, c->face + i, &slot);
+        }
     }
 }
 
@@ -389,21 +677,64 @@ static int get_out(PyObject *obj, int type, npy_intp size, PyArrayObject **out, 
     return 1;
 }
 
+#define WIDE "scatter_cli._cvolume.wide"
+
+static void wide_release(PyObject *capsule)
+{
+    WideTree *w = PyCapsule_GetPointer(capsule, WIDE);
+    if (w) {
+        wide_free(w);
+        free(w);
+    }
+}
+
+PyDoc_STRVAR(wide_doc, "wide(triangles (F,9) f8, order (F,) i8, thin (F,) u1, lo (N,3) f8, hi (N,3) f8, leaf) -> the wide "
+                       "tree that closest() walks, made once for a tree (an opaque object).");
+
+static PyObject *wide_py(PyObject *self, PyObject *args)
+{
+    PyObject *otri, *oorder, *othin, *olo, *ohi;
+    long long leaf;
+    Tree t;
+    if (!PyArg_ParseTuple(args, "OOOOOL", &otri, &oorder, &othin, &olo, &ohi, &leaf) ||
+        !get_tree(otri, oorder, othin, olo, ohi, leaf, &t))
+        return NULL;
+    WideTree *w = malloc(sizeof(WideTree));
+    int ok = 0;
+    if (w) {
+        Py_BEGIN_ALLOW_THREADS
+        ok = wide_tree(&t, w);
+        Py_END_ALLOW_THREADS
+    }
+    if (!ok) {
+        free(w);
+        return PyErr_NoMemory();
+    }
+    PyObject *capsule = PyCapsule_New(w, WIDE, wide_release);
+    if (!capsule) {
+        wide_free(w);
+        free(w);
+    }
+    return capsule;
+}
+
 PyDoc_STRVAR(closest_doc, "closest(triangles (F,9) f8, order (F,) i8, thin (F,) u1, lo (N,3) f8, hi (N,3) f8, leaf, points (n,3) f8, "
-                          "visit (n,) i8, tol, distance (n,) f8, closest (n,3) f8, face (n,) i8, threads): distance._closest_numpy "
-                          "into the three output arrays.");
+                          "visit (n,) i8, tol, distance (n,) f8, closest (n,3) f8, face (n,) i8, threads[, wide]): "
+                          "distance._closest_numpy into the three output arrays. ``wide``: wide() of the same arrays (made "
+                          "at the call when absent or None; one of another tree of the same sizes gives wrong answers, "
+                          "never a read out of bounds).");
 
 static PyObject *closest(PyObject *self, PyObject *args)
 {
-    PyObject *otri, *oorder, *othin, *olo, *ohi, *opts, *ovisit, *odist, *oclosest, *oface;
+    PyObject *otri, *oorder, *othin, *olo, *ohi, *opts, *ovisit, *odist, *oclosest, *oface, *owide = Py_None;
     long long leaf;
     double tol;
     int threads;
     Tree t;
     PyArrayObject *pts, *visit, *dist, *cl, *face;
     npy_intp n;
-    if (!PyArg_ParseTuple(args, "OOOOOLOOdOOOi", &otri, &oorder, &othin, &olo, &ohi, &leaf, &opts, &ovisit, &tol,
-                          &odist, &oclosest, &oface, &threads) ||
+    if (!PyArg_ParseTuple(args, "OOOOOLOOdOOOi|O", &otri, &oorder, &othin, &olo, &ohi, &leaf, &opts, &ovisit, &tol,
+                          &odist, &oclosest, &oface, &threads, &owide) ||
         !get_tree(otri, oorder, othin, olo, ohi, leaf, &t) || !get_points(opts, &pts, &n) || !get_visit(ovisit, n, &visit) ||
         !get_out(odist, NPY_FLOAT64, n, &dist, "distance") || !get_out(oclosest, NPY_FLOAT64, 3 * n, &cl, "closest") ||
         !get_out(oface, NPY_INT64, n, &face, "face"))
@@ -412,11 +743,29 @@ static PyObject *closest(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "closest: tol must be finite and >= 0");
         return NULL;
     }
-    Closest c = {t, PyArray_DATA(pts), PyArray_DATA(visit), tol, PyArray_DATA(dist), PyArray_DATA(cl), PyArray_DATA(face), n};
-    int count = n < THREAD_POINTS ? 1 : threads;
+    WideTree own, *w = &own;
+    if (owide != Py_None) {
+        w = PyCapsule_GetPointer(owide, WIDE);
+        if (!w)
+            return NULL;
+        if (w->nf != t.nf || w->leaves != t.leaves || w->leaf != t.leaf) {
+            PyErr_SetString(PyExc_ValueError, "closest: the wide tree is another tree's");
+            return NULL;
+        }
+    }
+    Closest c = {t, w, PyArray_DATA(pts), PyArray_DATA(visit), tol, PyArray_DATA(dist), PyArray_DATA(cl), PyArray_DATA(face), n, 0};
+    int count = n < THREAD_POINTS ? 1 : threads, ok = 1;
     Py_BEGIN_ALLOW_THREADS
-    in_parallel(count, closest_job, &c);
+    if (w == &own)
+        ok = wide_tree(&t, &own);
+    if (ok) {
+        in_parallel(count, closest_job, &c);
+        if (w == &own)
+            wide_free(&own);
+    }
     Py_END_ALLOW_THREADS
+    if (!ok)
+        return PyErr_NoMemory();
 #ifdef COUNT
     fprintf(stderr, "faces tested %g nodes opened %g per point\n", (double)faces_tested / n, (double)nodes_opened / n);
     faces_tested = nodes_opened = 0;
@@ -704,8 +1053,36 @@ static PyObject *order_py(PyObject *self, PyObject *args)
     return (PyObject *)out;
 }
 
+PyDoc_STRVAR(visit_doc, "visit(points (n,3) f8) -> (n,) i8: distance.visit_order (the points along a Morton curve).");
+
+static PyObject *visit_py(PyObject *self, PyObject *args)
+{
+    PyObject *opts;
+    PyArrayObject *pts;
+    npy_intp n;
+    if (!PyArg_ParseTuple(args, "O", &opts) || !get_points(opts, &pts, &n))
+        return NULL;
+    PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){n}, NPY_INT64);
+    uint64_t *code = malloc(sizeof(uint64_t) * (size_t)(n > 0 ? n : 1));
+    int ok = out && code;
+    if (ok) {
+        Py_BEGIN_ALLOW_THREADS
+        morton10(PyArray_DATA(pts), n, code);
+        ok = stable_order(code, n, 30, PyArray_DATA(out));
+        Py_END_ALLOW_THREADS
+    }
+    free(code);
+    if (!ok) {
+        Py_XDECREF(out);
+        return PyErr_NoMemory();
+    }
+    return (PyObject *)out;
+}
+
 static PyMethodDef methods[] = {
     {"order", order_py, METH_VARARGS, order_doc},
+    {"visit", visit_py, METH_VARARGS, visit_doc},
+    {"wide", wide_py, METH_VARARGS, wide_doc},
     {"closest", closest, METH_VARARGS, closest_doc},
     {"crossings", crossings_py, METH_VARARGS, crossings_doc},
     {NULL, NULL, 0, NULL},

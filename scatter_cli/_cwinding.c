@@ -5,7 +5,8 @@
  * subtree is skipped, a near leaf adds its triangles' solid angles one by one, a near
  * inner node opens), every term added to a sum started at 0. Every float64 operation
  * is the NumPy code's, in its order (built with -ffp-contract=off), the arctangent
- * included (Cephes' atan, + - * / only), so the two paths give the same bytes. The
+ * included (Cephes' atan, + - * / only), so the two paths give the same bytes. Four
+ * neighbouring points walk together, one in each lane of a vector (see winding_4). The
  * points are shared among the threads in blocks; each point's sum is its own, so the
  * result does not depend on the threads. The GIL is released while they run. The links
  * are checked first: a subtree or a leaf's triangles out of range raise ValueError.
@@ -15,6 +16,7 @@
 #define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
 #include <numpy/arrayobject.h>
 #include "_ckernel.h"
+#include "_cmorton.h"
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -28,63 +30,6 @@ static const double INV2PI = 0.15915494309189535, INV4PI = 0.07957747154594767;
 static const double PIO2 = 1.5707963267948966, PIO4 = 0.7853981633974483, PI = 3.141592653589793;
 static const double MOREBITS = 6.123233995736765886130e-17, HALF_MOREBITS = 0.5 * 6.123233995736765886130e-17;
 static const double TAN3PIO8 = 2.41421356237309504880;
-
-/* winding.atan2 for one pair */
-static inline double atan2_(double y, double x)
-{
-    double ay = fabs(y), ax = fabs(x), t, arg, z, a;
-    t = ax == 0 ? INFINITY : ay / ax; /* (NaN stays NaN) */
-    int small = t <= 0.66, large = t > TAN3PIO8;
-    arg = small ? t : large ? 1.0 / t : (t - 1.0) / (t + 1.0);
-    z = arg * arg;
-    z = z * ((((-8.750608600031904122785e-01 * z + -1.615753718733365076637e+01) * z + -7.500855792314704667340e+01) * z +
-              -1.228866684490136173410e+02) * z + -6.485021904942025371773e+01) /
-        (((((z + 2.485846490142306297962e+01) * z + 1.650270098316988542046e+02) * z + 4.328810604912902668951e+02) * z +
-          4.853903996359136964868e+02) * z + 1.945506571482613964425e+02);
-    z = arg * z + arg;
-    a = small ? z : large ? PIO2 - z + MOREBITS : PIO4 + z + HALF_MOREBITS;
-    if (ay == 0)
-        a = 0.0;
-    if (x < 0)
-        a = PI - a;
-    return y < 0 ? -a : a;
-}
-
-/* winding._triangle_terms for one triangle t[9] and point q[3] */
-static inline double triangle_term(const double *t, const double *q)
-{
-    double ax = t[0] - q[0], ay = t[1] - q[1], az = t[2] - q[2];
-    double bx = t[3] - q[0], by = t[4] - q[1], bz = t[5] - q[2];
-    double cx = t[6] - q[0], cy = t[7] - q[1], cz = t[8] - q[2];
-    double la = sqrt(ax * ax + ay * ay + az * az);
-    double lb = sqrt(bx * bx + by * by + bz * bz);
-    double lc = sqrt(cx * cx + cy * cy + cz * cz);
-    double det = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx);
-    double ab = ax * bx + ay * by + az * bz;
-    double bc = bx * cx + by * cy + bz * cz;
-    double ca = cx * ax + cy * ay + cz * az;
-    double den = la * lb * lc + ab * lc + bc * la + ca * lb;
-    return atan2_(det, den) * INV2PI;
-}
-
-/* winding._far_terms for one node f and offset r (centre - point), d2 = |r|^2 */
-static inline double far_term(const double *f, double rx, double ry, double rz, double d2, int order)
-{
-    double id2 = 1.0 / d2;
-    double id3 = id2 / sqrt(d2);
-    double w = (f[4] * rx + f[5] * ry + f[6] * rz) * id3;
-    if (order >= 1) {
-        double quad = (f[8] * rx + f[11] * ry + f[12] * rz) * rx + (f[9] * ry + f[13] * rz) * ry + f[10] * rz * rz;
-        w = w + (f[7] - 3.0 * quad * id2) * id3;
-    }
-    if (order >= 2) {
-        double lin = f[14] * rx + f[15] * ry + f[16] * rz;
-        double cub = (f[17] * rx + f[20] * ry + f[21] * rz) * (rx * rx) + (f[18] * ry + f[22] * rx + f[23] * rz) * (ry * ry) +
-                     (f[19] * rz + f[24] * rx + f[25] * ry) * (rz * rz) + f[26] * rx * ry * rz;
-        w = w + (7.5 * cub * id2 - 1.5 * lin) * id2 * id3;
-    }
-    return w * INV4PI;
-}
 
 /* what the walk reads at every node, in one cache line: the centre, the squared
  * distance beyond which the node is far ((accuracy * radius)^2, as the NumPy path
@@ -103,25 +48,127 @@ typedef struct {
     int64_t next; /* the next block to take (atomic) */
 } Work;
 
-static double winding_at(const Work *w, const double *q)
+/* ---- four points at a time ----
+ *
+ * Four neighbouring points walk the tree together, each lane of a vector holding one
+ * point: the walk visits, in preorder, every node that any of the four would visit
+ * alone (lane l's next node is next[l]; the walk goes to the least of them), and at each
+ * node a lane whose own walk is there adds what it would add alone, in the same order
+ * (the other lanes compute but keep their sum). Every lane does the scalar code's
+ * float64 operations in its order, so the sums are the same bytes. */
+
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wpsabi" /* vectors pass only between inlined functions */
+#endif
+typedef double v4d __attribute__((vector_size(32)));
+typedef int64_t v4l __attribute__((vector_size(32)));
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__GLIBC__) /* (ifunc) */
+#define TARGETS __attribute__((target_clones("avx2", "default")))
+#else
+#define TARGETS
+#endif
+#define INLINE __attribute__((always_inline)) static inline
+
+/* lanes of a where m is set, else of b */
+INLINE v4d pick(v4l m, v4d a, v4d b) { return (v4d)(((v4l)a & m) | ((v4l)b & ~m)); }
+
+INLINE v4d sqrt4(v4d x)
 {
-    double acc = 0.0;
+    for (int l = 0; l < 4; l++)
+        x[l] = sqrt(x[l]);
+    return x;
+}
+
+INLINE v4d abs4(v4d x) { return (v4d)((v4l)x & (v4l){INT64_MAX, INT64_MAX, INT64_MAX, INT64_MAX}); }
+
+/* winding.atan2, lane by lane */
+INLINE v4d atan2_4(v4d y, v4d x)
+{
+    v4d ay = abs4(y), ax = abs4(x), t, arg, z, a;
+    t = pick(ax == 0, (v4d){INFINITY, INFINITY, INFINITY, INFINITY}, ay / ax);
+    v4l small = t <= 0.66, large = t > TAN3PIO8;
+    arg = pick(small, t, pick(large, 1.0 / t, (t - 1.0) / (t + 1.0)));
+    z = arg * arg;
+    z = z * ((((-8.750608600031904122785e-01 * z + -1.615753718733365076637e+01) * z + -7.500855792314704667340e+01) * z +
+              -1.228866684490136173410e+02) * z + -6.485021904942025371773e+01) /
+        (((((z + 2.485846490142306297962e+01) * z + 1.650270098316988542046e+02) * z + 4.328810604912902668951e+02) * z +
+          4.853903996359136964868e+02) * z + 1.945506571482613964425e+02);
+    z = arg * z + arg;
+    a = pick(small, z, pick(large, PIO2 - z + MOREBITS, PIO4 + z + HALF_MOREBITS));
+    a = pick(ay == 0, (v4d){0, 0, 0, 0}, a);
+    a = pick(x < 0, PI - a, a);
+    return pick(y < 0, -a, a);
+}
+
+/* winding._triangle_terms, lane by lane */
+INLINE v4d triangle_term4(const double *t, v4d qx, v4d qy, v4d qz)
+{
+    v4d ax = t[0] - qx, ay = t[1] - qy, az = t[2] - qz;
+    v4d bx = t[3] - qx, by = t[4] - qy, bz = t[5] - qz;
+    v4d cx = t[6] - qx, cy = t[7] - qy, cz = t[8] - qz;
+    v4d la = sqrt4(ax * ax + ay * ay + az * az);
+    v4d lb = sqrt4(bx * bx + by * by + bz * bz);
+    v4d lc = sqrt4(cx * cx + cy * cy + cz * cz);
+    v4d det = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx);
+    v4d ab = ax * bx + ay * by + az * bz;
+    v4d bc = bx * cx + by * cy + bz * cz;
+    v4d ca = cx * ax + cy * ay + cz * az;
+    v4d den = la * lb * lc + ab * lc + bc * la + ca * lb;
+    return atan2_4(det, den) * INV2PI;
+}
+
+/* winding._far_terms, lane by lane */
+INLINE v4d far_term4(const double *f, v4d rx, v4d ry, v4d rz, v4d d2, int order)
+{
+    v4d id2 = 1.0 / d2;
+    v4d id3 = id2 / sqrt4(d2);
+    v4d w = (f[4] * rx + f[5] * ry + f[6] * rz) * id3;
+    if (order >= 1) {
+        v4d quad = (f[8] * rx + f[11] * ry + f[12] * rz) * rx + (f[9] * ry + f[13] * rz) * ry + f[10] * rz * rz;
+        w = w + (f[7] - 3.0 * quad * id2) * id3;
+    }
+    if (order >= 2) {
+        v4d lin = f[14] * rx + f[15] * ry + f[16] * rz;
+        v4d cub = (f[17] * rx + f[20] * ry + f[21] * rz) * (rx * rx) + (f[18] * ry + f[22] * rx + f[23] * rz) * (ry * ry) +
+                  (f[19] * rz + f[24] * rx + f[25] * ry) * (rz * rz) + f[26] * rx * ry * rz;
+        w = w + (7.5 * cub * id2 - 1.5 * lin) * id2 * id3;
+    }
+    return w * INV4PI;
+}
+
+/* the winding numbers at the points q[0..3] (m of them real, the rest copies of q[0]) into out */
+TARGETS static void winding_4(const Work *w, const double *q, int64_t m, double *out)
+{
+    v4d qx, qy, qz, acc = {0, 0, 0, 0};
+    for (int l = 0; l < 4; l++) {
+        const double *p = q + 3 * (l < m ? l : 0);
+        qx[l] = p[0], qy[l] = p[1], qz[l] = p[2];
+    }
+    v4l next = {0, 0, 0, 0};
     int64_t i = 0;
     while (i < w->count) {
         const Hot *h = w->hot + i;
-        double rx = h->c[0] - q[0], ry = h->c[1] - q[1], rz = h->c[2] - q[2];
-        double d2 = rx * rx + ry * ry + rz * rz;
-        if (d2 > h->far2) {
-            acc += far_term(w->nodes + FIELDS * i, rx, ry, rz, d2, w->order);
-            i = h->skip;
-        } else if (h->count > 0) {
-            for (int64_t k = 0; k < h->count; k++)
-                acc += triangle_term(w->tri + 9 * (h->first + k), q);
-            i = h->skip;
+        v4l here = next == i;
+        v4d rx = h->c[0] - qx, ry = h->c[1] - qy, rz = h->c[2] - qz;
+        v4d d2 = rx * rx + ry * ry + rz * rz;
+        v4l far = (d2 > h->far2) & here, near = here & ~far;
+        if (far[0] | far[1] | far[2] | far[3])
+            acc = pick(far, acc + far_term4(w->nodes + FIELDS * i, rx, ry, rz, d2, w->order), acc);
+        if (h->count > 0) {
+            if (near[0] | near[1] | near[2] | near[3])
+                for (int64_t k = 0; k < h->count; k++)
+                    acc = pick(near, acc + triangle_term4(w->tri + 9 * (h->first + k), qx, qy, qz), acc);
+            next = (v4l)pick(here, (v4d)(v4l){h->skip, h->skip, h->skip, h->skip}, (v4d)next);
         } else
-            i++;
+            next = (v4l)pick(far, (v4d)(v4l){h->skip, h->skip, h->skip, h->skip},
+                             pick(here, (v4d)(v4l){i + 1, i + 1, i + 1, i + 1}, (v4d)next));
+        i = next[0];
+        for (int l = 1; l < 4; l++)
+            i = next[l] < i ? next[l] : i;
     }
-    return acc != acc ? NAN : acc;
+    for (int l = 0; l < m; l++)
+        out[l] = acc[l] != acc[l] ? NAN : acc[l];
 }
 
 static void *run(void *arg)
@@ -132,8 +179,8 @@ static void *run(void *arg)
         int64_t i0 = b * BLOCK, i1 = i0 + BLOCK < w->n ? i0 + BLOCK : w->n;
         if (i0 >= w->n)
             return NULL;
-        for (int64_t i = i0; i < i1; i++)
-            w->out[i] = winding_at(w, w->points + 3 * i);
+        for (int64_t i = i0; i < i1; i += 4)
+            winding_4(w, w->points + 3 * i, i1 - i < 4 ? i1 - i : 4, w->out + i);
     }
 }
 
@@ -228,8 +275,59 @@ static PyObject *winding(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+PyDoc_STRVAR(morton_doc, "morton(points (n, 3) float64) -> (n,) uint64: winding._morton's codes.");
+
+static PyObject *morton_py(PyObject *self, PyObject *args)
+{
+    PyObject *op;
+    PyArrayObject *pa;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "O", &op) || !get2(op, NPY_FLOAT64, 3, &pa, "points"))
+        return NULL;
+    npy_intp n = PyArray_DIM(pa, 0);
+    PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){n}, NPY_UINT64);
+    if (!out)
+        return NULL;
+    Py_BEGIN_ALLOW_THREADS
+    morton21(PyArray_DATA(pa), n, PyArray_DATA(out));
+    Py_END_ALLOW_THREADS
+    return (PyObject *)out;
+}
+
+PyDoc_STRVAR(order_doc, "order(codes (n,) uint64) -> (n,) int64: np.argsort(codes, kind=\"stable\") (codes below 2^63).");
+
+static PyObject *order_py(PyObject *self, PyObject *args)
+{
+    PyObject *oc;
+    PyArrayObject *ca;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "O", &oc) || !get(oc, NPY_UINT64, -1, &ca, "codes"))
+        return NULL;
+    npy_intp n = PyArray_SIZE(ca);
+    const uint64_t *c = PyArray_DATA(ca);
+    for (npy_intp i = 0; i < n; i++)
+        if (c[i] >> 63) {
+            PyErr_SetString(PyExc_ValueError, "codes: not below 2^63");
+            return NULL;
+        }
+    PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){n}, NPY_INT64);
+    if (!out)
+        return NULL;
+    int ok;
+    Py_BEGIN_ALLOW_THREADS
+    ok = stable_order(c, n, 63, PyArray_DATA(out));
+    Py_END_ALLOW_THREADS
+    if (!ok) {
+        Py_DECREF(out);
+        return PyErr_NoMemory();
+    }
+    return (PyObject *)out;
+}
+
 static PyMethodDef methods[] = {
     {"winding", winding, METH_VARARGS, winding_doc},
+    {"morton", morton_py, METH_VARARGS, morton_doc},
+    {"order", order_py, METH_VARARGS, order_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -74,7 +74,7 @@ class WindingTree:
         tri, an = tri[keep], an[keep]
         centroid = (tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0
         codes = _morton(centroid)
-        order = np.argsort(codes, kind="stable")
+        order = _stable_order(codes)
         self.face, tri, an, centroid = self.face[order], tri[order], an[order], centroid[order]
         self.triangles = np.ascontiguousarray(tri.reshape(-1, 9))
         start, end, skip = _layout(codes[order], LEAF)
@@ -99,7 +99,7 @@ def winding_numbers(tree: WindingTree, points, *, accuracy: float = ACCURACY, or
     out = np.zeros(len(points))
     for at in range(0, len(points), CHUNK):
         # in Morton order: neighbouring points walk the same nodes (the sums do not change)
-        near = at + np.argsort(_morton(points[at:at + CHUNK]), kind="stable")
+        near = at + _stable_order(_morton(points[at:at + CHUNK]))
         part = points[near]
         if _kernel is not None:
             w = np.empty(len(part))
@@ -124,7 +124,9 @@ def _spread(x):
 
 def _morton(p):
     """(n,) uint64 Morton codes of ``p`` (n, 3) float64 on a 2^21 grid over the box of
-    its finite rows (the others: 0)."""
+    its finite rows (the others: 0). The kernel's ``morton`` computes the same codes."""
+    if _kernel is not None:
+        return _kernel.morton(np.ascontiguousarray(p, dtype=np.float64))
     finite = np.isfinite(p).all(axis=1)
     if not finite.any():
         return np.zeros(len(p), np.uint64)
@@ -133,6 +135,14 @@ def _morton(p):
         rel = (np.where(finite[:, None], p, lo) - lo) / (hi - lo)
     q = (np.nan_to_num(np.clip(rel, 0.0, 1.0), nan=0.0) * (2.0**21 - 1)).astype(np.uint64)
     return (_spread(q[:, 0]) << np.uint64(2)) | (_spread(q[:, 1]) << np.uint64(1)) | _spread(q[:, 2])
+
+
+def _stable_order(codes):
+    """(n,) int64: np.argsort(codes, kind="stable") of ``codes`` (n,) uint64 (Morton codes,
+    below 2^63), by the kernel's radix sort when built."""
+    if _kernel is not None:
+        return _kernel.order(codes)
+    return np.argsort(codes, kind="stable")
 
 
 def _top_bit(x):
@@ -239,11 +249,11 @@ def _node_fields(tri, an, centroid, start, end, skip):
     if not n:
         return fields
     origin = 0.5 * (centroid.min(axis=0) + centroid.max(axis=0))
-    p = (centroid - origin).T  # (3, T): rows of per-triangle values, summed along them
-    u = [(tri[:, v] - centroid).T for v in range(3)]  # corners about the centroid
-    an_t = an.T
+    p = np.ascontiguousarray((centroid - origin).T)  # (3, T): rows of per-triangle values, summed along them
+    u = [np.ascontiguousarray((tri[:, v] - centroid).T) for v in range(3)]  # corners about the centroid
+    an_t = np.ascontiguousarray(an.T)
     raw = np.empty((34, len(tri)))
-    raw[0] = np.sqrt((an * an).sum(axis=1))
+    raw[0] = _norms(an)
     raw[1:4] = raw[0] * p
     raw[4:7] = an_t
     raw[7:16] = (an_t[:, None, :] * p[None, :, :]).reshape(9, -1)
@@ -289,20 +299,28 @@ def _radii(tri, centre, start, end, skip):
     size = end[leaf] - start[leaf]
     owner = np.repeat(leaf, size)
     corner = tri - centre[owner][:, None, :]
-    r[leaf] = np.maximum.reduceat(np.sqrt((corner * corner).sum(axis=2)).max(axis=1), start[leaf])
+    r[leaf] = np.maximum.reduceat(_norms(corner.reshape(-1, 3)).reshape(-1, 3).max(axis=1), start[leaf])
     g = (tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0
-    gap = tri - g[:, None, :]
-    rho = np.sqrt((gap * gap).sum(axis=2)).max(axis=1)
+    rho = _norms((tri - g[:, None, :]).reshape(-1, 3)).reshape(-1, 3).max(axis=1)
     bottom = np.repeat(depth[leaf], size)  # the depth of each triangle's leaf
     inner = np.flatnonzero(skip != np.arange(n) + 1)
+    gx, gy, gz = (np.ascontiguousarray(g[:, k]) for k in range(3))
+    cx, cy, cz = (np.ascontiguousarray(centre[:, k]) for k in range(3))
     for d in range(int(depth[inner].max(initial=-1)) + 1):
         k = inner[depth[inner] == d]  # in preorder: their ranges in order, disjoint, covering these triangles
-        at = np.flatnonzero(bottom > d)
+        deeper = bottom > d
+        at = slice(None) if deeper.all() else np.flatnonzero(deeper)
         who = np.repeat(k, end[k] - start[k])
-        off = g[at] - centre[who]
-        far = np.sqrt((off * off).sum(axis=1)) + rho[at]
+        ox, oy, oz = gx[at] - cx[who], gy[at] - cy[who], gz[at] - cz[who]
+        far = np.sqrt(ox * ox + oy * oy + oz * oz) + rho[at]
         r[k] = np.maximum.reduceat(far, np.cumsum(end[k] - start[k]) - (end[k] - start[k]))
     return r
+
+
+def _norms(v):
+    """(m,) float64 lengths of ``v`` (m, 3): sqrt of x*x + y*y + z*z, added left to right
+    (as numpy's sum over a row of three does, without its slow reduction loop)."""
+    return np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2])
 
 
 # ---- the NumPy path: the kernel's float64 operations, in its order ----

@@ -172,8 +172,20 @@ def test_a_tree_that_skips_a_node_fails(name, path):
     _, _, face = distance.closest_points(tree, points)
     slot = np.argsort(tree.order)[face]
     node = int(np.bincount(slot // tree.leaf).argmax()) + leaves - 1
-    tree.lo[node], tree.hi[node] = np.inf, -np.inf
-    assert not agrees(tree, tri, points)
+    broken = distance.TriangleTree(v, f)  # (before its first query: the kernel keeps its own copy of the boxes)
+    broken.lo[node], broken.hi[node] = np.inf, -np.inf
+    assert not agrees(broken, tri, points)
+
+
+def test_a_tree_pickles_without_the_kernels_copy():
+    import pickle
+
+    v, f = mesh("icosphere")
+    tree = distance.TriangleTree(v, f)
+    points = query_points(v[f])
+    before = distance.closest_points(tree, points)
+    again = distance.closest_points(pickle.loads(pickle.dumps(tree)), points)
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(before, again))
 
 
 def test_ties_go_to_the_lowest_face():
@@ -330,10 +342,12 @@ def test_the_kernel_refuses_bad_arrays():
     visit = np.arange(4)
 
     def call(tri=t.triangles, order=t.order, thin=t.thin, lo=t.lo, hi=t.hi, leaf=t.leaf, points=p, visit=visit, tol=0.0,
-             outs=out):
-        KERNEL.closest(tri, order, thin, lo, hi, leaf, points, visit, tol, *outs, 2)
+             outs=out, wide=None):
+        KERNEL.closest(tri, order, thin, lo, hi, leaf, points, visit, tol, *outs, 2, wide)
 
-    call()  # the good call passes
+    call()  # the good calls pass, without and with the tree's wide form
+    call(wide=t.wide())
+    other = distance.TriangleTree(*mesh("cube"))
     nan = t.triangles.copy()
     nan[3, 4] = np.nan
     bad_order = t.order.copy()
@@ -342,7 +356,7 @@ def test_the_kernel_refuses_bad_arrays():
              dict(leaf=0), dict(leaf=t.leaf * 2), dict(points=np.full((4, 3), np.nan)), dict(points=np.zeros((4, 2))),
              dict(points=np.zeros((4, 3), np.float32)), dict(visit=np.array([0, 1, 1, 3])),
              dict(visit=np.array([0, 1, 2, 4])), dict(tol=np.nan), dict(outs=(np.empty(3),) + out[1:]),
-             dict(tri=np.asfortranarray(t.triangles))]
+             dict(tri=np.asfortranarray(t.triangles)), dict(wide=other.wide()), dict(wide=t.lo)]
     for case in cases:
         with pytest.raises((ValueError, TypeError)):
             call(**case)
@@ -389,3 +403,25 @@ def test_fuzz_kernel_against_numpy_and_brute_force(seed, faces, scale, degenerat
     # brute force at unit scale (scale is not a power of two: exact to 1e-15)
     assert np.all(np.abs(d / scale - brute_distance(tri / scale, points / scale)) <= 1e-9 * extent / scale)
     assert np.all(pair_distance(tri[face] / scale, q / scale) <= 1e-9 * extent / scale)
+
+
+@needs_kernel
+@settings(max_examples=60, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(0, 3000), scale=st.sampled_from([1e-100, 1.0, 1e100]),
+       flat=st.booleans(), tied=st.booleans())
+def test_kernel_visit_order_is_numpys(seed, n, scale, flat, tied):
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(n, 3)) * scale
+    if flat:
+        p[:, 1] = 0.5  # one axis without extent
+    if tied:
+        p = np.round(p / scale * 2) * scale / 2
+    got = KERNEL.visit(np.ascontiguousarray(p))
+    saved, distance._kernel = distance._kernel, None
+    try:
+        want = distance.visit_order(p)
+    finally:
+        distance._kernel = saved
+    assert got.tobytes() == want.tobytes()
+    with pytest.raises(ValueError):
+        KERNEL.visit(np.array([[0.0, np.nan, 0.0]]))

@@ -348,3 +348,43 @@ def test_fuzzed_links_are_refused_or_walked_safely(rows):
         i = np.arange(len(links))
         assert np.any((skip <= i) | (skip > len(links)) | (first < 0) | (first > 64) | (count < 0)
                       | (count > 64 - first))
+
+
+@needs_kernel
+@settings(max_examples=80)
+@given(st.lists(st.tuples(*[coordinate] * 3), min_size=0, max_size=60))
+def test_kernel_morton_codes_and_order_are_numpys(points):
+    """The kernel's Morton codes (tree and query order) and their stable order are the
+    NumPy functions', on finite, huge, tied and non-finite coordinates; and the tree built
+    with either is the same."""
+    p = np.array(points, dtype=np.float64).reshape(-1, 3)
+    p = np.concatenate([p, p[: len(p) // 2]])  # ties
+    saved = winding._kernel
+    with np.errstate(all="ignore"):
+        codes, order = winding._morton(p), winding._stable_order(winding._morton(p))
+        winding._kernel = None
+        try:
+            want, want_order = winding._morton(p), np.argsort(winding._morton(p), kind="stable")
+        finally:
+            winding._kernel = saved
+    assert codes.dtype == want.dtype and codes.tobytes() == want.tobytes()
+    assert order.tobytes() == want_order.astype(np.int64).tobytes()
+
+
+def test_trees_built_with_and_without_the_kernel_are_the_same(monkeypatch):
+    mesh = trimesh.load(SAMPLES / "skull.ply", process=False)
+    a = WindingTree(np.asarray(mesh.vertices, float), np.asarray(mesh.faces))
+    monkeypatch.setattr(winding, "_kernel", None)
+    b = WindingTree(np.asarray(mesh.vertices, float), np.asarray(mesh.faces))
+    assert all(x.tobytes() == y.tobytes() for x, y in zip((a.nodes, a.links, a.triangles, a.face),
+                                                         (b.nodes, b.links, b.triangles, b.face)))
+
+
+@needs_kernel
+def test_kernel_morton_refuses_bad_arrays():
+    for bad in (np.zeros((4, 2)), np.zeros((4, 3), np.float32), np.zeros((3, 4)).T):
+        with pytest.raises((TypeError, ValueError)):
+            KERNEL.morton(bad)
+    for bad in (np.array([2**63], np.uint64), np.zeros(3, np.int64)):
+        with pytest.raises((TypeError, ValueError)):
+            KERNEL.order(bad)
