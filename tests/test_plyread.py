@@ -146,13 +146,17 @@ def test_the_face_record_must_keep_the_file_s_order(ball, monkeypatch, tmp_path)
     assert got is not None and got[1].tobytes() != want[1].tobytes()
 
 
-def test_plain_jobs_give_the_same_bytes_either_way(ball, tmp_path):
-    path = write_ply(tmp_path / "m.ply", *ball, order=">")
-    fast = scatter_cli.sample(path, count=5000, seed=2, attributes="face,normal")
-    slow = scatter_cli.sample(load_surface(path), count=5000, seed=2, attributes="face,normal")
+@pytest.mark.parametrize("face_props", [(), (("quality", "f4", True), ("red", "u1", False), ("green", "u1", False),
+                                                ("blue", "u1", False))])
+@pytest.mark.parametrize("attributes", ["face,normal", "face,bary,smooth-normal"])
+def test_plain_jobs_give_the_same_bytes_either_way(face_props, attributes, ball, tmp_path):
+    path = write_ply(tmp_path / "m.ply", *ball, order=">", face_props=face_props)
+    assert read_triangles(path) is not None  # the fast path answers
+    fast = scatter_cli.sample(path, count=5000, seed=2, attributes=attributes)
+    slow = scatter_cli.sample(load_surface(path), count=5000, seed=2, attributes=attributes)  # trimesh's
     assert fast.points.tobytes() == slow.points.tobytes()
-    assert fast.attributes["face"].tobytes() == slow.attributes["face"].tobytes()
-    assert fast.attributes["normal"].tobytes() == slow.attributes["normal"].tobytes()
+    for name in fast.attributes:
+        assert fast.attributes[name].tobytes() == slow.attributes[name].tobytes()
 
 
 def test_bad_indices_still_get_the_one_line_error(ball, tmp_path):
