@@ -3,7 +3,9 @@
 Importing trimesh costs about 0.12 s, more than a whole small job. This reader handles
 the common case only: a binary PLY (either byte order) whose elements are ``vertex``
 (scalar properties including x, y, z) and then ``face`` (one list property of three
-indices per face, nothing else). For anything else it returns None and the caller loads
+indices per face, and scalar properties beside it, such as an STL attribute or face
+colours, which trimesh keeps apart from the triangles: skipped, and read only for jobs
+not asking for colours). For anything else it returns None and the caller loads
 the file with trimesh, which also reports what is wrong with a malformed file. When it
 answers, it gives the arrays trimesh gives with ``process=False``.
 """
@@ -20,6 +22,7 @@ _TYPES = {
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }
 _MAX_HEADER = 1 << 16
+_INDEX_NAMES = {"vertex_indices", "vertex_index"}
 
 
 def read_triangles(path):
@@ -46,6 +49,8 @@ def read_triangles_from(data, smooth=False, color=False):
         if layout is None:
             return None
         order, vertex, n_vertex, face, n_face = layout
+        if color and len(face.names) > 2:
+            return None  # face colours: trimesh's visuals decide which colours count
         vertex, face = vertex.newbyteorder(order), face.newbyteorder(order)
         sizes = (vertex.itemsize * n_vertex, face.itemsize * n_face)
         if body_at + sum(sizes) != len(data):
@@ -136,13 +141,35 @@ def _layout(lines):
     (_, n_vertex, vprops), (_, n_face, fprops) = elements
     if any(len(p) != 2 or p[0] not in _TYPES for p in vprops) or {"x", "y", "z"} - {p[1] for p in vprops}:
         return None
-    if len(fprops) != 1 or len(fprops[0]) != 4 or fprops[0][0] != "list":
-        return None
-    _, count_type, index_type, name = fprops[0]
-    if name not in ("vertex_indices", "vertex_index") or count_type not in _TYPES or index_type not in _TYPES:
-        return None
-    if _TYPES[index_type][0] == "f" or n_vertex < 0 or n_face < 0:
+    face = _face_dtype(fprops)
+    if face is None or n_vertex < 0 or n_face < 0:
         return None
     vertex = np.dtype([(p[1], _TYPES[p[0]]) for p in vprops])
-    face = np.dtype([("n", _TYPES[count_type]), ("i", _TYPES[index_type], 3)])
     return order, vertex, n_vertex, face, n_face
+
+
+def _face_dtype(fprops):
+    """The face record: ``n`` (the corner count), ``i`` (three indices) and the scalar
+    properties beside the list (``e0``, ``e1``... in file order), or None. One list only
+    (a second, such as ``texcoord``, trimesh reads), named as trimesh looks for it, and no
+    other property with that name or a name given twice (trimesh keeps one of each name)."""
+    lists = [k for k, p in enumerate(fprops) if p[:1] == ["list"]]
+    if len(lists) != 1 or len(fprops[lists[0]]) != 4:
+        return None
+    _, count_type, index_type, name = fprops[lists[0]]
+    if name not in _INDEX_NAMES or count_type not in _TYPES or index_type not in _TYPES:
+        return None
+    if _TYPES[index_type][0] == "f":
+        return None
+    names = [p[-1] for p in fprops]
+    if len(set(names)) != len(names) or len(_INDEX_NAMES & set(names)) != 1:
+        return None
+    fields = []
+    for k, p in enumerate(fprops):
+        if k == lists[0]:
+            fields += [("n", _TYPES[count_type]), ("i", _TYPES[index_type], 3)]
+        elif len(p) == 2 and p[0] in _TYPES:
+            fields.append((f"e{k}", _TYPES[p[0]]))
+        else:
+            return None
+    return np.dtype(fields)

@@ -7,7 +7,8 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli.plyread import read_triangles
+from scatter_cli import plyread
+from scatter_cli.plyread import read_triangles, read_triangles_from
 from scatter_cli.loaders import load_surface
 
 from .conftest import SAMPLES, run_user, scatter_command
@@ -19,22 +20,33 @@ def trimesh_arrays(path):
 
 
 def write_ply(path, vertices, faces, order="<", vertex_type="f4", index_type="i4", count_type="u1",
-              extra_vertex=(), extra_face="", fmt=None):
-    names = {"f4": "float", "f8": "double", "i4": "int", "u4": "uint", "u1": "uchar", "i2": "short"}
+              extra_vertex=(), extra_face="", fmt=None, face_props=()):
+    """``face_props``: (name, type, before the index list) scalar face properties, written
+    with values; ``extra_face``: a header line only."""
+    names = {"f4": "float", "f8": "double", "i4": "int", "u4": "uint", "u1": "uchar", "i2": "short", "u2": "ushort"}
     fmt = fmt or {"<": "binary_little_endian", ">": "binary_big_endian"}[order]
     vprops = [("x", vertex_type), ("y", vertex_type), ("z", vertex_type)] + list(extra_vertex)
     header = [f"ply", f"format {fmt} 1.0", "comment made by test_plyread", f"element vertex {len(vertices)}"]
     header += [f"property {names[t]} {n}" for n, t in vprops]
-    header += [f"element face {len(faces)}", f"property list {names[count_type]} {names[index_type]} vertex_indices"]
+    before = [(n, t) for n, t, first, *_ in face_props if first]
+    after = [(n, t) for n, t, first, *_ in face_props if not first]
+    header += [f"element face {len(faces)}"] + [f"property {names[t]} {n}" for n, t in before]
+    header += [f"property list {names[count_type]} {names[index_type]} vertex_indices"]
+    header += [f"property {names[t]} {n}" for n, t in after]
     if extra_face:
         header.append(extra_face)
     header.append("end_header")
     vrec = np.zeros(len(vertices), dtype=[(n, order + t) for n, t in vprops])
     for k, axis in enumerate("xyz"):
         vrec[axis] = vertices[:, k]
-    frec = np.zeros(len(faces), dtype=[("n", order + count_type), ("i", order + index_type, 3)])
+    frec = np.zeros(len(faces), dtype=[(f"b_{n}", order + t) for n, t in before]
+                    + [("n", order + count_type), ("i", order + index_type, 3)]
+                    + [(f"a_{n}", order + t) for n, t in after])
     frec["n"] = 3
     frec["i"] = faces
+    for k, (name, _, _, *value) in enumerate(face_props):
+        column = ("b_" if f"b_{name}" in frec.dtype.names else "a_") + name
+        frec[column] = value[0] if value else np.arange(len(faces)) * (k + 7) % 251
     with open(path, "wb") as f:
         f.write(("\n".join(header) + "\n").encode())
         f.write(vrec.tobytes())
@@ -63,6 +75,10 @@ def test_sample_plys_read_as_trimesh_reads_them(name):
     dict(order=">"),
     dict(vertex_type="f8", index_type="u4", count_type="i4"),
     dict(extra_vertex=[("red", "u1"), ("confidence", "f4")]),
+    # scalar face properties beside the list, as trimesh writes an STL's attribute or face colours
+    dict(face_props=[("stl", "u2", False)]),
+    dict(order=">", face_props=[("quality", "f4", True), ("red", "u1", False), ("green", "u1", False),
+                                ("blue", "u1", False)]),
 ])
 def test_written_variants_read_as_trimesh_reads_them(options, ball, tmp_path):
     path = write_ply(tmp_path / "m.ply", *ball, **options)
@@ -72,7 +88,8 @@ def test_written_variants_read_as_trimesh_reads_them(options, ball, tmp_path):
         assert a.tobytes() == b.tobytes()
 
 
-@pytest.mark.parametrize("case", ["ascii", "quads", "face colours", "texcoords", "truncated", "not a ply"])
+@pytest.mark.parametrize("case", ["ascii", "quads", "face property not in the body", "texcoords", "truncated",
+                                  "not a ply", "index name twice", "list property type"])
 def test_anything_else_is_handed_to_trimesh(case, ball, tmp_path):
     v, f = ball
     path = tmp_path / "m.ply"
@@ -83,8 +100,14 @@ def test_anything_else_is_handed_to_trimesh(case, ball, tmp_path):
         data = path.read_bytes()
         at = data.index(b"end_header\n") + len(b"end_header\n") + 12 * len(v)
         path.write_bytes(data[:at] + b"\x04" + data[at + 1:])  # the first face claims four corners
-    elif case == "face colours":
+    elif case == "face property not in the body":
         write_ply(path, v, f, extra_face="property uchar red")
+    elif case == "index name twice":
+        write_ply(path, v, f, face_props=[("vertex_index", "i4", True)])
+    elif case == "list property type":
+        write_ply(path, v, f, face_props=[("red", "u1", False)])
+        data = path.read_bytes()
+        path.write_bytes(data.replace(b"property uchar red", b"property list red", 1))
     elif case == "texcoords":
         write_ply(path, v, f, extra_face="property list uchar float texcoord")
     elif case == "truncated":
@@ -95,13 +118,45 @@ def test_anything_else_is_handed_to_trimesh(case, ball, tmp_path):
     assert read_triangles(path) is None
 
 
-def test_plain_jobs_give_the_same_bytes_either_way(ball, tmp_path):
-    path = write_ply(tmp_path / "m.ply", *ball, order=">")
-    fast = scatter_cli.sample(path, count=5000, seed=2, attributes="face,normal")
-    slow = scatter_cli.sample(load_surface(path), count=5000, seed=2, attributes="face,normal")
+def test_face_properties_are_read_only_for_jobs_without_colours(ball, tmp_path):
+    path = write_ply(tmp_path / "m.ply", *ball, face_props=[("red", "u1", False), ("green", "u1", False),
+                                                             ("blue", "u1", False)])
+    data = path.read_bytes()
+    assert read_triangles_from(data) is not None
+    assert read_triangles_from(data, smooth=True) is not None
+    assert read_triangles_from(data, color=True) is None  # face colours: trimesh's visuals
+
+
+def test_the_face_record_must_keep_the_file_s_order(ball, monkeypatch, tmp_path):
+    """A reader placing the list first whatever the file says (the broken variant) reads
+    other triangles than trimesh: the comparisons above can fail."""
+    # a one-byte property of 3 before the list: the broken reading still sees triangles
+    path = write_ply(tmp_path / "m.ply", *ball, face_props=[("quality", "u1", True, 3)])
+    want = trimesh_arrays(path)
+    real = plyread._face_dtype
+
+    def list_first(fprops):
+        dtype = real(fprops)
+        extras = [n for n in dtype.names if n not in ("n", "i")]
+        return np.dtype([(n, dtype.fields[n][0]) for n in ("n", "i", *extras)])
+
+    assert read_triangles(path)[1].tobytes() == want[1].tobytes()
+    monkeypatch.setattr(plyread, "_face_dtype", list_first)
+    got = read_triangles(path)
+    assert got is not None and got[1].tobytes() != want[1].tobytes()
+
+
+@pytest.mark.parametrize("face_props", [(), (("quality", "f4", True), ("red", "u1", False), ("green", "u1", False),
+                                                ("blue", "u1", False))])
+@pytest.mark.parametrize("attributes", ["face,normal", "face,bary,smooth-normal"])
+def test_plain_jobs_give_the_same_bytes_either_way(face_props, attributes, ball, tmp_path):
+    path = write_ply(tmp_path / "m.ply", *ball, order=">", face_props=face_props)
+    assert read_triangles(path) is not None  # the fast path answers
+    fast = scatter_cli.sample(path, count=5000, seed=2, attributes=attributes)
+    slow = scatter_cli.sample(load_surface(path), count=5000, seed=2, attributes=attributes)  # trimesh's
     assert fast.points.tobytes() == slow.points.tobytes()
-    assert fast.attributes["face"].tobytes() == slow.attributes["face"].tobytes()
-    assert fast.attributes["normal"].tobytes() == slow.attributes["normal"].tobytes()
+    for name in fast.attributes:
+        assert fast.attributes[name].tobytes() == slow.attributes[name].tobytes()
 
 
 def test_bad_indices_still_get_the_one_line_error(ball, tmp_path):
