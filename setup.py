@@ -25,7 +25,7 @@ SANITIZED = os.environ.get("SCATTER_SANITIZE", "") not in ("", "0")
 
 def kernel(name):
     flags = FLAGS + SANITIZE if SANITIZED else FLAGS
-    return Extension(f"scatter_cli.{name}", [f"scatter_cli/{name}.c"], depends=["scatter_cli/_ckernel.h", "scatter_cli/_cmorton.h"],
+    return Extension(f"scatter_cli.{name}", [f"scatter_cli/{name}.c"], depends=["scatter_cli/_ckernel.h", "scatter_cli/_cmorton.h", "scatter_cli/_cthreads.h"],
                      include_dirs=[numpy.get_include()],
                      extra_compile_args=flags, extra_link_args=SANITIZE if SANITIZED else [], optional=True)
 

@@ -1,5 +1,5 @@
 """One compiled kernel built with AddressSanitizer and UndefinedBehaviorSanitizer into a
-copy of the package, for the sanitizer scripts (stable_sanitizers.py, enclosure_sanitizers.py)."""
+copy of the package, for the sanitizer scripts (stable_sanitizers.py, enclosure_sanitizers.py, ...)."""
 
 import glob
 import os
@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import sys
 import sysconfig
+import tempfile
 from pathlib import Path
 
 import numpy
@@ -36,3 +37,20 @@ def sanitized_copy(tmp, kernel, also=()):
     env = dict(os.environ, PYTHONPATH=str(tmp), LD_PRELOAD=":".join(r[0] for r in runtimes), ASAN_OPTIONS="detect_leaks=0")
     env.pop("SCATTER_NUMPY", None)
     return env
+
+
+def run_sanitized(kernel, module, tests, script):
+    """Build scatter_cli/KERNEL.c with the sanitizers in a temporary copy (tests and
+    benchmarks beside it, samples linked), then run there, on 2 threads: the test file
+    ``tests`` (a conftest line checks that scatter_cli.MODULE's kernel is the sanitized
+    one) and the Python ``script`` (the copy's path as its argv[1]). Any report aborts."""
+    with tempfile.TemporaryDirectory() as tmp:
+        env = sanitized_copy(tmp, kernel, also=("tests", "benchmarks"))
+        env["SCATTER_REQUIRE_KERNELS"] = "1"
+        env["SCATTER_THREADS"] = "2"
+        os.symlink(ROOT / "samples", Path(tmp) / "samples")
+        with open(Path(tmp) / "tests" / "conftest.py", "a") as conf:
+            conf.write(f"\nfrom scatter_cli import {module} as _m\nassert {tmp!r} in _m._kernel.__file__\n")
+        subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", tests], env=env, check=True,
+                       cwd=tmp)
+        subprocess.run([sys.executable, "-c", script, tmp], env=env, check=True, cwd=tmp)

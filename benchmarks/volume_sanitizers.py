@@ -14,14 +14,11 @@ on 2 threads. Any report aborts.
 Results are in benchmarks/results/2026-12-03-volume-distance.md.
 """
 
-import os
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from sanitized import ROOT, sanitized_copy  # noqa: E402
+from sanitized import run_sanitized  # noqa: E402
 
 BIG = r'''
 import numpy as np, sys, trimesh
@@ -40,16 +37,7 @@ print("volume kernel: skull, 10^5 points under the sanitizers:", round(float(d.m
 
 
 def main():
-    with tempfile.TemporaryDirectory() as tmp:
-        env = sanitized_copy(tmp, "_cvolume", also=("tests", "benchmarks"))
-        env["SCATTER_REQUIRE_KERNELS"] = "1"
-        env["SCATTER_THREADS"] = "2"
-        os.symlink(ROOT / "samples", Path(tmp) / "samples")
-        with open(Path(tmp) / "tests" / "conftest.py", "a") as conf:
-            conf.write(f"\nfrom scatter_cli import distance as _d\nassert {tmp!r} in _d._kernel.__file__\n")
-        subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests/test_distance.py"],
-                       env=env, check=True, cwd=tmp)
-        subprocess.run([sys.executable, "-c", BIG, tmp], env=env, check=True, cwd=tmp)
+    run_sanitized("_cvolume", "distance", "tests/test_distance.py", BIG)
 
 
 if __name__ == "__main__":

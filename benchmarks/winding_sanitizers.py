@@ -13,14 +13,11 @@ with the NumPy path's bytes. Any report aborts.
 Results are in benchmarks/results/2026-12-03-winding.md.
 """
 
-import os
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from sanitized import ROOT, sanitized_copy  # noqa: E402
+from sanitized import run_sanitized  # noqa: E402
 
 BIG = r'''
 import numpy as np, sys, trimesh
@@ -39,17 +36,7 @@ print("winding kernel: skull, 20,000 points under the sanitizers, same bytes as 
 
 
 def main():
-    with tempfile.TemporaryDirectory() as tmp:
-        env = sanitized_copy(tmp, "_cwinding", also=("tests", "benchmarks"))
-        env["SCATTER_REQUIRE_KERNELS"] = "1"
-        env["SCATTER_THREADS"] = "2"
-        os.symlink(ROOT / "samples", Path(tmp) / "samples")
-        # the tests must see the sanitized kernel: a conftest appended to the copy checks it
-        with open(Path(tmp) / "tests" / "conftest.py", "a") as conf:
-            conf.write(f"\nfrom scatter_cli import winding as _w\nassert {tmp!r} in _w._kernel.__file__\n")
-        subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests/test_winding.py"],
-                       env=env, check=True, cwd=tmp)
-        subprocess.run([sys.executable, "-c", BIG, tmp], env=env, check=True, cwd=tmp)
+    run_sanitized("_cwinding", "winding", "tests/test_winding.py", BIG)
 
 
 if __name__ == "__main__":

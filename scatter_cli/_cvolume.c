@@ -25,50 +25,11 @@
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
-#include <pthread.h>
+#include "_cthreads.h"
 
-#define MAX_THREADS 8
 /* below this many points a call runs on one thread */
 #define THREAD_POINTS 512
 #define MAX_DEPTH 62
-
-typedef struct {
-    void (*fn)(void *ctx, int k, int count);
-    void *ctx;
-    int k, count;
-} Job;
-
-static void *run_job(void *arg)
-{
-    Job *j = arg;
-    j->fn(j->ctx, j->k, j->count);
-    return NULL;
-}
-
-/* fn(ctx, k, count) for k = 0 .. count - 1, on count threads (k = 0 on the caller; a share
- * whose thread does not start runs on the caller) */
-static void in_parallel(int count, void (*fn)(void *, int, int), void *ctx)
-{
-    count = count < 1 ? 1 : count > MAX_THREADS ? MAX_THREADS : count;
-    Job job[MAX_THREADS];
-    pthread_t id[MAX_THREADS];
-    int started[MAX_THREADS] = {0};
-    for (int k = 0; k < count; k++)
-        job[k] = (Job){fn, ctx, k, count};
-    for (int k = 1; k < count; k++)
-        started[k] = pthread_create(&id[k], NULL, run_job, &job[k]) == 0;
-    fn(ctx, 0, count);
-    for (int k = 1; k < count; k++)
-        if (started[k])
-            pthread_join(id[k], NULL);
-        else
-            fn(ctx, k, count);
-}
-
-static inline void share(int64_t n, int k, int count, int64_t *i0, int64_t *i1)
-{
-    *i0 = n * k / count, *i1 = n * (k + 1) / count;
-}
 
 /* ---- the tree ---- */
 
