@@ -67,6 +67,19 @@ _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 _MALLOPT = ((_M_MMAP_THRESHOLD, 32 << 20), (_M_TRIM_THRESHOLD, 1 << 30))
 
 
+# the variables OpenBLAS reads for its thread count, in its order
+_BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS")
+
+
+def single_threaded_blas():
+    """Start NumPy's OpenBLAS with one thread (unless the user chose a count): scatter
+    multiplies only small matrices, and starting a thread per core costs every command
+    about 0.1 CPU s at NumPy's import (its children inherit the setting). Call it before
+    NumPy is imported; the Python API leaves the user's settings alone."""
+    if not any(name in os.environ for name in _BLAS_THREADS):
+        os.environ["OPENBLAS_NUM_THREADS"] = "1"
+
+
 def keep_freed_memory():
     """Tell glibc's allocator to keep freed memory for reuse (nothing elsewhere, or when
     the user tunes it: MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_, or malloc settings
@@ -90,6 +103,7 @@ def _malloc_tuned(env) -> bool:
 
 def run_command(command, argv):
     """Run the click ``command`` on ``argv``; returns the exit code (never raises)."""
+    single_threaded_blas()
     install_signal_handlers()
     keep_freed_memory()
     usage_error, click_error = _click_error_types()

@@ -1,6 +1,7 @@
 """The process settings of the ``scatter`` command (scatter_cli/process.py)."""
 
 import os
+import subprocess
 import sys
 
 import pytest
@@ -57,3 +58,34 @@ def test_a_users_own_malloc_settings_are_left_alone(monkeypatch):
             m.setattr(process.sys, "platform", "linux")
             process.keep_freed_memory()
         assert len(calls) == expected, env
+
+
+
+THREADS = """
+import os, sys
+from scatter_cli import process
+if sys.argv[1] == "single":
+    process.single_threaded_blas()
+import numpy as np
+np.ones((64, 64)) @ np.ones((64, 64))  # BLAS at work
+print(len(os.listdir("/proc/self/task")))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or (os.cpu_count() or 1) < 2,
+                    reason="threads counted in /proc; OpenBLAS starts one a core")
+def test_blas_runs_on_one_thread_unless_the_user_chose(tmp_path):
+    """The command starts NumPy's BLAS with one thread; without the setting (the broken
+    variant) it starts more, and a count the user set is kept."""
+    from scatter_cli.process import _BLAS_THREADS
+
+    clean = {k: v for k, v in os.environ.items() if k not in _BLAS_THREADS}
+
+    def threads(mode, **extra):
+        out = subprocess.run([sys.executable, "-c", THREADS, mode], cwd=tmp_path, env={**clean, **extra},
+                             stdin=subprocess.DEVNULL, capture_output=True, check=True)
+        return int(out.stdout)
+
+    assert threads("single") == 1
+    assert threads("default") > 1
+    assert threads("single", OMP_NUM_THREADS="2") > 1
