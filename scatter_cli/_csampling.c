@@ -169,7 +169,7 @@ static PyObject *areas(PyObject *self, PyObject *args)
 PyDoc_STRVAR(unit_normals_doc,
 "unit_normals(vertices, faces, out, center)\n\n"
 "The unit normal of each face (F, 3) int64 of vertices (V, 3) float64 less center (3,)\n"
-"float64 into out (F, 3) float64, zero where it is not finite: visibility.face_normals,\n"
+"float64 into out (F, 3) float64, zero where it is not finite: normals.face_normals,\n"
 "operation for operation. Raises ValueError for a vertex index out of range.");
 
 static PyObject *unit_normals(PyObject *self, PyObject *args)

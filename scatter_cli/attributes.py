@@ -13,6 +13,7 @@ import numpy as np
 
 from .errors import ScatterError
 from .columns import ATTRIBUTES
+from .normals import face_normals
 from .surface import Surface, cofactors
 from .surface_data import color_source, interpolate, uv_table, vertex_normal_table
 
@@ -111,11 +112,7 @@ class AttributeMaker:
             if ("normal", gi) in self._tables:
                 continue
             g = self.surface.geometries[gi]
-            v, f = g.vertices, g.faces
-            n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-            with np.errstate(invalid="ignore", divide="ignore"):
-                n /= np.linalg.norm(n, axis=1, keepdims=True)
-            self._tables["normal", gi] = n
+            self._tables["normal", gi] = face_normals(g.vertices, g.faces)  # 0 on faces that get no points
 
     def _normals(self, raw, groups):
         """(n, 3) float64 unit normals: smooth when smooth-normal is asked for, else the face's."""

@@ -17,7 +17,7 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli import (distance, enclosure, exterior_rays, native, pairs, parity, rayscene, readers, sampling,
+from scatter_cli import (distance, enclosure, native, normals, pairs, parity, rayscene, readers, sampling,
                          stable, thinning, winding)
 from scatter_cli.loaders import load_surface
 from scatter_cli.surface import Geometry, Instance, Surface
@@ -29,7 +29,7 @@ REQUIRED = os.environ.get("SCATTER_REQUIRE_KERNELS", "") not in ("", "0")
 
 # Where each kernel is held: switching it off sets these to None.
 SWITCHES = {
-    "_csampling": [(sampling, "_kernel"), (exterior_rays, "_kernel")],
+    "_csampling": [(sampling, "_kernel"), (normals, "_kernel")],
     "_cthinning": [(pairs, "_kernel")],
     "_cstable": [(stable, "_kernel")],
     "_creaders": [(readers, "_kernel")],
@@ -129,7 +129,7 @@ def normals_case(seed, center):
     def run():
         v, f = awkward_mesh(seed)
         with np.errstate(all="ignore"):
-            return {"normals": exterior_rays.face_normals(v, f, center).tobytes()}
+            return {"normals": normals.face_normals(v, f, center).tobytes()}
 
     return run
 

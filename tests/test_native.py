@@ -47,8 +47,8 @@ def test_scatter_numpy_switches_them_off(monkeypatch):
 
 
 _HELD = """
-from scatter_cli import distance, enclosure, exterior_rays, pairs, parity, rayscene, readers, sampling, stable, winding
-print(sum(m._kernel is not None for m in (enclosure, pairs, rayscene, readers, sampling, stable, exterior_rays,
+from scatter_cli import distance, enclosure, normals, pairs, parity, rayscene, readers, sampling, stable, winding
+print(sum(m._kernel is not None for m in (enclosure, pairs, rayscene, readers, sampling, stable, normals,
                                          winding, distance, parity)))
 """
 

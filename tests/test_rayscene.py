@@ -1,5 +1,5 @@
 """The compiled Embree scene (scatter_cli/_cembree.c) gives embreex's verdicts, and the
-face-normal kernel gives exterior_rays.face_normals' NumPy values, bit for bit.
+face-normal kernel gives normals.face_normals' NumPy values, bit for bit.
 
 embreex builds its scene by copying the mesh element by element; the kernel shares the
 arrays with the same library. Both are robust scenes of one triangle geometry per mesh,
@@ -13,7 +13,7 @@ import os
 import numpy as np
 import pytest
 
-from scatter_cli import rayscene, exterior_rays
+from scatter_cli import normals, rayscene
 from scatter_cli.loaders import load_surface
 
 from . import exterior_scenes as es
@@ -58,7 +58,7 @@ def rays(meshes, n, seed):
     s = np.sqrt(u[:, 0])
     b = np.stack([1 - s, s * (1 - u[:, 1]), s * u[:, 1]], axis=1)
     p = np.einsum("ij,ijk->ik", b, tri[face])
-    normal = exterior_rays.face_normals(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3))[face]
+    normal = normals.face_normals(tri.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3))[face]
     off = rng.choice([0.0, 1e-7, -1e-7, 1e-5], n)[:, None]
     d = rng.normal(size=(n, 3))
     d[: n // 2] = normal[: n // 2] * rng.choice([1.0, -1.0], (n // 2, 1))
@@ -126,11 +126,11 @@ def numpy_normals(v, f):
 def test_face_normals_kernel_is_numpys_bit_for_bit(seed, center, monkeypatch):
     """The normals of the faces less a centre (none, one far off, one at a vertex)."""
     v, f = awkward_mesh(seed)
-    assert exterior_rays._kernel is not None
+    assert normals._kernel is not None
     with np.errstate(all="ignore"):
-        fast = exterior_rays.face_normals(v, f, center)
-        monkeypatch.setattr(exterior_rays, "_kernel", None)
-        slow = exterior_rays.face_normals(v, f, center)
+        fast = normals.face_normals(v, f, center)
+        monkeypatch.setattr(normals, "_kernel", None)
+        slow = normals.face_normals(v, f, center)
         want = numpy_normals(v - (0.0 if center is None else np.array(center)), f)
     assert fast.tobytes() == slow.tobytes() == np.ascontiguousarray(want).tobytes()
     assert np.any(fast != 0) and (center is not None or np.all(fast[:2] == 0))
@@ -158,7 +158,7 @@ def test_buffers_are_numpys_float32_of_the_vertices_less_the_centre():
 def test_normals_with_the_edges_swapped_fail_the_same_check():
     v, f = awkward_mesh(0)
     with np.errstate(all="ignore"):
-        assert exterior_rays.face_normals(v, f[:, [0, 2, 1]]).tobytes() != np.ascontiguousarray(numpy_normals(v, f)).tobytes()
+        assert normals.face_normals(v, f[:, [0, 2, 1]]).tobytes() != np.ascontiguousarray(numpy_normals(v, f)).tobytes()
 
 
 def test_kernels_refuse_bad_arrays():
@@ -173,9 +173,9 @@ def test_kernels_refuse_bad_arrays():
     with pytest.raises(TypeError):
         COMPILED.occluded(scene, np.zeros((2, 3), np.float32), np.zeros((1, 3), np.float32), np.empty(2, bool))
     with pytest.raises(ValueError, match="out of range"):
-        exterior_rays._kernel.unit_normals(np.zeros((3, 3)), np.array([[0, 1, 3]]), np.empty((1, 3)), np.zeros(3))
+        normals._kernel.unit_normals(np.zeros((3, 3)), np.array([[0, 1, 3]]), np.empty((1, 3)), np.zeros(3))
     with pytest.raises(TypeError):
-        exterior_rays._kernel.unit_normals(np.zeros((3, 3)), np.array([[0, 1, 2]]), np.empty((1, 3)), np.zeros(2))
+        normals._kernel.unit_normals(np.zeros((3, 3)), np.array([[0, 1, 2]]), np.empty((1, 3)), np.zeros(2))
 
 
 def test_a_library_that_does_not_load_falls_back_to_embreex(monkeypatch):
