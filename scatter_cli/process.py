@@ -76,7 +76,7 @@ def single_threaded_blas():
     multiplies only small matrices, and starting a thread per core costs every command
     about 0.1 CPU s at NumPy's import (its children inherit the setting). Call it before
     NumPy is imported; the Python API leaves the user's settings alone."""
-    if not any(name in os.environ for name in _BLAS_THREADS):
+    if not any(os.environ.get(name) for name in _BLAS_THREADS):
         os.environ["OPENBLAS_NUM_THREADS"] = "1"
 
 

@@ -8,6 +8,7 @@ so chunks can be made in any size, order or thread and the output is the same by
 
 from __future__ import annotations
 
+import functools
 import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -255,6 +256,7 @@ def uniforms(seed: int, start: int, stop: int):
     return np.random.Generator(_stream(seed, start)).random((stop - start, DRAWS_PER_POINT))
 
 
+@functools.lru_cache(maxsize=64)  # a batch asks for the same seed and start for every mesh
 def generator_state(seed: int, start: int):
     """(state high, state low, inc high, inc low): the 128-bit PCG64DXSM state, as four
     uint64, from which the kernel draws point ``start`` onwards."""

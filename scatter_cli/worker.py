@@ -64,6 +64,9 @@ def serve():
             _trim_heap()
 
 
+_made = set()  # output folders this process has made or found (a batch writes many files to one)
+
+
 def sample_file(input, output, fmt, setup, warn=None):
     """Sample ``input`` to ``output`` in format ``fmt`` as ``scatter sample INPUT -o OUTPUT`` does.
 
@@ -77,8 +80,9 @@ def sample_file(input, output, fmt, setup, warn=None):
 
     try:
         folder = os.path.dirname(output)
-        if folder:
+        if folder and folder not in _made:
             os.makedirs(folder, exist_ok=True)
+            _made.add(folder)
         run = api.sample_to(input, SampleOptions(**setup["options"]), output, fmt, setup.get("ascii", False),
                             crs=setup.get("crs"), warn=warn)
         return {"error": None, "count": run.size, "faces": int(run.info["faces"]), "area": float(run.info["area"])}

@@ -1,7 +1,6 @@
 """The process settings of the ``scatter`` command (scatter_cli/process.py)."""
 
 import os
-import subprocess
 import sys
 
 import pytest
@@ -79,12 +78,10 @@ def test_blas_runs_on_one_thread_unless_the_user_chose(tmp_path):
     variant) it starts more, and a count the user set is kept."""
     from scatter_cli.process import _BLAS_THREADS
 
-    clean = {k: v for k, v in os.environ.items() if k not in _BLAS_THREADS}
+    unset = dict.fromkeys(_BLAS_THREADS, "")  # empty: OpenBLAS's default, and not a user's choice
 
     def threads(mode, **extra):
-        out = subprocess.run([sys.executable, "-c", THREADS, mode], cwd=tmp_path, env={**clean, **extra},
-                             stdin=subprocess.DEVNULL, capture_output=True, check=True)
-        return int(out.stdout)
+        return int(run_user([sys.executable, "-c", THREADS, mode], cwd=tmp_path, env={**unset, **extra}).stdout)
 
     assert threads("single") == 1
     assert threads("default") > 1

@@ -76,7 +76,8 @@ def check_room(path, size):
     if size is None or is_stdout(path):
         return
     path = os.fspath(path)
-    if os.path.exists(path) and not os.path.isfile(path):
+    existing = _stat(path)
+    if existing is not None and not stat.S_ISREG(existing.st_mode):
         return
     folder = os.path.dirname(os.path.abspath(path))
     try:
@@ -86,6 +87,14 @@ def check_room(path, size):
     room = fs.f_bavail * fs.f_frsize
     if size > room:
         raise ScatterError(f"{path}: the output needs {_bytes(size)}, its file system has {_bytes(room)} free")
+
+
+def _stat(path):
+    """os.stat of ``path``, or None when there is nothing there."""
+    try:
+        return os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return None
 
 
 def _bytes(n):
@@ -102,8 +111,10 @@ def _bytes(n):
 def open_output(path):
     """A binary stream for ``path``; ``None`` or ``'-'`` is standard output.
 
-    Regular files are written atomically through a temporary file in the same folder.
-    Devices and pipes (``/dev/null``, a FIFO) are written in place.
+    Regular files are written atomically through a temporary file in the same folder
+    (``.NAME.XXXXXXXX.part``), which gets the mode an ordinary ``open(path, 'w')`` would
+    give: the existing file's, or 0666 less the umask. Devices and pipes (``/dev/null``,
+    a FIFO) are written in place.
     """
     if is_stdout(path):
         with writing(STDOUT):
@@ -111,24 +122,22 @@ def open_output(path):
             sys.stdout.buffer.flush()
         return
     path = os.fspath(path)
-    if os.path.exists(path) and not os.path.isfile(path):
-        if os.path.isdir(path):
+    existing = _stat(path)
+    if existing is not None and not stat.S_ISREG(existing.st_mode):
+        if stat.S_ISDIR(existing.st_mode):
             raise ScatterError(f"{path}: is a directory")
         with writing(path), open(path, "wb") as stream:
             yield stream
         return
     folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise ScatterError(f"{path}: cannot write: folder '{os.path.dirname(path) or '.'}' does not exist")
-    import tempfile  # here: importing it costs the start-up of commands that write nothing
-
     with writing(path):
-        fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".part", dir=folder)
+        fd, tmp = _create_temp(path, folder)
     try:
         with writing(path), os.fdopen(fd, "wb", buffering=1 << 20) as stream:
             yield stream
-        _set_mode(tmp, path)
         with writing(path):
+            if existing is not None:
+                os.chmod(tmp, stat.S_IMODE(existing.st_mode))
             os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -136,12 +145,21 @@ def open_output(path):
         raise
 
 
-def _set_mode(tmp, path):
-    """Give the new file the mode an ordinary ``open(path, 'w')`` would (mkstemp makes 0600)."""
-    if os.path.exists(path):
-        mode = stat.S_IMODE(os.stat(path).st_mode)
-    else:
-        umask = os.umask(0)
-        os.umask(umask)
-        mode = 0o666 & ~umask
-    os.chmod(tmp, mode)
+_NAME_CHARACTERS = "abcdefghijklmnopqrstuvwxyz0123456789_"
+_CREATE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+
+
+def _create_temp(path, folder):
+    """(fd, name) of a new file ``.NAME.XXXXXXXX.part`` beside ``path`` in ``folder``,
+    created with mode 0666 less the umask."""
+    base = os.path.basename(path)
+    for _ in range(100):
+        name = "".join(_NAME_CHARACTERS[b % len(_NAME_CHARACTERS)] for b in os.urandom(8))
+        tmp = os.path.join(folder, f".{base}.{name}.part")
+        try:
+            return os.open(tmp, _CREATE, 0o666), tmp
+        except FileExistsError:
+            continue
+        except (FileNotFoundError, NotADirectoryError):
+            raise ScatterError(f"{path}: cannot write: folder '{os.path.dirname(path) or '.'}' does not exist") from None
+    raise FileExistsError(f"no free temporary name beside {path}")
