@@ -121,7 +121,7 @@ class AttributeMaker:
         return self._face_normals(raw, groups)
 
     def _face_normals(self, raw, groups):
-        n = self._per_geometry(raw, groups, lambda gi, face, bary: self._tables["normal", gi][face], 3)
+        n = self._per_geometry(raw, groups, lambda gi, face, bary: np.take(self._tables["normal", gi], face, axis=0), 3)
         return self._to_world(raw.instance, n, np.flatnonzero(self._moved[raw.instance]))
 
     # -- orient: +Z onto the normal, then a spin about it from the seed ------------------
@@ -151,7 +151,7 @@ class AttributeMaker:
         if len(bad):
             sub = raw.take(bad)
             flat = self._per_geometry(sub, None if groups is None else self._groups(sub),
-                                      lambda gi, face, bary: self._tables["normal", gi][face], 3)
+                                      lambda gi, face, bary: np.take(self._tables["normal", gi], face, axis=0), 3)
             n[bad] = self._to_world(sub.instance, flat)
         return n
 

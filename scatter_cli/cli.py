@@ -3,8 +3,6 @@
 How the process runs (signals, exit codes, standard output) is :mod:`scatter_cli.process`.
 """
 
-from __future__ import annotations
-
 import json
 import sys
 import time
