@@ -8,6 +8,7 @@ SCATTER_NUMPY=1 runs the NumPy path even when they are built; SCATTER_NO_AVX512=
 the thinning kernel its plain distance loops instead of its AVX-512 ones.
 """
 
+import functools
 import importlib
 import os
 
@@ -33,11 +34,17 @@ def _flag(variable):
     return os.environ.get(variable, "") not in ("", "0")
 
 
+@functools.lru_cache(maxsize=1)
+def _cores() -> int:
+    """The machine's cores (os.cpu_count reads /sys each time)."""
+    return os.cpu_count() or 1
+
+
 def worker_count() -> int:
     """Threads for sampling and thinning: SCATTER_THREADS, else the cores, at most 4."""
     env = os.environ.get("SCATTER_THREADS", "").strip()
     if not env:
-        return max(1, min(4, os.cpu_count() or 1))
+        return max(1, min(4, _cores()))
     try:
         return max(1, int(env))
     except ValueError:
