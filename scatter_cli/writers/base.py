@@ -90,10 +90,11 @@ def check_room(path, size):
 
 
 def _stat(path):
-    """os.stat of ``path``, or None when there is nothing there."""
+    """os.stat of ``path``, or None when there is nothing there (or it cannot be seen:
+    then creating the file says why)."""
     try:
         return os.stat(path)
-    except (FileNotFoundError, NotADirectoryError):
+    except OSError:
         return None
 
 
