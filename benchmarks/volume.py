@@ -10,7 +10,11 @@ building its tree or scene each time) and its ratio to the fastest peer of the s
   (`--sign winding`). One tree for distance and parity; queries in chunks of CHUNK points.
 - peers: Open3D ``RaycastingScene.compute_signed_distance`` (float32, Embree), point-cloud-
   utils ``signed_distance_to_mesh`` (fast winding number signs), libigl
-  ``signed_distance`` with ``SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER``.
+  ``signed_distance`` with ``SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER``; with
+  ``--mesh-to-sdf PYTHON``, also mesh_to_sdf's ``mesh_to_sdf`` (its defaults: 100 scans
+  of 400 x 400, signs from the normals of the nearest scan points) in that Python (an
+  environment of its own: it pins old libraries; rendering headless through EGL), run
+  once without a warm-up (minutes), its time the whole subprocess.
 
 Then, on an open mesh (samples/hemisphere.off), each method's inside labels against the
 exact winding number (libigl's ``winding_number``, a sum of solid angles) at 2*10^4
@@ -18,6 +22,7 @@ points of its padded box: the share of points labelled differently, over all poi
 over those with |w - 0.5| >= 0.05.
 
     python benchmarks/volume.py [--points N] [--repeats R] [--peer-repeats R] [--meshes skull,sphere7]
+        [--mesh-to-sdf PYTHON]
 
 Figures: benchmarks/results/2026-12-03-volume-distance.md.
 """
@@ -25,7 +30,9 @@ Figures: benchmarks/results/2026-12-03-volume-distance.md.
 import argparse
 import os
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -120,6 +127,33 @@ def igl_sdf(v, f, p):
     return s, s < 0
 
 
+M2S_SCRIPT = r"""
+import os, sys
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+import numpy as np, trimesh
+from mesh_to_sdf import mesh_to_sdf
+d = np.load(sys.argv[1])
+s = mesh_to_sdf(trimesh.Trimesh(d["v"], d["f"], process=False), d["p"])
+np.save(sys.argv[2], np.asarray(s, dtype=np.float64))
+"""
+
+
+def mesh_to_sdf_in(python):
+    """mesh_to_sdf's signed distances (negative inside), computed in ``python``."""
+
+    def run(v, f, p):
+        with tempfile.TemporaryDirectory() as tmp:
+            np.savez(f"{tmp}/in.npz", v=v, f=f, p=p)
+            subprocess.run([python, "-c", M2S_SCRIPT, f"{tmp}/in.npz", f"{tmp}/out.npy"], check=True,
+                           stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+            s = np.load(f"{tmp}/out.npy")
+        return s, s < 0
+
+    return run
+
+
+SLOW = ("mesh_to_sdf",)  # run once, without a warm-up
+
 OURS = {"scatter distance": ours_distance, "scatter parity (3 rays)": ours_parity,
         "scatter distance + parity": ours_distance_parity}
 if winding is not None:
@@ -128,9 +162,10 @@ PEERS = {"Open3D compute_signed_distance": open3d_sdf, "point-cloud-utils signed
          "libigl signed_distance (fast winding)": igl_sdf}
 
 
-def timed(fn, v, f, p, repeats):
+def timed(fn, v, f, p, repeats, warm=True):
     """(median s, the runs' s, the last output) of ``repeats`` runs after a warm-up"""
-    fn(v, f, p[:10000])  # warm-up
+    if warm:
+        fn(v, f, p[:10000])
     times = []
     for _ in range(repeats):
         t = time.perf_counter()
@@ -147,7 +182,8 @@ def speed(name, n, repeats, peer_repeats):
     rows, ref = [], None
     for label, fn in {**OURS, **PEERS}.items():
         try:
-            med, times, out = timed(fn, v, f, p, repeats if label in OURS else peer_repeats)
+            slow = label.startswith(SLOW)
+            med, times, out = timed(fn, v, f, p, 1 if slow else repeats if label in OURS else peer_repeats, not slow)
         except ImportError as e:
             print(f"- {label}: not installed ({e})")
             continue
@@ -195,7 +231,10 @@ def main():
     ap.add_argument("--meshes", default="skull,sphere7")
     ap.add_argument("--label-points", type=int, default=20000)
     ap.add_argument("--threads", type=int, default=None, help="SCATTER_THREADS for ours (default: its default)")
+    ap.add_argument("--mesh-to-sdf", metavar="PYTHON", help="a Python with mesh-to-sdf installed: run it too")
     args = ap.parse_args()
+    if args.mesh_to_sdf:
+        PEERS["mesh_to_sdf mesh_to_sdf (scans)"] = mesh_to_sdf_in(args.mesh_to_sdf)
     if args.threads:
         os.environ["SCATTER_THREADS"] = str(args.threads)
     print(f"load before: {open('/proc/loadavg').read().strip()}; cores: {os.cpu_count()}; "
