@@ -5,10 +5,10 @@
  * subtree is skipped, a near leaf adds its triangles' solid angles one by one, a near
  * inner node opens), every term added to a sum started at 0. Every float64 operation
  * is the NumPy code's, in its order (built with -ffp-contract=off), the arctangent
- * included (Cephes' atan, + - * / only), so the two paths give the same bytes. Four
- * neighbouring points walk together, one in each lane of a vector (see winding_4). The
- * points are shared among the threads in blocks; each point's sum is its own, so the
- * result does not depend on the threads. The GIL is released while they run. The links
+ * included (Cephes' atan, + - * / only), so the two paths give the same bytes. The
+ * points walk in a Morton order of their own (walk_order), four neighbours together, one
+ * in each lane of a vector (see winding_4), shared among the threads in blocks; each
+ * point's sum is its own, so the result depends on neither that order nor the threads. The GIL is released while they run. The links
  * are checked first: a subtree or a leaf's triangles out of range raise ValueError.
  */
 #define PY_SSIZE_T_CLEAN
@@ -42,6 +42,7 @@ typedef struct {
 typedef struct {
     const double *points, *nodes, *tri;
     const Hot *hot;
+    const int64_t *walk; /* the points' indices in the order they walk */
     int64_t n, count;
     int order;
     double *out;
@@ -137,38 +138,58 @@ INLINE v4d far_term4(const double *f, v4d rx, v4d ry, v4d rz, v4d d2, int order)
     return w * INV4PI;
 }
 
-/* the winding numbers at the points q[0..3] (m of them real, the rest copies of q[0]) into out */
-TARGETS static void winding_4(const Work *w, const double *q, int64_t m, double *out)
+/* the lanes set in m, as bits */
+INLINE unsigned bits4(v4l m) { return (unsigned)(m[0] & 1) | (unsigned)(m[1] & 2) | (unsigned)(m[2] & 4) | (unsigned)(m[3] & 8); }
+
+/* lane masks by their bits */
+static const v4l LANES[16] = {
+#define L(b) {-(int64_t)((b) & 1), -(int64_t)((b) >> 1 & 1), -(int64_t)((b) >> 2 & 1), -(int64_t)((b) >> 3 & 1)}
+    L(0), L(1), L(2), L(3), L(4), L(5), L(6), L(7), L(8), L(9), L(10), L(11), L(12), L(13), L(14), L(15)
+#undef L
+};
+
+/* the winding numbers at the points of indices at[0..3] (m of them real, the rest copies
+ * of at[0]) into out at the same indices. Lane l's own walk is at node next[l]; the
+ * lanes there are "here". The next node is i + 1 when a near lane opens this one (a
+ * branch, which the processor predicts ahead of the node's distances), else the least
+ * next[l]. */
+TARGETS static void winding_4(const Work *w, const int64_t *at, int64_t m)
 {
     v4d qx, qy, qz, acc = {0, 0, 0, 0};
     for (int l = 0; l < 4; l++) {
-        const double *p = q + 3 * (l < m ? l : 0);
+        const double *p = w->points + 3 * at[l < m ? l : 0];
         qx[l] = p[0], qy[l] = p[1], qz[l] = p[2];
     }
-    v4l next = {0, 0, 0, 0};
-    int64_t i = 0;
+    int64_t next[4] = {0, 0, 0, 0}, i = 0;
     while (i < w->count) {
         const Hot *h = w->hot + i;
-        v4l here = next == i;
+        unsigned here = 0;
+        int64_t other = INT64_MAX; /* the least next of the lanes elsewhere */
+        for (int l = 0; l < 4; l++) {
+            here |= (unsigned)(next[l] == i) << l;
+            other = next[l] != i && next[l] < other ? next[l] : other;
+        }
         v4d rx = h->c[0] - qx, ry = h->c[1] - qy, rz = h->c[2] - qz;
         v4d d2 = rx * rx + ry * ry + rz * rz;
-        v4l far = (d2 > h->far2) & here, near = here & ~far;
-        if (far[0] | far[1] | far[2] | far[3])
-            acc = pick(far, acc + far_term4(w->nodes + FIELDS * i, rx, ry, rz, d2, w->order), acc);
-        if (h->count > 0) {
-            if (near[0] | near[1] | near[2] | near[3])
-                for (int64_t k = 0; k < h->count; k++)
-                    acc = pick(near, acc + triangle_term4(w->tri + 9 * (h->first + k), qx, qy, qz), acc);
-            next = (v4l)pick(here, (v4d)(v4l){h->skip, h->skip, h->skip, h->skip}, (v4d)next);
-        } else
-            next = (v4l)pick(far, (v4d)(v4l){h->skip, h->skip, h->skip, h->skip},
-                             pick(here, (v4d)(v4l){i + 1, i + 1, i + 1, i + 1}, (v4d)next));
-        i = next[0];
-        for (int l = 1; l < 4; l++)
-            i = next[l] < i ? next[l] : i;
+        unsigned far = bits4(d2 > h->far2) & here, near = here & ~far;
+        int64_t skip = h->skip;
+        if (far)
+            acc = pick(LANES[far], acc + far_term4(w->nodes + FIELDS * i, rx, ry, rz, d2, w->order), acc);
+        if (h->count == 0 && near) {
+            for (int l = 0; l < 4; l++)
+                next[l] = far >> l & 1 ? skip : near >> l & 1 ? i + 1 : next[l];
+            i = i + 1;
+            continue;
+        }
+        if (near)
+            for (int64_t k = 0; k < h->count; k++)
+                acc = pick(LANES[near], acc + triangle_term4(w->tri + 9 * (h->first + k), qx, qy, qz), acc);
+        for (int l = 0; l < 4; l++)
+            next[l] = here >> l & 1 ? skip : next[l];
+        i = skip < other ? skip : other;
     }
     for (int l = 0; l < m; l++)
-        out[l] = acc[l] != acc[l] ? NAN : acc[l];
+        w->out[at[l]] = acc[l] != acc[l] ? NAN : acc[l];
 }
 
 static void *run(void *arg)
@@ -180,8 +201,47 @@ static void *run(void *arg)
         if (i0 >= w->n)
             return NULL;
         for (int64_t i = i0; i < i1; i += 4)
-            winding_4(w, w->points + 3 * i, i1 - i < 4 ? i1 - i : 4, w->out + i);
+            winding_4(w, w->walk + i, i1 - i < 4 ? i1 - i : 4);
     }
+}
+
+/* walk (n,): the indices of the points p (n, 3) in the Morton order of their top 10 bits
+ * an axis (winding._morton's codes >> 33), so that neighbouring points walk together
+ * (any order gives the same sums); 0 when out of memory */
+static int walk_order(const double *p, int64_t n, int64_t *walk)
+{
+    size_t size = (size_t)(n > 0 ? n : 1);
+    uint64_t *code = malloc(sizeof(uint64_t) * size);
+    uint32_t *key = malloc(sizeof(uint32_t) * 2 * size);
+    int64_t *tmp = malloc(sizeof(int64_t) * size);
+    int ok = code && key && tmp;
+    if (ok) {
+        morton21(p, n, code);
+        uint32_t *kf = key, *kt = key + size;
+        int64_t *of = walk, *ot = tmp;
+        for (int64_t i = 0; i < n; i++)
+            kf[i] = (uint32_t)(code[i] >> 33), of[i] = i;
+        for (int shift = 0; shift < 30; shift += 10) { /* least significant digit first, stable */
+            int64_t count[1025] = {0};
+            for (int64_t i = 0; i < n; i++)
+                count[(kf[i] >> shift & 1023) + 1]++;
+            for (int d = 0; d < 1024; d++)
+                count[d + 1] += count[d];
+            for (int64_t i = 0; i < n; i++) {
+                int64_t to = count[kf[i] >> shift & 1023]++;
+                kt[to] = kf[i], ot[to] = of[i];
+            }
+            uint32_t *ks = kf;
+            kf = kt, kt = ks;
+            int64_t *os = of;
+            of = ot, ot = os;
+        }
+        if (of != walk)
+            for (int64_t i = 0; i < n; i++)
+                walk[i] = of[i];
+    }
+    free(code), free(key), free(tmp);
+    return ok;
 }
 
 /* the links of a preorder tree: each node's subtree ends after it and within the tree,
@@ -237,20 +297,21 @@ static PyObject *winding(PyObject *self, PyObject *args)
     }
     const double *nodes = PyArray_DATA(na);
     const int64_t *links = PyArray_DATA(la);
-    Work w = {PyArray_DATA(pa), nodes, PyArray_DATA(ta), NULL, PyArray_DIM(pa, 0), PyArray_DIM(na, 0), order,
+    Work w = {PyArray_DATA(pa), nodes, PyArray_DATA(ta), NULL, NULL, PyArray_DIM(pa, 0), PyArray_DIM(na, 0), order,
               PyArray_DATA(oa), 0};
     int ok, memory = 1;
     Py_BEGIN_ALLOW_THREADS
     ok = links_ok(links, w.count, PyArray_DIM(ta, 0));
-    Hot *hot = ok ? malloc(sizeof(Hot) * (size_t)(w.count > 0 ? w.count : 1)) : NULL;
-    memory = !ok || hot != NULL;
-    if (hot) {
+    Hot *hot = ok ? aligned_alloc(64, sizeof(Hot) * (size_t)(w.count > 0 ? w.count : 1)) : NULL;
+    int64_t *walk = ok ? malloc(sizeof(int64_t) * (size_t)(w.n > 0 ? w.n : 1)) : NULL;
+    memory = !ok || (hot && walk && walk_order(w.points, w.n, walk));
+    if (ok && memory) {
         for (int64_t i = 0; i < w.count; i++) {
             const double *f = nodes + FIELDS * i;
             double t = beta * f[3];
             hot[i] = (Hot){{f[0], f[1], f[2]}, t * t, links[3 * i], links[3 * i + 1], links[3 * i + 2], 0};
         }
-        w.hot = hot;
+        w.hot = hot, w.walk = walk;
         int64_t blocks = (w.n + BLOCK - 1) / BLOCK;
         int count = threads > MAX_THREADS ? MAX_THREADS : threads;
         if (count > blocks)
@@ -263,8 +324,8 @@ static PyObject *winding(PyObject *self, PyObject *args)
         for (int k = 1; k < count; k++)
             if (started[k])
                 pthread_join(id[k], NULL);
-        free(hot);
     }
+    free(hot), free(walk);
     Py_END_ALLOW_THREADS
     if (!memory)
         return PyErr_NoMemory();

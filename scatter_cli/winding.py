@@ -34,7 +34,8 @@ _kernel = native.kernel("_cwinding")
 LEAF = 8  # triangles at most in a leaf
 ACCURACY = 2.0  # a node is far when farther than this times its radius (Barill's beta)
 ORDER = 2  # terms of the far-field expansion: 0 (dipole), 1, 2
-CHUNK = 65536  # points per call of the kernel (and per step of the NumPy path)
+CHUNK = 1 << 18  # points per call of the kernel (larger: nearer neighbours walk together)
+NUMPY_CHUNK = 1 << 16  # points per step of the NumPy path, at most CHUNK
 FIELDS = 28  # float64 fields of a node, see _node_fields
 
 INV2PI = 0.15915494309189535  # 1 / (2 pi), as in _cwinding.c
@@ -97,17 +98,16 @@ def winding_numbers(tree: WindingTree, points, *, accuracy: float = ACCURACY, or
     if order not in (0, 1, 2) or not accuracy > 0:
         raise ValueError("winding_numbers: order is 0, 1 or 2 and accuracy positive")
     out = np.zeros(len(points))
-    for at in range(0, len(points), CHUNK):
+    if _kernel is not None:  # (it walks the points in an order of its own)
+        for at in range(0, len(points), CHUNK):
+            _kernel.winding(points[at:at + CHUNK], tree.nodes, tree.links, tree.triangles, float(accuracy),
+                            int(order), native.worker_count(), out[at:at + CHUNK])
+        return out
+    step = min(CHUNK, NUMPY_CHUNK)
+    for at in range(0, len(points), step):
         # in Morton order: neighbouring points walk the same nodes (the sums do not change)
-        near = at + _stable_order(_morton(points[at:at + CHUNK]))
-        part = points[near]
-        if _kernel is not None:
-            w = np.empty(len(part))
-            _kernel.winding(part, tree.nodes, tree.links, tree.triangles, float(accuracy), int(order),
-                            native.worker_count(), w)
-        else:
-            w = _numpy_winding(part, tree, float(accuracy), int(order))
-        out[near] = w
+        near = at + _stable_order(_morton(points[at:at + step]))
+        out[near] = _numpy_winding(points[near], tree, float(accuracy), int(order))
     return out
 
 
