@@ -8,8 +8,9 @@
  * included (Cephes' atan, + - * / only), so the two paths give the same bytes. The
  * points walk in a Morton order of their own (walk_order), four neighbours together, one
  * in each lane of a vector (see winding_4), shared among the threads in blocks; each
- * point's sum is its own, so the result depends on neither that order nor the threads. The GIL is released while they run. The links
- * are checked first: a subtree or a leaf's triangles out of range raise ValueError.
+ * point's sum is its own, so the result depends on neither that order nor the threads.
+ * The GIL is released while they run. The links are checked first: a subtree or a
+ * leaf's triangles out of range, or subtrees that do not nest, raise ValueError.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -25,6 +26,7 @@
 #define FIELDS 28
 #define MAX_THREADS 8
 #define BLOCK 256 /* points a thread takes at a time */
+#define DEPTH 256 /* subtrees at most, one in the other (a WindingTree: below 128) */
 
 static const double INV2PI = 0.15915494309189535, INV4PI = 0.07957747154594767;
 static const double PIO2 = 1.5707963267948966, PIO4 = 0.7853981633974483, PI = 3.141592653589793;
@@ -149,10 +151,10 @@ static const v4l LANES[16] = {
 };
 
 /* the winding numbers at the points of indices at[0..3] (m of them real, the rest copies
- * of at[0]) into out at the same indices. Lane l's own walk is at node next[l]; the
- * lanes there are "here". The next node is i + 1 when a near lane opens this one (a
- * branch, which the processor predicts ahead of the node's distances), else the least
- * next[l]. */
+ * of at[0]) into out at the same indices. The lanes whose own walk is at node i are the
+ * bits "here". When some lanes open node i and others skip its subtree, the walk goes
+ * on into the subtree with the first and keeps (where the subtree ends, all of them) on
+ * a stack; the subtrees nest (links_ok), so every lane's walk passes there. */
 TARGETS static void winding_4(const Work *w, const int64_t *at, int64_t m)
 {
     v4d qx, qy, qz, acc = {0, 0, 0, 0};
@@ -160,33 +162,29 @@ TARGETS static void winding_4(const Work *w, const int64_t *at, int64_t m)
         const double *p = w->points + 3 * at[l < m ? l : 0];
         qx[l] = p[0], qy[l] = p[1], qz[l] = p[2];
     }
-    int64_t next[4] = {0, 0, 0, 0}, i = 0;
+    int64_t end[DEPTH];
+    unsigned lanes[DEPTH], here = 15;
+    int top = 0;
+    int64_t i = 0;
     while (i < w->count) {
         const Hot *h = w->hot + i;
-        unsigned here = 0;
-        int64_t other = INT64_MAX; /* the least next of the lanes elsewhere */
-        for (int l = 0; l < 4; l++) {
-            here |= (unsigned)(next[l] == i) << l;
-            other = next[l] != i && next[l] < other ? next[l] : other;
-        }
         v4d rx = h->c[0] - qx, ry = h->c[1] - qy, rz = h->c[2] - qz;
         v4d d2 = rx * rx + ry * ry + rz * rz;
         unsigned far = bits4(d2 > h->far2) & here, near = here & ~far;
-        int64_t skip = h->skip;
         if (far)
             acc = pick(LANES[far], acc + far_term4(w->nodes + FIELDS * i, rx, ry, rz, d2, w->order), acc);
-        if (h->count == 0 && near) {
-            for (int l = 0; l < 4; l++)
-                next[l] = far >> l & 1 ? skip : near >> l & 1 ? i + 1 : next[l];
+        if (h->count == 0 && near) { /* (a branch: the processor walks on before the distances are known) */
+            if (far)
+                end[top] = h->skip, lanes[top] = here, top++, here = near;
             i = i + 1;
             continue;
         }
         if (near)
             for (int64_t k = 0; k < h->count; k++)
                 acc = pick(LANES[near], acc + triangle_term4(w->tri + 9 * (h->first + k), qx, qy, qz), acc);
-        for (int l = 0; l < 4; l++)
-            next[l] = here >> l & 1 ? skip : next[l];
-        i = skip < other ? skip : other;
+        i = h->skip;
+        while (top > 0 && end[top - 1] == i)
+            here = lanes[--top];
     }
     for (int l = 0; l < m; l++)
         w->out[at[l]] = acc[l] != acc[l] ? NAN : acc[l];
@@ -244,14 +242,22 @@ static int walk_order(const double *p, int64_t n, int64_t *walk)
     return ok;
 }
 
-/* the links of a preorder tree: each node's subtree ends after it and within the tree,
- * a leaf's triangles lie within the triangles */
+/* the links of a preorder tree: each node's subtree ends after it, within the tree and
+ * within every subtree it lies in, at most DEPTH subtrees deep; a leaf's triangles lie
+ * within the triangles */
 static int links_ok(const int64_t *links, int64_t count, int64_t ntri)
 {
+    int64_t end[DEPTH]; /* the ends of the subtrees node i lies in, innermost last */
+    int depth = 0;
     for (int64_t i = 0; i < count; i++) {
         const int64_t *l = links + 3 * i;
         if (l[0] <= i || l[0] > count || l[1] < 0 || l[1] > ntri || l[2] < 0 || l[2] > ntri - l[1])
             return 0;
+        while (depth > 0 && end[depth - 1] <= i)
+            depth--;
+        if (depth == DEPTH || (depth > 0 && l[0] > end[depth - 1]))
+            return 0;
+        end[depth++] = l[0];
     }
     return 1;
 }
@@ -330,7 +336,7 @@ static PyObject *winding(PyObject *self, PyObject *args)
     if (!memory)
         return PyErr_NoMemory();
     if (!ok) {
-        PyErr_SetString(PyExc_ValueError, "links: a subtree or a leaf's triangles out of range");
+        PyErr_SetString(PyExc_ValueError, "links: a subtree or a leaf's triangles out of range, or subtrees not nested");
         return NULL;
     }
     Py_RETURN_NONE;

@@ -287,11 +287,14 @@ def test_kernel_refuses_bad_arrays():
     good = kernel_args(tree, points)
     KERNEL.winding(*good)
     bad_links = []
+    inner = tree.links[1, 0]  # the end of the root's left subtree: a node inside it ends after it
     for row, col, value in ((0, 0, 0), (3, 0, 3), (0, 0, len(tree.links) + 1), (len(tree.links) - 1, 1, -1),
-                            (len(tree.links) - 1, 2, len(tree.triangles)), (len(tree.links) - 1, 2, -1)):
+                            (len(tree.links) - 1, 2, len(tree.triangles)), (len(tree.links) - 1, 2, -1),
+                            (2, 0, inner + 1)):
         links = tree.links.copy()
         links[row, col] = value
         bad_links.append(links)
+    assert 2 < inner < len(tree.links) - 1
     readonly = np.empty(5)
     readonly.flags.writeable = False
     bad = [
@@ -347,7 +350,13 @@ def test_fuzzed_links_are_refused_or_walked_safely(rows):
         skip, first, count = links.T
         i = np.arange(len(links))
         assert np.any((skip <= i) | (skip > len(links)) | (first < 0) | (first > 64) | (count < 0)
-                      | (count > 64 - first))
+                      | (count > 64 - first)) or not nested(skip)
+
+
+def nested(skip):
+    """Whether the subtrees [i, skip[i]) of a preorder tree nest: none ends after one it
+    starts in."""
+    return all(skip[j] <= skip[i] for i in range(len(skip)) for j in range(i + 1, min(skip[i], len(skip))))
 
 
 @needs_kernel
