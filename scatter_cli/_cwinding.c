@@ -342,6 +342,75 @@ static PyObject *winding(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* ---- the tree's radii: winding._radii's values ---- */
+
+static inline double norm3(double x, double y, double z) { return sqrt(x * x + y * y + z * z); }
+
+/* np.maximum's: NaN wins */
+static inline double most(double m, double x) { return x > m || x != x ? x : m; }
+
+PyDoc_STRVAR(radii_doc, "radii(triangles (T, 9) float64, centre (N, 3) float64, start, end, skip (N,) int64, out (N,) "
+                        "float64): winding._radii's radii into out");
+
+static PyObject *radii_py(PyObject *self, PyObject *args)
+{
+    PyObject *ot, *oc, *os, *oe, *ok, *oo;
+    PyArrayObject *ta, *ca, *sa, *ea, *ka, *oa;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOOOO", &ot, &oc, &os, &oe, &ok, &oo) || !get2(ot, NPY_FLOAT64, 9, &ta, "triangles") ||
+        !get2(oc, NPY_FLOAT64, 3, &ca, "centre") || !get(os, NPY_INT64, PyArray_DIM(ca, 0), &sa, "start") ||
+        !get(oe, NPY_INT64, PyArray_DIM(ca, 0), &ea, "end") || !get(ok, NPY_INT64, PyArray_DIM(ca, 0), &ka, "skip") ||
+        !get(oo, NPY_FLOAT64, PyArray_DIM(ca, 0), &oa, "out"))
+        return NULL;
+    if (!PyArray_ISWRITEABLE(oa)) {
+        PyErr_SetString(PyExc_ValueError, "out: not writeable");
+        return NULL;
+    }
+    const double *tri = PyArray_DATA(ta), *c = PyArray_DATA(ca);
+    const int64_t *start = PyArray_DATA(sa), *end = PyArray_DATA(ea), *skip = PyArray_DATA(ka);
+    double *r = PyArray_DATA(oa);
+    int64_t n = PyArray_DIM(ca, 0), t = PyArray_DIM(ta, 0);
+    for (int64_t k = 0; k < n; k++)
+        if (start[k] < 0 || start[k] >= end[k] || end[k] > t) {
+            PyErr_SetString(PyExc_ValueError, "start, end: a node's triangles empty or out of range");
+            return NULL;
+        }
+    double *g = malloc(sizeof(double) * 4 * (size_t)(t > 0 ? t : 1)); /* centroid, and the farthest corner from it */
+    if (!g)
+        return PyErr_NoMemory();
+    Py_BEGIN_ALLOW_THREADS
+    for (int64_t i = 0; i < t; i++) {
+        const double *v = tri + 9 * i;
+        double *gi = g + 4 * i;
+        for (int a = 0; a < 3; a++)
+            gi[a] = (v[a] + v[3 + a] + v[6 + a]) / 3.0;
+        gi[3] = norm3(v[0] - gi[0], v[1] - gi[1], v[2] - gi[2]);
+        gi[3] = most(gi[3], norm3(v[3] - gi[0], v[4] - gi[1], v[5] - gi[2]));
+        gi[3] = most(gi[3], norm3(v[6] - gi[0], v[7] - gi[1], v[8] - gi[2]));
+    }
+    for (int64_t k = 0; k < n; k++) {
+        const double *ck = c + 3 * k;
+        double m = 0.0;
+        if (skip[k] == k + 1) /* a leaf: its farthest corner */
+            for (int64_t i = start[k]; i < end[k]; i++)
+                for (int a = 0; a < 3; a++) {
+                    const double *v = tri + 9 * i + 3 * a;
+                    double x = norm3(v[0] - ck[0], v[1] - ck[1], v[2] - ck[2]);
+                    m = i == start[k] && a == 0 ? x : most(m, x);
+                }
+        else /* its triangles' spheres */
+            for (int64_t i = start[k]; i < end[k]; i++) {
+                const double *gi = g + 4 * i;
+                double x = norm3(gi[0] - ck[0], gi[1] - ck[1], gi[2] - ck[2]) + gi[3];
+                m = i == start[k] ? x : most(m, x);
+            }
+        r[k] = m != m ? NAN : m;
+    }
+    Py_END_ALLOW_THREADS
+    free(g);
+    Py_RETURN_NONE;
+}
+
 PyDoc_STRVAR(morton_doc, "morton(points (n, 3) float64) -> (n,) uint64: winding._morton's codes.");
 
 static PyObject *morton_py(PyObject *self, PyObject *args)
@@ -394,6 +463,7 @@ static PyObject *order_py(PyObject *self, PyObject *args)
 static PyMethodDef methods[] = {
     {"winding", winding, METH_VARARGS, winding_doc},
     {"morton", morton_py, METH_VARARGS, morton_doc},
+    {"radii", radii_py, METH_VARARGS, radii_doc},
     {"order", order_py, METH_VARARGS, order_doc},
     {NULL, NULL, 0, NULL},
 };

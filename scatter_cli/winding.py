@@ -289,10 +289,13 @@ def _radii(tri, centre, start, end, skip):
     """(N,) float64: at the leaves, the distance from the centre to the farthest corner of
     their triangles; above, a bound of it by the triangles' own spheres (about their
     centroids), one depth at a time (each triangle lies in one node of each depth down to
-    its leaf)."""
+    its leaf). The kernel's ``radii`` computes the same values."""
     n = len(skip)
     r = np.zeros(n)
     if not n:
+        return r
+    if _kernel is not None:
+        _kernel.radii(np.ascontiguousarray(tri.reshape(-1, 9)), np.ascontiguousarray(centre), start, end, skip, r)
         return r
     depth = _depths(skip)
     leaf = np.flatnonzero(skip == np.arange(n) + 1)
@@ -314,6 +317,7 @@ def _radii(tri, centre, start, end, skip):
         ox, oy, oz = gx[at] - cx[who], gy[at] - cy[who], gz[at] - cz[who]
         far = np.sqrt(ox * ox + oy * oy + oz * oz) + rho[at]
         r[k] = np.maximum.reduceat(far, np.cumsum(end[k] - start[k]) - (end[k] - start[k]))
+    r[np.isnan(r)] = np.nan  # (one NaN, whichever the operations made: a NaN radius never makes a node far)
     return r
 
 

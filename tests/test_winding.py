@@ -320,6 +320,7 @@ coordinate = st.one_of(finite, st.sampled_from([0.0, 1e-300, -1e-300, 1e300, -1e
        st.lists(st.tuples(*[coordinate] * 3), min_size=1, max_size=30),
        st.sampled_from([0.3, 1.0, 2.0]), st.integers(0, 2))
 def test_fuzzed_soups_give_the_same_bytes_on_both_paths(tris, points, accuracy, order):
+    """Winding numbers, and the trees built with the kernel's helpers and without."""
     tri = np.array(tris, dtype=np.float64).reshape(-1, 3, 3)
     tri = np.concatenate([tri, tri[:3, [0, 0, 1]]])  # and some zero-area copies
     points = np.array(points, dtype=np.float64)
@@ -329,9 +330,11 @@ def test_fuzzed_soups_give_the_same_bytes_on_both_paths(tris, points, accuracy, 
         saved, winding._kernel = winding._kernel, None
         try:
             n = winding_numbers(tree, points, accuracy=accuracy, order=order)
+            numpy_tree = WindingTree(tri)
         finally:
             winding._kernel = saved
     assert k.tobytes() == n.tobytes()
+    assert tree.nodes.tobytes() == numpy_tree.nodes.tobytes() and tree.links.tobytes() == numpy_tree.links.tobytes()
 
 
 @needs_kernel
@@ -397,3 +400,22 @@ def test_kernel_morton_refuses_bad_arrays():
     for bad in (np.array([2**63], np.uint64), np.zeros(3, np.int64)):
         with pytest.raises((TypeError, ValueError)):
             KERNEL.order(bad)
+
+
+@needs_kernel
+def test_kernel_radii_refuses_bad_arrays():
+    tree = WindingTree(icosphere(1))
+    skip, start, count = (tree.links[:, k].copy() for k in range(3))
+    end = np.array([(start[k:skip[k]] + count[k:skip[k]]).max() for k in range(len(skip))])  # its last leaf's end
+    centre = np.ascontiguousarray(tree.nodes[:, :3])
+    out = np.empty(len(skip))
+    KERNEL.radii(tree.triangles, centre, start, end, skip, out)
+    assert out.tobytes() == tree.nodes[:, 3].tobytes()
+    empty, beyond = end.copy(), end.copy()
+    empty[3], beyond[-1] = start[3], len(tree.triangles) + 1
+    for args in ((tree.triangles, centre, start, empty, skip, out), (tree.triangles, centre, start, beyond, skip, out),
+                 (tree.triangles, centre, start - 1, end, skip, out), (tree.triangles, centre[:-1], start, end, skip, out),
+                 (tree.triangles.reshape(-1, 3), centre, start, end, skip, out),
+                 (tree.triangles, centre, start, end, skip, np.empty(len(skip), np.float32))):
+        with pytest.raises((TypeError, ValueError)):
+            KERNEL.radii(*args)
