@@ -91,7 +91,7 @@ INLINE v4d atan2_4(v4d y, v4d x)
     v4d ay = abs4(y), ax = abs4(x), t, arg, z, a;
     t = pick(ax == 0, (v4d){INFINITY, INFINITY, INFINITY, INFINITY}, ay / ax);
     v4l small = t <= 0.66, large = t > TAN3PIO8;
-    arg = pick(small, t, pick(large, 1.0 / t, (t - 1.0) / (t + 1.0)));
+    arg = pick(small, t, pick(large, (v4d){1, 1, 1, 1}, t - 1.0) / pick(large, t, t + 1.0)); /* (one division) */
     z = arg * arg;
     z = z * ((((-8.750608600031904122785e-01 * z + -1.615753718733365076637e+01) * z + -7.500855792314704667340e+01) * z +
               -1.228866684490136173410e+02) * z + -6.485021904942025371773e+01) /
@@ -411,6 +411,86 @@ static PyObject *radii_py(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* ---- the tree's sums: winding._subtree_sums's values ---- */
+
+PyDoc_STRVAR(sums_doc, "subtree_sums(rows (K, T) float64, start (N,) int64, skip (N,) int64, out (N, K) float64): "
+                       "winding._subtree_sums's sums into out (a leaf: at most 8 triangles)");
+
+static PyObject *sums_py(PyObject *self, PyObject *args)
+{
+    PyObject *orow, *os, *ok, *oo;
+    PyArrayObject *ra, *sa, *ka, *oa;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOO", &orow, &os, &ok, &oo) || !get(orow, NPY_FLOAT64, -1, &ra, "rows") ||
+        !get(os, NPY_INT64, -1, &sa, "start") || !get(ok, NPY_INT64, PyArray_SIZE(sa), &ka, "skip"))
+        return NULL;
+    if (PyArray_NDIM(ra) != 2) {
+        PyErr_SetString(PyExc_ValueError, "rows: not (K, T)");
+        return NULL;
+    }
+    int64_t K = PyArray_DIM(ra, 0), T = PyArray_DIM(ra, 1), n = PyArray_SIZE(sa);
+    if (!get2(oo, NPY_FLOAT64, K, &oa, "out"))
+        return NULL;
+    if (PyArray_DIM(oa, 0) != n || !PyArray_ISWRITEABLE(oa)) {
+        PyErr_SetString(PyExc_ValueError, "out: not (N, K) or not writeable");
+        return NULL;
+    }
+    const double *rows = PyArray_DATA(ra);
+    const int64_t *start = PyArray_DATA(sa), *skip = PyArray_DATA(ka);
+    double *out = PyArray_DATA(oa);
+    /* the leaves' triangles as np.add.reduceat(rows, start[leaf], axis=1) takes them: from
+     * a leaf's start to the next leaf's (the last: to T) */
+    int64_t last = -1; /* the leaf before, or -1 */
+    for (int64_t k = 0; k <= n; k++) {
+        if (k < n && skip[k] != k + 1) {
+            if (k + 1 >= n || skip[k + 1] < 0 || skip[k + 1] >= n) {
+                PyErr_SetString(PyExc_ValueError, "skip: an inner node's children out of range");
+                return NULL;
+            }
+            continue;
+        }
+        if (k < n && (start[k] < 0 || start[k] >= T)) {
+            PyErr_SetString(PyExc_ValueError, "start: out of range");
+            return NULL;
+        }
+        if (last >= 0) {
+            int64_t to = k < n ? start[k] : T, size = to > start[last] ? to - start[last] : 1;
+            if (size > 8) {
+                PyErr_SetString(PyExc_ValueError, "start: a leaf of more than 8 triangles");
+                return NULL;
+            }
+        }
+        last = k;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    last = -1;
+    for (int64_t k = 0; k <= n; k++) {
+        if (k < n && skip[k] != k + 1)
+            continue;
+        if (last >= 0) {
+            int64_t s = start[last], to = k < n ? start[k] : T, e = to > s ? to : s + 1;
+            for (int64_t q = 0; q < K; q++) {
+                const double *r = rows + q * T;
+                double x = r[s];
+                if (e - s > 1) { /* the first, plus the sum of the others (numpy's pairwise sum below 8 terms) */
+                    double rest = r[s + 1];
+                    for (int64_t t = s + 2; t < e; t++)
+                        rest = rest + r[t];
+                    x = x + rest;
+                }
+                out[last * K + q] = x;
+            }
+        }
+        last = k;
+    }
+    for (int64_t k = n - 1; k >= 0; k--) /* (children after their parent) */
+        if (skip[k] != k + 1)
+            for (int64_t q = 0; q < K; q++)
+                out[k * K + q] = out[(k + 1) * K + q] + out[skip[k + 1] * K + q];
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
 PyDoc_STRVAR(morton_doc, "morton(points (n, 3) float64) -> (n,) uint64: winding._morton's codes.");
 
 static PyObject *morton_py(PyObject *self, PyObject *args)
@@ -464,6 +544,7 @@ static PyMethodDef methods[] = {
     {"winding", winding, METH_VARARGS, winding_doc},
     {"morton", morton_py, METH_VARARGS, morton_doc},
     {"radii", radii_py, METH_VARARGS, radii_doc},
+    {"subtree_sums", sums_py, METH_VARARGS, sums_doc},
     {"order", order_py, METH_VARARGS, order_doc},
     {NULL, NULL, 0, NULL},
 };

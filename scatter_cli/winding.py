@@ -68,15 +68,15 @@ class WindingTree:
 
     def __init__(self, vertices, faces=None):
         v = np.asarray(vertices, dtype=np.float64)
-        tri = v.reshape(-1, 3, 3) if faces is None else v[np.asarray(faces, dtype=np.int64)]
+        tri = v.reshape(-1, 3, 3) if faces is None else np.take(v, np.asarray(faces, dtype=np.int64), axis=0)
         an = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         keep = np.isfinite(tri).all(axis=(1, 2)) & np.isfinite(an).all(axis=1) & (an != 0).any(axis=1)
         self.face = np.flatnonzero(keep)
-        tri, an = tri[keep], an[keep]
+        tri, an = np.compress(keep, tri, axis=0), np.compress(keep, an, axis=0)
         centroid = (tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0
         codes = _morton(centroid)
         order = _stable_order(codes)
-        self.face, tri, an, centroid = self.face[order], tri[order], an[order], centroid[order]
+        self.face, tri, an, centroid = (np.take(a, order, axis=0) for a in (self.face, tri, an, centroid))
         self.triangles = np.ascontiguousarray(tri.reshape(-1, 9))
         start, end, skip = _layout(codes[order], LEAF)
         self.links = np.stack([skip, start, np.where(skip == np.arange(len(skip)) + 1, end - start, 0)], axis=1)
@@ -202,7 +202,11 @@ def _layout(codes, leaf):
 
 def _subtree_sums(rows, start, skip):
     """(N, K) per node: the sums of ``rows`` (K, T) float64 over its triangles, from its
-    leaves up."""
+    leaves up. The kernel's ``subtree_sums`` computes the same values."""
+    if _kernel is not None:
+        out = np.empty((len(skip), len(rows)))
+        _kernel.subtree_sums(rows, start, skip, out)
+        return out
     leaf = skip == np.arange(len(skip)) + 1
     out = np.zeros((len(skip), len(rows)))
     out[leaf] = np.add.reduceat(rows, start[leaf], axis=1).T

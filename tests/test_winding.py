@@ -419,3 +419,27 @@ def test_kernel_radii_refuses_bad_arrays():
                  (tree.triangles, centre, start, end, skip, np.empty(len(skip), np.float32))):
         with pytest.raises((TypeError, ValueError)):
             KERNEL.radii(*args)
+
+
+@needs_kernel
+def test_kernel_subtree_sums_are_numpys_and_refuse_bad_arrays(monkeypatch):
+    tree = WindingTree(icosphere(2))
+    skip, start = tree.links[:, 0].copy(), tree.links[:, 1].copy()
+    rng = np.random.default_rng(2)
+    rows = rng.normal(size=(5, len(tree.triangles))) * 10.0 ** rng.integers(-300, 300, size=(5, len(tree.triangles)))
+    rows[rng.random(rows.shape) < 0.2] = -0.0
+    rows[0, 7], rows[1, 9], rows[2, 11] = np.inf, -np.inf, np.nan
+    out = np.empty((len(skip), 5))
+    KERNEL.subtree_sums(rows, start, skip, out)
+    monkeypatch.setattr(winding, "_kernel", None)
+    with np.errstate(all="ignore"):
+        assert out.tobytes() == winding._subtree_sums(rows, start, skip).tobytes()
+    leaves = np.flatnonzero(tree.links[:, 2] > 0)
+    big = np.flatnonzero(tree.links[leaves[:-1], 2] >= 6)[0]
+    wide = start.copy()
+    wide[leaves[big + 1]] += 3  # the leaf before takes 3 more triangles: more than 8
+    for args in ((rows, wide, skip, out), (rows, start - 1, skip, out), (rows, start + len(tree.triangles), skip, out),
+                 (rows, start, np.where(skip == len(skip), len(skip) + 5, skip), out), (rows[0], start, skip, out),
+                 (rows, start, skip, out[:, :4].copy()), (rows, start, skip[:-1], out)):
+        with pytest.raises((TypeError, ValueError)):
+            KERNEL.subtree_sums(*args)
