@@ -264,21 +264,21 @@ def _node_fields(tri, an, centroid, start, end, skip):
     for k, (i, j) in enumerate(PAIRS):  # E[(x - o)_i (x - o)_j] over the triangle
         second = p[i] * p[j] + (u[0][i] * u[0][j] + u[1][i] * u[1][j] + u[2][i] * u[2][j]) / 12.0
         raw[16 + k:34:6] = an_t * second
-    sums = _subtree_sums(raw, start, skip)
-    c = sums[:, 1:4] / sums[:, :1]
-    a0, a1 = sums[:, 4:7], sums[:, 7:16].reshape(-1, 3, 3)
-    m = a1 - a0[:, :, None] * c[:, None, :]
+    sums = np.ascontiguousarray(_subtree_sums(raw, start, skip).T)  # (34, N): rows, as raw's
+    c = sums[1:4] / sums[0]
+    a0, a1 = sums[4:7], sums[7:16].reshape(3, 3, -1)
+    m = a1 - a0[:, None, :] * c[None, :, :]
     s = {}  # s[i, j, k] = sum of an_i (x - c)_j (x - c)_k, j <= k
     for k, (j, l) in enumerate(PAIRS):
         for i in range(3):
-            s[i, j, l] = s[i, l, j] = (sums[:, 16 + 6 * i + k] - a1[:, i, j] * c[:, l] - a1[:, i, l] * c[:, j]
-                                       + a0[:, i] * c[:, j] * c[:, l])
-    fields[:, 0:3] = c + origin
+            s[i, j, l] = s[i, l, j] = (sums[16 + 6 * i + k] - a1[i, j] * c[l] - a1[i, l] * c[j]
+                                       + a0[i] * c[j] * c[l])
+    fields[:, 0:3] = (c + origin[:, None]).T
     fields[:, 3] = _radii(tri, fields[:, 0:3], start, end, skip)
-    fields[:, 4:7] = a0
-    fields[:, 7] = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
-    fields[:, 8:14] = np.stack([m[:, 0, 0], m[:, 1, 1], m[:, 2, 2], m[:, 0, 1] + m[:, 1, 0],
-                                m[:, 0, 2] + m[:, 2, 0], m[:, 1, 2] + m[:, 2, 1]], axis=1)
+    fields[:, 4:7] = a0.T
+    fields[:, 7] = m[0, 0] + m[1, 1] + m[2, 2]
+    fields[:, 8:14] = np.stack([m[0, 0], m[1, 1], m[2, 2], m[0, 1] + m[1, 0], m[0, 2] + m[2, 0], m[1, 2] + m[2, 1]],
+                               axis=1)
     for k in range(3):  # 2 sum_i s_iik + sum_j s_kjj
         fields[:, 14 + k] = 2.0 * (s[0, 0, k] + s[1, 1, k] + s[2, 2, k]) + s[k, 0, 0] + s[k, 1, 1] + s[k, 2, 2]
     x, y, z = 0, 1, 2
