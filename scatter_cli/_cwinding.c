@@ -491,6 +491,57 @@ static PyObject *sums_py(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* ---- the triangles' moments: the rows winding._node_fields sums ---- */
+
+static const int PAIRS[6][2] = {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {0, 2}, {1, 2}};
+
+PyDoc_STRVAR(moments_doc, "moments(triangles (T, 9) float64, an (T, 3) float64, centroid (T, 3) float64, origin (3,) "
+                          "float64, out (34, T) float64): winding._node_fields's rows of per-triangle moments into out");
+
+static PyObject *moments_py(PyObject *self, PyObject *args)
+{
+    PyObject *ot, *oa, *oc, *og, *oo;
+    PyArrayObject *ta, *aa, *ca, *ga, *outa;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOOO", &ot, &oa, &oc, &og, &oo) || !get2(ot, NPY_FLOAT64, 9, &ta, "triangles") ||
+        !get2(oa, NPY_FLOAT64, 3, &aa, "an") || !get2(oc, NPY_FLOAT64, 3, &ca, "centroid") ||
+        !get(og, NPY_FLOAT64, 3, &ga, "origin") || !get(oo, NPY_FLOAT64, 34 * PyArray_DIM(ta, 0), &outa, "out"))
+        return NULL;
+    int64_t t = PyArray_DIM(ta, 0);
+    if (PyArray_DIM(aa, 0) != t || PyArray_DIM(ca, 0) != t || !PyArray_ISWRITEABLE(outa)) {
+        PyErr_SetString(PyExc_ValueError, "an, centroid: not one row a triangle, or out not writeable");
+        return NULL;
+    }
+    const double *tri = PyArray_DATA(ta), *an = PyArray_DATA(aa), *cen = PyArray_DATA(ca), *o = PyArray_DATA(ga);
+    double *out = PyArray_DATA(outa);
+    Py_BEGIN_ALLOW_THREADS
+    for (int64_t i = 0; i < t; i++) {
+        const double *a = an + 3 * i, *g = cen + 3 * i, *v = tri + 9 * i;
+        double p[3], u[3][3];
+        for (int j = 0; j < 3; j++) {
+            p[j] = g[j] - o[j];
+            for (int c = 0; c < 3; c++)
+                u[c][j] = v[3 * c + j] - g[j];
+        }
+        double r0 = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+        out[i] = r0;
+        for (int j = 0; j < 3; j++) {
+            out[(1 + j) * t + i] = r0 * p[j];
+            out[(4 + j) * t + i] = a[j];
+            for (int k = 0; k < 3; k++)
+                out[(7 + 3 * j + k) * t + i] = a[j] * p[k];
+        }
+        for (int k = 0; k < 6; k++) { /* E[(x - o)_a (x - o)_b] over the triangle, times an */
+            int x = PAIRS[k][0], y = PAIRS[k][1];
+            double second = p[x] * p[y] + (u[0][x] * u[0][y] + u[1][x] * u[1][y] + u[2][x] * u[2][y]) / 12.0;
+            for (int j = 0; j < 3; j++)
+                out[(16 + k + 6 * j) * t + i] = a[j] * second;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
 PyDoc_STRVAR(morton_doc, "morton(points (n, 3) float64) -> (n,) uint64: winding._morton's codes.");
 
 static PyObject *morton_py(PyObject *self, PyObject *args)
@@ -545,6 +596,7 @@ static PyMethodDef methods[] = {
     {"morton", morton_py, METH_VARARGS, morton_doc},
     {"radii", radii_py, METH_VARARGS, radii_doc},
     {"subtree_sums", sums_py, METH_VARARGS, sums_doc},
+    {"moments", moments_py, METH_VARARGS, moments_doc},
     {"order", order_py, METH_VARARGS, order_doc},
     {NULL, NULL, 0, NULL},
 };

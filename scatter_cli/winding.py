@@ -20,7 +20,9 @@ order), added one by one from 0. The compiled kernel ``_cwinding`` walks the tre
 depth-first in that order; the NumPy path below walks all points of a chunk down the
 tree in step, adding each point's next term in the same order, and does the same
 float64 operations (its own arctangent, as the kernel's, from + - * / only), so the two
-give the same bytes (tests/test_winding.py holds them to it).
+give the same bytes (tests/test_winding.py holds them to it). The kernel also computes
+the tree's per-triangle moments, their sums over each node and the nodes' radii, the
+same values as the NumPy functions named.
 """
 
 from __future__ import annotations
@@ -253,17 +255,7 @@ def _node_fields(tri, an, centroid, start, end, skip):
     if not n:
         return fields
     origin = 0.5 * (centroid.min(axis=0) + centroid.max(axis=0))
-    p = np.ascontiguousarray((centroid - origin).T)  # (3, T): rows of per-triangle values, summed along them
-    u = [np.ascontiguousarray((tri[:, v] - centroid).T) for v in range(3)]  # corners about the centroid
-    an_t = np.ascontiguousarray(an.T)
-    raw = np.empty((34, len(tri)))
-    raw[0] = _norms(an)
-    raw[1:4] = raw[0] * p
-    raw[4:7] = an_t
-    raw[7:16] = (an_t[:, None, :] * p[None, :, :]).reshape(9, -1)
-    for k, (i, j) in enumerate(PAIRS):  # E[(x - o)_i (x - o)_j] over the triangle
-        second = p[i] * p[j] + (u[0][i] * u[0][j] + u[1][i] * u[1][j] + u[2][i] * u[2][j]) / 12.0
-        raw[16 + k:34:6] = an_t * second
+    raw = _moments(tri, an, centroid, origin)
     sums = np.ascontiguousarray(_subtree_sums(raw, start, skip).T)  # (34, N): rows, as raw's
     c = sums[1:4] / sums[0]
     a0, a1 = sums[4:7], sums[7:16].reshape(3, 3, -1)
@@ -287,6 +279,29 @@ def _node_fields(tri, an, centroid, start, end, skip):
         2 * s[y, y, x] + s[x, y, y], 2 * s[y, y, z] + s[z, y, y], 2 * s[z, z, x] + s[x, z, z],
         2 * s[z, z, y] + s[y, z, z], 2 * (s[x, y, z] + s[y, x, z] + s[z, x, y])], axis=1)
     return fields
+
+
+def _moments(tri, an, centroid, origin):
+    """(34, T) float64 rows of per-triangle values, summed over each node: area, area times
+    the centroid about ``origin`` (3,), area-weighted normal ``an`` (T, 3), its products with
+    the centroid, and with the second moments of the triangle ``tri`` (T, 3, 3) about the
+    origin. The kernel's ``moments`` computes the same values."""
+    raw = np.empty((34, len(tri)))
+    if _kernel is not None:
+        _kernel.moments(np.ascontiguousarray(tri.reshape(-1, 9)), np.ascontiguousarray(an),
+                        np.ascontiguousarray(centroid), np.ascontiguousarray(origin), raw)
+        return raw
+    p = np.ascontiguousarray((centroid - origin).T)  # (3, T): rows of per-triangle values, summed along them
+    u = [np.ascontiguousarray((tri[:, v] - centroid).T) for v in range(3)]  # corners about the centroid
+    an_t = np.ascontiguousarray(an.T)
+    raw[0] = _norms(an)
+    raw[1:4] = raw[0] * p
+    raw[4:7] = an_t
+    raw[7:16] = (an_t[:, None, :] * p[None, :, :]).reshape(9, -1)
+    for k, (i, j) in enumerate(PAIRS):  # E[(x - o)_i (x - o)_j] over the triangle
+        second = p[i] * p[j] + (u[0][i] * u[0][j] + u[1][i] * u[1][j] + u[2][i] * u[2][j]) / 12.0
+        raw[16 + k:34:6] = an_t * second
+    return raw
 
 
 def _radii(tri, centre, start, end, skip):

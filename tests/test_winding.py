@@ -443,3 +443,17 @@ def test_kernel_subtree_sums_are_numpys_and_refuse_bad_arrays(monkeypatch):
                  (rows, start, skip, out[:, :4].copy()), (rows, start, skip[:-1], out)):
         with pytest.raises((TypeError, ValueError)):
             KERNEL.subtree_sums(*args)
+
+
+@needs_kernel
+def test_kernel_moments_refuse_bad_arrays():
+    tri = icosphere(1)
+    an = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    centroid, origin = tri.mean(axis=1), np.zeros(3)
+    flat, out = tri.reshape(-1, 9), np.empty((34, len(tri)))
+    KERNEL.moments(flat, an, centroid, origin, out)
+    for args in ((flat, an[:-1], centroid, origin, out), (flat, an, centroid[:-1], origin, out),
+                 (flat, an, centroid, np.zeros(2), out), (flat, an, centroid, origin, out[:33]),
+                 (flat.reshape(-1, 3), an, centroid, origin, out), (flat, an, centroid, origin, out.astype(np.float32))):
+        with pytest.raises((TypeError, ValueError)):
+            KERNEL.moments(*args)
