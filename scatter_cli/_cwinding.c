@@ -203,22 +203,36 @@ static void *run(void *arg)
     }
 }
 
-/* walk (n,): the indices of the points p (n, 3) in the Morton order of their top 10 bits
- * an axis (winding._morton's codes >> 33), so that neighbouring points walk together
- * (any order gives the same sums); 0 when out of memory */
+/* walk (n,): the indices of the points p (n, 3) in the Morton order of their cells in a
+ * 1024^3 grid over the box of the finite ones (the others first), so that neighbouring
+ * points walk together (any order gives the same sums); 0 when out of memory */
 static int walk_order(const double *p, int64_t n, int64_t *walk)
 {
     size_t size = (size_t)(n > 0 ? n : 1);
-    uint64_t *code = malloc(sizeof(uint64_t) * size);
     uint32_t *key = malloc(sizeof(uint32_t) * 2 * size);
     int64_t *tmp = malloc(sizeof(int64_t) * size);
-    int ok = code && key && tmp;
+    int ok = key && tmp;
     if (ok) {
-        morton21(p, n, code);
+        double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY}, scale[3];
+        for (int64_t i = 0; i < n; i++) {
+            const double *q = p + 3 * i;
+            if (isfinite(q[0]) && isfinite(q[1]) && isfinite(q[2]))
+                for (int k = 0; k < 3; k++)
+                    lo[k] = q[k] < lo[k] ? q[k] : lo[k], hi[k] = q[k] > hi[k] ? q[k] : hi[k];
+        }
+        for (int k = 0; k < 3; k++)
+            scale[k] = hi[k] > lo[k] ? 1024.0 / (hi[k] - lo[k]) : 0.0;
         uint32_t *kf = key, *kt = key + size;
         int64_t *of = walk, *ot = tmp;
-        for (int64_t i = 0; i < n; i++)
-            kf[i] = (uint32_t)(code[i] >> 33), of[i] = i;
+        for (int64_t i = 0; i < n; i++) {
+            const double *q = p + 3 * i;
+            uint64_t c[3];
+            for (int k = 0; k < 3; k++) {
+                double x = (q[k] - lo[k]) * scale[k];
+                c[k] = x >= 1.0 && x <= 1023.0 ? (uint64_t)x : x > 1023.0 ? 1023 : 0; /* (NaN: 0) */
+            }
+            kf[i] = (uint32_t)((spread21(c[0]) << 2) | (spread21(c[1]) << 1) | spread21(c[2])), of[i] = i;
+        }
         for (int shift = 0; shift < 30; shift += 10) { /* least significant digit first, stable */
             int64_t count[1025] = {0};
             for (int64_t i = 0; i < n; i++)
@@ -238,7 +252,7 @@ static int walk_order(const double *p, int64_t n, int64_t *walk)
             for (int64_t i = 0; i < n; i++)
                 walk[i] = of[i];
     }
-    free(code), free(key), free(tmp);
+    free(key), free(tmp);
     return ok;
 }
 
