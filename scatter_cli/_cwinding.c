@@ -177,13 +177,13 @@ TARGETS static void winding_4(const Work *w, const int64_t *at, int64_t m)
             if (far)
                 end[top] = h->skip, lanes[top] = here, top++, here = near;
             i = i + 1;
-            continue;
+        } else {
+            if (near)
+                for (int64_t k = 0; k < h->count; k++)
+                    acc = pick(LANES[near], acc + triangle_term4(w->tri + 9 * (h->first + k), qx, qy, qz), acc);
+            i = h->skip;
         }
-        if (near)
-            for (int64_t k = 0; k < h->count; k++)
-                acc = pick(LANES[near], acc + triangle_term4(w->tri + 9 * (h->first + k), qx, qy, qz), acc);
-        i = h->skip;
-        while (top > 0 && end[top - 1] == i)
+        while (top > 0 && end[top - 1] == i) /* (after an inner node of no subtree too: i + 1 is its end) */
             here = lanes[--top];
     }
     for (int l = 0; l < m; l++)

@@ -457,3 +457,45 @@ def test_kernel_moments_refuse_bad_arrays():
                  (flat.reshape(-1, 3), an, centroid, origin, out), (flat, an, centroid, origin, out.astype(np.float32))):
         with pytest.raises((TypeError, ValueError)):
             KERNEL.moments(*args)
+
+
+def nested_links(rng, size, triangles):
+    """(N, 3) int64 links of a random forest of nested subtrees in preorder: inner nodes of
+    0 to 3 children (0: an inner node of no subtree), leaves of 0 to 4 triangles, and
+    some leaves over subtrees of their own (the walk skips those)."""
+    rows = []
+
+    def node(depth):
+        at = len(rows)
+        rows.append(None)
+        inner = depth < 5 and rng.random() < 0.6
+        if inner or rng.random() < 0.1:
+            for _ in range(rng.integers(0, 4)):
+                node(depth + 1)
+        count = 0 if inner else int(rng.integers(0, 5))
+        rows[at] = (len(rows), int(rng.integers(0, triangles - count + 1)), count)
+
+    while len(rows) < size:
+        node(0)
+    return np.array(rows, dtype=np.int64)
+
+
+@needs_kernel
+@pytest.mark.parametrize("seed", range(6))
+def test_kernel_walks_any_nested_links_as_the_numpy_path(seed):
+    """On random nested links (not only the trees WindingTree makes), each point's terms
+    are the NumPy walk's, in its order: the four lanes' shared walk never loses a lane."""
+    rng = np.random.default_rng(seed)
+    links = nested_links(rng, 300, 40)
+    nodes = rng.normal(size=(len(links), winding.FIELDS))
+    nodes[:, :3] = rng.uniform(-2, 2, size=(len(links), 3))
+    nodes[:, 3] = rng.uniform(0, 1, size=len(links))
+    tree = type("Tree", (), {"nodes": nodes, "links": links, "triangles": rng.uniform(-2, 2, size=(40, 9))})
+    points = rng.uniform(-2, 2, size=(400, 3))
+    assert (links[:, 2] == 0).any() and (links[:, 0] == np.arange(len(links)) + 1)[links[:, 2] == 0].any()
+    for beta, order in ((0.5, 2), (1.5, 1), (3.0, 0)):
+        out = np.empty(len(points))
+        KERNEL.winding(points, nodes, links, tree.triangles, beta, order, 2, out)
+        with np.errstate(all="ignore"):
+            want = winding._numpy_winding(points, tree, beta, order)
+        assert out.tobytes() == want.tobytes()
