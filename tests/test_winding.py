@@ -341,14 +341,18 @@ def test_fuzzed_soups_give_the_same_bytes_on_both_paths(tris, points, accuracy, 
 @settings(max_examples=60)
 @given(st.lists(st.tuples(st.integers(-3, 40), st.integers(-3, 80), st.integers(-3, 12)), min_size=1, max_size=30))
 def test_fuzzed_links_are_refused_or_walked_safely(rows):
-    """Random links: the kernel refuses them or walks them within its arrays (the
-    sanitizer run, benchmarks/winding_sanitizers.py, checks the second)."""
+    """Random links: the kernel refuses them, or walks them within its arrays (the
+    sanitizer run, benchmarks/winding_sanitizers.py, checks that) as the NumPy path does."""
     nodes = np.random.default_rng(len(rows)).normal(size=(len(rows), winding.FIELDS))
     links = np.array(rows, dtype=np.int64)
     tri = np.random.default_rng(1).normal(size=(64, 9))
-    out = np.empty(4)
+    points = np.random.default_rng(2).normal(size=(7, 3))
+    out = np.empty(7)
     try:
-        KERNEL.winding(np.zeros((4, 3)), nodes, links, tri, 1.0, 2, 2, out)
+        KERNEL.winding(points, nodes, links, tri, 1.0, 2, 2, out)
+        tree = type("Tree", (), {"nodes": nodes, "links": links, "triangles": tri})
+        with np.errstate(all="ignore"):
+            assert out.tobytes() == winding._numpy_winding(points, tree, 1.0, 2).tobytes()
     except ValueError:
         skip, first, count = links.T
         i = np.arange(len(links))
