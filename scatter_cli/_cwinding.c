@@ -5,11 +5,12 @@
  * subtree is skipped, a near leaf adds its triangles' solid angles one by one, a near
  * inner node opens), every term added to a sum started at 0. Every float64 operation
  * is the NumPy code's, in its order (built with -ffp-contract=off), the arctangent
- * included (Cephes' atan, + - * / only), so the two paths give the same bytes. Four
- * neighbouring points walk together, one in each lane of a vector (see winding_4). The
- * points are shared among the threads in blocks; each point's sum is its own, so the
- * result does not depend on the threads. The GIL is released while they run. The links
- * are checked first: a subtree or a leaf's triangles out of range raise ValueError.
+ * included (Cephes' atan, + - * / only), so the two paths give the same bytes. The
+ * points walk in a Morton order of their own (walk_order), four neighbours together, one
+ * in each lane of a vector (see winding_4), shared among the threads in blocks; each
+ * point's sum is its own, so the result depends on neither that order nor the threads.
+ * The GIL is released while they run. The links are checked first: a subtree or a
+ * leaf's triangles out of range, or subtrees that do not nest, raise ValueError.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -25,6 +26,7 @@
 #define FIELDS 28
 #define MAX_THREADS 8
 #define BLOCK 256 /* points a thread takes at a time */
+#define DEPTH 256 /* subtrees at most, one in the other (a WindingTree: below 128) */
 
 static const double INV2PI = 0.15915494309189535, INV4PI = 0.07957747154594767;
 static const double PIO2 = 1.5707963267948966, PIO4 = 0.7853981633974483, PI = 3.141592653589793;
@@ -42,6 +44,7 @@ typedef struct {
 typedef struct {
     const double *points, *nodes, *tri;
     const Hot *hot;
+    const int64_t *walk; /* the points' indices in the order they walk */
     int64_t n, count;
     int order;
     double *out;
@@ -88,7 +91,7 @@ INLINE v4d atan2_4(v4d y, v4d x)
     v4d ay = abs4(y), ax = abs4(x), t, arg, z, a;
     t = pick(ax == 0, (v4d){INFINITY, INFINITY, INFINITY, INFINITY}, ay / ax);
     v4l small = t <= 0.66, large = t > TAN3PIO8;
-    arg = pick(small, t, pick(large, 1.0 / t, (t - 1.0) / (t + 1.0)));
+    arg = pick(small, t, pick(large, (v4d){1, 1, 1, 1}, t - 1.0) / pick(large, t, t + 1.0)); /* (one division) */
     z = arg * arg;
     z = z * ((((-8.750608600031904122785e-01 * z + -1.615753718733365076637e+01) * z + -7.500855792314704667340e+01) * z +
               -1.228866684490136173410e+02) * z + -6.485021904942025371773e+01) /
@@ -137,38 +140,54 @@ INLINE v4d far_term4(const double *f, v4d rx, v4d ry, v4d rz, v4d d2, int order)
     return w * INV4PI;
 }
 
-/* the winding numbers at the points q[0..3] (m of them real, the rest copies of q[0]) into out */
-TARGETS static void winding_4(const Work *w, const double *q, int64_t m, double *out)
+/* the lanes set in m, as bits */
+INLINE unsigned bits4(v4l m) { return (unsigned)(m[0] & 1) | (unsigned)(m[1] & 2) | (unsigned)(m[2] & 4) | (unsigned)(m[3] & 8); }
+
+/* lane masks by their bits */
+static const v4l LANES[16] = {
+#define L(b) {-(int64_t)((b) & 1), -(int64_t)((b) >> 1 & 1), -(int64_t)((b) >> 2 & 1), -(int64_t)((b) >> 3 & 1)}
+    L(0), L(1), L(2), L(3), L(4), L(5), L(6), L(7), L(8), L(9), L(10), L(11), L(12), L(13), L(14), L(15)
+#undef L
+};
+
+/* the winding numbers at the points of indices at[0..3] (m of them real, the rest copies
+ * of at[0]) into out at the same indices. The lanes whose own walk is at node i are the
+ * bits "here". When some lanes open node i and others skip its subtree, the walk goes
+ * on into the subtree with the first and keeps (where the subtree ends, all of them) on
+ * a stack; the subtrees nest (links_ok), so every lane's walk passes there. */
+TARGETS static void winding_4(const Work *w, const int64_t *at, int64_t m)
 {
     v4d qx, qy, qz, acc = {0, 0, 0, 0};
     for (int l = 0; l < 4; l++) {
-        const double *p = q + 3 * (l < m ? l : 0);
+        const double *p = w->points + 3 * at[l < m ? l : 0];
         qx[l] = p[0], qy[l] = p[1], qz[l] = p[2];
     }
-    v4l next = {0, 0, 0, 0};
+    int64_t end[DEPTH];
+    unsigned lanes[DEPTH], here = 15;
+    int top = 0;
     int64_t i = 0;
     while (i < w->count) {
         const Hot *h = w->hot + i;
-        v4l here = next == i;
         v4d rx = h->c[0] - qx, ry = h->c[1] - qy, rz = h->c[2] - qz;
         v4d d2 = rx * rx + ry * ry + rz * rz;
-        v4l far = (d2 > h->far2) & here, near = here & ~far;
-        if (far[0] | far[1] | far[2] | far[3])
-            acc = pick(far, acc + far_term4(w->nodes + FIELDS * i, rx, ry, rz, d2, w->order), acc);
-        if (h->count > 0) {
-            if (near[0] | near[1] | near[2] | near[3])
+        unsigned far = bits4(d2 > h->far2) & here, near = here & ~far;
+        if (far)
+            acc = pick(LANES[far], acc + far_term4(w->nodes + FIELDS * i, rx, ry, rz, d2, w->order), acc);
+        if (h->count == 0 && near) { /* (a branch: the processor walks on before the distances are known) */
+            if (far)
+                end[top] = h->skip, lanes[top] = here, top++, here = near;
+            i = i + 1;
+        } else {
+            if (near)
                 for (int64_t k = 0; k < h->count; k++)
-                    acc = pick(near, acc + triangle_term4(w->tri + 9 * (h->first + k), qx, qy, qz), acc);
-            next = (v4l)pick(here, (v4d)(v4l){h->skip, h->skip, h->skip, h->skip}, (v4d)next);
-        } else
-            next = (v4l)pick(far, (v4d)(v4l){h->skip, h->skip, h->skip, h->skip},
-                             pick(here, (v4d)(v4l){i + 1, i + 1, i + 1, i + 1}, (v4d)next));
-        i = next[0];
-        for (int l = 1; l < 4; l++)
-            i = next[l] < i ? next[l] : i;
+                    acc = pick(LANES[near], acc + triangle_term4(w->tri + 9 * (h->first + k), qx, qy, qz), acc);
+            i = h->skip;
+        }
+        while (top > 0 && end[top - 1] == i) /* (after an inner node of no subtree too: i + 1 is its end) */
+            here = lanes[--top];
     }
     for (int l = 0; l < m; l++)
-        out[l] = acc[l] != acc[l] ? NAN : acc[l];
+        w->out[at[l]] = acc[l] != acc[l] ? NAN : acc[l];
 }
 
 static void *run(void *arg)
@@ -180,18 +199,79 @@ static void *run(void *arg)
         if (i0 >= w->n)
             return NULL;
         for (int64_t i = i0; i < i1; i += 4)
-            winding_4(w, w->points + 3 * i, i1 - i < 4 ? i1 - i : 4, w->out + i);
+            winding_4(w, w->walk + i, i1 - i < 4 ? i1 - i : 4);
     }
 }
 
-/* the links of a preorder tree: each node's subtree ends after it and within the tree,
- * a leaf's triangles lie within the triangles */
+/* walk (n,): the indices of the points p (n, 3) in the Morton order of their cells in a
+ * 1024^3 grid over the box of the finite ones (the others first), so that neighbouring
+ * points walk together (any order gives the same sums); 0 when out of memory */
+static int walk_order(const double *p, int64_t n, int64_t *walk)
+{
+    size_t size = (size_t)(n > 0 ? n : 1);
+    uint32_t *key = malloc(sizeof(uint32_t) * 2 * size);
+    int64_t *tmp = malloc(sizeof(int64_t) * size);
+    int ok = key && tmp;
+    if (ok) {
+        double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY}, scale[3];
+        for (int64_t i = 0; i < n; i++) {
+            const double *q = p + 3 * i;
+            if (isfinite(q[0]) && isfinite(q[1]) && isfinite(q[2]))
+                for (int k = 0; k < 3; k++)
+                    lo[k] = q[k] < lo[k] ? q[k] : lo[k], hi[k] = q[k] > hi[k] ? q[k] : hi[k];
+        }
+        for (int k = 0; k < 3; k++)
+            scale[k] = hi[k] > lo[k] ? 1024.0 / (hi[k] - lo[k]) : 0.0;
+        uint32_t *kf = key, *kt = key + size;
+        int64_t *of = walk, *ot = tmp;
+        for (int64_t i = 0; i < n; i++) {
+            const double *q = p + 3 * i;
+            uint64_t c[3];
+            for (int k = 0; k < 3; k++) {
+                double x = (q[k] - lo[k]) * scale[k];
+                c[k] = x >= 1.0 && x <= 1023.0 ? (uint64_t)x : x > 1023.0 ? 1023 : 0; /* (NaN: 0) */
+            }
+            kf[i] = (uint32_t)((spread21(c[0]) << 2) | (spread21(c[1]) << 1) | spread21(c[2])), of[i] = i;
+        }
+        for (int shift = 0; shift < 30; shift += 10) { /* least significant digit first, stable */
+            int64_t count[1025] = {0};
+            for (int64_t i = 0; i < n; i++)
+                count[(kf[i] >> shift & 1023) + 1]++;
+            for (int d = 0; d < 1024; d++)
+                count[d + 1] += count[d];
+            for (int64_t i = 0; i < n; i++) {
+                int64_t to = count[kf[i] >> shift & 1023]++;
+                kt[to] = kf[i], ot[to] = of[i];
+            }
+            uint32_t *ks = kf;
+            kf = kt, kt = ks;
+            int64_t *os = of;
+            of = ot, ot = os;
+        }
+        if (of != walk)
+            for (int64_t i = 0; i < n; i++)
+                walk[i] = of[i];
+    }
+    free(key), free(tmp);
+    return ok;
+}
+
+/* the links of a preorder tree: each node's subtree ends after it, within the tree and
+ * within every subtree it lies in, at most DEPTH subtrees deep; a leaf's triangles lie
+ * within the triangles */
 static int links_ok(const int64_t *links, int64_t count, int64_t ntri)
 {
+    int64_t end[DEPTH]; /* the ends of the subtrees node i lies in, innermost last */
+    int depth = 0;
     for (int64_t i = 0; i < count; i++) {
         const int64_t *l = links + 3 * i;
         if (l[0] <= i || l[0] > count || l[1] < 0 || l[1] > ntri || l[2] < 0 || l[2] > ntri - l[1])
             return 0;
+        while (depth > 0 && end[depth - 1] <= i)
+            depth--;
+        if (depth == DEPTH || (depth > 0 && l[0] > end[depth - 1]))
+            return 0;
+        end[depth++] = l[0];
     }
     return 1;
 }
@@ -237,20 +317,21 @@ static PyObject *winding(PyObject *self, PyObject *args)
     }
     const double *nodes = PyArray_DATA(na);
     const int64_t *links = PyArray_DATA(la);
-    Work w = {PyArray_DATA(pa), nodes, PyArray_DATA(ta), NULL, PyArray_DIM(pa, 0), PyArray_DIM(na, 0), order,
+    Work w = {PyArray_DATA(pa), nodes, PyArray_DATA(ta), NULL, NULL, PyArray_DIM(pa, 0), PyArray_DIM(na, 0), order,
               PyArray_DATA(oa), 0};
     int ok, memory = 1;
     Py_BEGIN_ALLOW_THREADS
     ok = links_ok(links, w.count, PyArray_DIM(ta, 0));
-    Hot *hot = ok ? malloc(sizeof(Hot) * (size_t)(w.count > 0 ? w.count : 1)) : NULL;
-    memory = !ok || hot != NULL;
-    if (hot) {
+    Hot *hot = ok ? aligned_alloc(64, sizeof(Hot) * (size_t)(w.count > 0 ? w.count : 1)) : NULL;
+    int64_t *walk = ok ? malloc(sizeof(int64_t) * (size_t)(w.n > 0 ? w.n : 1)) : NULL;
+    memory = !ok || (hot && walk && walk_order(w.points, w.n, walk));
+    if (ok && memory) {
         for (int64_t i = 0; i < w.count; i++) {
             const double *f = nodes + FIELDS * i;
             double t = beta * f[3];
             hot[i] = (Hot){{f[0], f[1], f[2]}, t * t, links[3 * i], links[3 * i + 1], links[3 * i + 2], 0};
         }
-        w.hot = hot;
+        w.hot = hot, w.walk = walk;
         int64_t blocks = (w.n + BLOCK - 1) / BLOCK;
         int count = threads > MAX_THREADS ? MAX_THREADS : threads;
         if (count > blocks)
@@ -263,15 +344,215 @@ static PyObject *winding(PyObject *self, PyObject *args)
         for (int k = 1; k < count; k++)
             if (started[k])
                 pthread_join(id[k], NULL);
-        free(hot);
     }
+    free(hot), free(walk);
     Py_END_ALLOW_THREADS
     if (!memory)
         return PyErr_NoMemory();
     if (!ok) {
-        PyErr_SetString(PyExc_ValueError, "links: a subtree or a leaf's triangles out of range");
+        PyErr_SetString(PyExc_ValueError, "links: a subtree or a leaf's triangles out of range, or subtrees not nested");
         return NULL;
     }
+    Py_RETURN_NONE;
+}
+
+/* ---- the tree's radii: winding._radii's values ---- */
+
+static inline double norm3(double x, double y, double z) { return sqrt(x * x + y * y + z * z); }
+
+/* np.maximum's: NaN wins */
+static inline double most(double m, double x) { return x > m || x != x ? x : m; }
+
+PyDoc_STRVAR(radii_doc, "radii(triangles (T, 9) float64, centre (N, 3) float64, start, end, skip (N,) int64, out (N,) "
+                        "float64): winding._radii's radii into out");
+
+static PyObject *radii_py(PyObject *self, PyObject *args)
+{
+    PyObject *ot, *oc, *os, *oe, *ok, *oo;
+    PyArrayObject *ta, *ca, *sa, *ea, *ka, *oa;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOOOO", &ot, &oc, &os, &oe, &ok, &oo) || !get2(ot, NPY_FLOAT64, 9, &ta, "triangles") ||
+        !get2(oc, NPY_FLOAT64, 3, &ca, "centre") || !get(os, NPY_INT64, PyArray_DIM(ca, 0), &sa, "start") ||
+        !get(oe, NPY_INT64, PyArray_DIM(ca, 0), &ea, "end") || !get(ok, NPY_INT64, PyArray_DIM(ca, 0), &ka, "skip") ||
+        !get(oo, NPY_FLOAT64, PyArray_DIM(ca, 0), &oa, "out"))
+        return NULL;
+    if (!PyArray_ISWRITEABLE(oa)) {
+        PyErr_SetString(PyExc_ValueError, "out: not writeable");
+        return NULL;
+    }
+    const double *tri = PyArray_DATA(ta), *c = PyArray_DATA(ca);
+    const int64_t *start = PyArray_DATA(sa), *end = PyArray_DATA(ea), *skip = PyArray_DATA(ka);
+    double *r = PyArray_DATA(oa);
+    int64_t n = PyArray_DIM(ca, 0), t = PyArray_DIM(ta, 0);
+    for (int64_t k = 0; k < n; k++)
+        if (start[k] < 0 || start[k] >= end[k] || end[k] > t) {
+            PyErr_SetString(PyExc_ValueError, "start, end: a node's triangles empty or out of range");
+            return NULL;
+        }
+    double *g = malloc(sizeof(double) * 4 * (size_t)(t > 0 ? t : 1)); /* centroid, and the farthest corner from it */
+    if (!g)
+        return PyErr_NoMemory();
+    Py_BEGIN_ALLOW_THREADS
+    for (int64_t i = 0; i < t; i++) {
+        const double *v = tri + 9 * i;
+        double *gi = g + 4 * i;
+        for (int a = 0; a < 3; a++)
+            gi[a] = (v[a] + v[3 + a] + v[6 + a]) / 3.0;
+        gi[3] = norm3(v[0] - gi[0], v[1] - gi[1], v[2] - gi[2]);
+        gi[3] = most(gi[3], norm3(v[3] - gi[0], v[4] - gi[1], v[5] - gi[2]));
+        gi[3] = most(gi[3], norm3(v[6] - gi[0], v[7] - gi[1], v[8] - gi[2]));
+    }
+    for (int64_t k = 0; k < n; k++) {
+        const double *ck = c + 3 * k;
+        double m = 0.0;
+        if (skip[k] == k + 1) /* a leaf: its farthest corner */
+            for (int64_t i = start[k]; i < end[k]; i++)
+                for (int a = 0; a < 3; a++) {
+                    const double *v = tri + 9 * i + 3 * a;
+                    double x = norm3(v[0] - ck[0], v[1] - ck[1], v[2] - ck[2]);
+                    m = i == start[k] && a == 0 ? x : most(m, x);
+                }
+        else /* its triangles' spheres */
+            for (int64_t i = start[k]; i < end[k]; i++) {
+                const double *gi = g + 4 * i;
+                double x = norm3(gi[0] - ck[0], gi[1] - ck[1], gi[2] - ck[2]) + gi[3];
+                m = i == start[k] ? x : most(m, x);
+            }
+        r[k] = m != m ? NAN : m;
+    }
+    Py_END_ALLOW_THREADS
+    free(g);
+    Py_RETURN_NONE;
+}
+
+/* ---- the tree's sums: winding._subtree_sums's values ---- */
+
+PyDoc_STRVAR(sums_doc, "subtree_sums(rows (K, T) float64, start (N,) int64, skip (N,) int64, out (N, K) float64): "
+                       "winding._subtree_sums's sums into out (a leaf: at most 8 triangles)");
+
+static PyObject *sums_py(PyObject *self, PyObject *args)
+{
+    PyObject *orow, *os, *ok, *oo;
+    PyArrayObject *ra, *sa, *ka, *oa;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOO", &orow, &os, &ok, &oo) || !get(orow, NPY_FLOAT64, -1, &ra, "rows") ||
+        !get(os, NPY_INT64, -1, &sa, "start") || !get(ok, NPY_INT64, PyArray_SIZE(sa), &ka, "skip"))
+        return NULL;
+    if (PyArray_NDIM(ra) != 2) {
+        PyErr_SetString(PyExc_ValueError, "rows: not (K, T)");
+        return NULL;
+    }
+    int64_t K = PyArray_DIM(ra, 0), T = PyArray_DIM(ra, 1), n = PyArray_SIZE(sa);
+    if (!get2(oo, NPY_FLOAT64, K, &oa, "out"))
+        return NULL;
+    if (PyArray_DIM(oa, 0) != n || !PyArray_ISWRITEABLE(oa)) {
+        PyErr_SetString(PyExc_ValueError, "out: not (N, K) or not writeable");
+        return NULL;
+    }
+    const double *rows = PyArray_DATA(ra);
+    const int64_t *start = PyArray_DATA(sa), *skip = PyArray_DATA(ka);
+    double *out = PyArray_DATA(oa);
+    /* the leaves' triangles as np.add.reduceat(rows, start[leaf], axis=1) takes them: from
+     * a leaf's start to the next leaf's (the last: to T) */
+    int64_t last = -1; /* the leaf before, or -1 */
+    for (int64_t k = 0; k <= n; k++) {
+        if (k < n && skip[k] != k + 1) {
+            if (k + 1 >= n || skip[k + 1] < 0 || skip[k + 1] >= n) {
+                PyErr_SetString(PyExc_ValueError, "skip: an inner node's children out of range");
+                return NULL;
+            }
+            continue;
+        }
+        if (k < n && (start[k] < 0 || start[k] >= T)) {
+            PyErr_SetString(PyExc_ValueError, "start: out of range");
+            return NULL;
+        }
+        if (last >= 0) {
+            int64_t to = k < n ? start[k] : T, size = to > start[last] ? to - start[last] : 1;
+            if (size > 8) {
+                PyErr_SetString(PyExc_ValueError, "start: a leaf of more than 8 triangles");
+                return NULL;
+            }
+        }
+        last = k;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    last = -1;
+    for (int64_t k = 0; k <= n; k++) {
+        if (k < n && skip[k] != k + 1)
+            continue;
+        if (last >= 0) {
+            int64_t s = start[last], to = k < n ? start[k] : T, e = to > s ? to : s + 1;
+            for (int64_t q = 0; q < K; q++) {
+                const double *r = rows + q * T;
+                double x = r[s];
+                if (e - s > 1) { /* the first, plus the sum of the others (numpy's pairwise sum below 8 terms) */
+                    double rest = r[s + 1];
+                    for (int64_t t = s + 2; t < e; t++)
+                        rest = rest + r[t];
+                    x = x + rest;
+                }
+                out[last * K + q] = x;
+            }
+        }
+        last = k;
+    }
+    for (int64_t k = n - 1; k >= 0; k--) /* (children after their parent) */
+        if (skip[k] != k + 1)
+            for (int64_t q = 0; q < K; q++)
+                out[k * K + q] = out[(k + 1) * K + q] + out[skip[k + 1] * K + q];
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
+/* ---- the triangles' moments: the rows winding._node_fields sums ---- */
+
+static const int PAIRS[6][2] = {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {0, 2}, {1, 2}};
+
+PyDoc_STRVAR(moments_doc, "moments(triangles (T, 9) float64, an (T, 3) float64, centroid (T, 3) float64, origin (3,) "
+                          "float64, out (34, T) float64): winding._node_fields's rows of per-triangle moments into out");
+
+static PyObject *moments_py(PyObject *self, PyObject *args)
+{
+    PyObject *ot, *oa, *oc, *og, *oo;
+    PyArrayObject *ta, *aa, *ca, *ga, *outa;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOOOO", &ot, &oa, &oc, &og, &oo) || !get2(ot, NPY_FLOAT64, 9, &ta, "triangles") ||
+        !get2(oa, NPY_FLOAT64, 3, &aa, "an") || !get2(oc, NPY_FLOAT64, 3, &ca, "centroid") ||
+        !get(og, NPY_FLOAT64, 3, &ga, "origin") || !get(oo, NPY_FLOAT64, 34 * PyArray_DIM(ta, 0), &outa, "out"))
+        return NULL;
+    int64_t t = PyArray_DIM(ta, 0);
+    if (PyArray_DIM(aa, 0) != t || PyArray_DIM(ca, 0) != t || !PyArray_ISWRITEABLE(outa)) {
+        PyErr_SetString(PyExc_ValueError, "an, centroid: not one row a triangle, or out not writeable");
+        return NULL;
+    }
+    const double *tri = PyArray_DATA(ta), *an = PyArray_DATA(aa), *cen = PyArray_DATA(ca), *o = PyArray_DATA(ga);
+    double *out = PyArray_DATA(outa);
+    Py_BEGIN_ALLOW_THREADS
+    for (int64_t i = 0; i < t; i++) {
+        const double *a = an + 3 * i, *g = cen + 3 * i, *v = tri + 9 * i;
+        double p[3], u[3][3];
+        for (int j = 0; j < 3; j++) {
+            p[j] = g[j] - o[j];
+            for (int c = 0; c < 3; c++)
+                u[c][j] = v[3 * c + j] - g[j];
+        }
+        double r0 = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+        out[i] = r0;
+        for (int j = 0; j < 3; j++) {
+            out[(1 + j) * t + i] = r0 * p[j];
+            out[(4 + j) * t + i] = a[j];
+            for (int k = 0; k < 3; k++)
+                out[(7 + 3 * j + k) * t + i] = a[j] * p[k];
+        }
+        for (int k = 0; k < 6; k++) { /* E[(x - o)_a (x - o)_b] over the triangle, times an */
+            int x = PAIRS[k][0], y = PAIRS[k][1];
+            double second = p[x] * p[y] + (u[0][x] * u[0][y] + u[1][x] * u[1][y] + u[2][x] * u[2][y]) / 12.0;
+            for (int j = 0; j < 3; j++)
+                out[(16 + k + 6 * j) * t + i] = a[j] * second;
+        }
+    }
+    Py_END_ALLOW_THREADS
     Py_RETURN_NONE;
 }
 
@@ -327,6 +608,9 @@ static PyObject *order_py(PyObject *self, PyObject *args)
 static PyMethodDef methods[] = {
     {"winding", winding, METH_VARARGS, winding_doc},
     {"morton", morton_py, METH_VARARGS, morton_doc},
+    {"radii", radii_py, METH_VARARGS, radii_doc},
+    {"subtree_sums", sums_py, METH_VARARGS, sums_doc},
+    {"moments", moments_py, METH_VARARGS, moments_doc},
     {"order", order_py, METH_VARARGS, order_doc},
     {NULL, NULL, 0, NULL},
 };

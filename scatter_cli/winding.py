@@ -20,7 +20,9 @@ order), added one by one from 0. The compiled kernel ``_cwinding`` walks the tre
 depth-first in that order; the NumPy path below walks all points of a chunk down the
 tree in step, adding each point's next term in the same order, and does the same
 float64 operations (its own arctangent, as the kernel's, from + - * / only), so the two
-give the same bytes (tests/test_winding.py holds them to it).
+give the same bytes (tests/test_winding.py holds them to it). The kernel also computes
+the tree's per-triangle moments, their sums over each node and the nodes' radii, the
+same values as the NumPy functions named.
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ _kernel = native.kernel("_cwinding")
 LEAF = 8  # triangles at most in a leaf
 ACCURACY = 2.0  # a node is far when farther than this times its radius (Barill's beta)
 ORDER = 2  # terms of the far-field expansion: 0 (dipole), 1, 2
-CHUNK = 65536  # points per call of the kernel (and per step of the NumPy path)
+CHUNK = 1 << 18  # points per call of the kernel (larger: nearer neighbours walk together)
+NUMPY_CHUNK = 1 << 16  # points per step of the NumPy path, at most CHUNK
 FIELDS = 28  # float64 fields of a node, see _node_fields
 
 INV2PI = 0.15915494309189535  # 1 / (2 pi), as in _cwinding.c
@@ -67,15 +70,15 @@ class WindingTree:
 
     def __init__(self, vertices, faces=None):
         v = np.asarray(vertices, dtype=np.float64)
-        tri = v.reshape(-1, 3, 3) if faces is None else v[np.asarray(faces, dtype=np.int64)]
+        tri = v.reshape(-1, 3, 3) if faces is None else np.take(v, np.asarray(faces, dtype=np.int64), axis=0)
         an = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         keep = np.isfinite(tri).all(axis=(1, 2)) & np.isfinite(an).all(axis=1) & (an != 0).any(axis=1)
         self.face = np.flatnonzero(keep)
-        tri, an = tri[keep], an[keep]
+        tri, an = np.compress(keep, tri, axis=0), np.compress(keep, an, axis=0)
         centroid = (tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0
         codes = _morton(centroid)
         order = _stable_order(codes)
-        self.face, tri, an, centroid = self.face[order], tri[order], an[order], centroid[order]
+        self.face, tri, an, centroid = (np.take(a, order, axis=0) for a in (self.face, tri, an, centroid))
         self.triangles = np.ascontiguousarray(tri.reshape(-1, 9))
         start, end, skip = _layout(codes[order], LEAF)
         self.links = np.stack([skip, start, np.where(skip == np.arange(len(skip)) + 1, end - start, 0)], axis=1)
@@ -97,17 +100,16 @@ def winding_numbers(tree: WindingTree, points, *, accuracy: float = ACCURACY, or
     if order not in (0, 1, 2) or not accuracy > 0:
         raise ValueError("winding_numbers: order is 0, 1 or 2 and accuracy positive")
     out = np.zeros(len(points))
-    for at in range(0, len(points), CHUNK):
+    if _kernel is not None:  # (it walks the points in an order of its own)
+        for at in range(0, len(points), CHUNK):
+            _kernel.winding(points[at:at + CHUNK], tree.nodes, tree.links, tree.triangles, float(accuracy),
+                            int(order), native.worker_count(), out[at:at + CHUNK])
+        return out
+    step = min(CHUNK, NUMPY_CHUNK)
+    for at in range(0, len(points), step):
         # in Morton order: neighbouring points walk the same nodes (the sums do not change)
-        near = at + _stable_order(_morton(points[at:at + CHUNK]))
-        part = points[near]
-        if _kernel is not None:
-            w = np.empty(len(part))
-            _kernel.winding(part, tree.nodes, tree.links, tree.triangles, float(accuracy), int(order),
-                            native.worker_count(), w)
-        else:
-            w = _numpy_winding(part, tree, float(accuracy), int(order))
-        out[near] = w
+        near = at + _stable_order(_morton(points[at:at + step]))
+        out[near] = _numpy_winding(points[near], tree, float(accuracy), int(order))
     return out
 
 
@@ -202,7 +204,11 @@ def _layout(codes, leaf):
 
 def _subtree_sums(rows, start, skip):
     """(N, K) per node: the sums of ``rows`` (K, T) float64 over its triangles, from its
-    leaves up."""
+    leaves up. The kernel's ``subtree_sums`` computes the same values."""
+    if _kernel is not None:
+        out = np.empty((len(skip), len(rows)))
+        _kernel.subtree_sums(rows, start, skip, out)
+        return out
     leaf = skip == np.arange(len(skip)) + 1
     out = np.zeros((len(skip), len(rows)))
     out[leaf] = np.add.reduceat(rows, start[leaf], axis=1).T
@@ -249,32 +255,22 @@ def _node_fields(tri, an, centroid, start, end, skip):
     if not n:
         return fields
     origin = 0.5 * (centroid.min(axis=0) + centroid.max(axis=0))
-    p = np.ascontiguousarray((centroid - origin).T)  # (3, T): rows of per-triangle values, summed along them
-    u = [np.ascontiguousarray((tri[:, v] - centroid).T) for v in range(3)]  # corners about the centroid
-    an_t = np.ascontiguousarray(an.T)
-    raw = np.empty((34, len(tri)))
-    raw[0] = _norms(an)
-    raw[1:4] = raw[0] * p
-    raw[4:7] = an_t
-    raw[7:16] = (an_t[:, None, :] * p[None, :, :]).reshape(9, -1)
-    for k, (i, j) in enumerate(PAIRS):  # E[(x - o)_i (x - o)_j] over the triangle
-        second = p[i] * p[j] + (u[0][i] * u[0][j] + u[1][i] * u[1][j] + u[2][i] * u[2][j]) / 12.0
-        raw[16 + k:34:6] = an_t * second
-    sums = _subtree_sums(raw, start, skip)
-    c = sums[:, 1:4] / sums[:, :1]
-    a0, a1 = sums[:, 4:7], sums[:, 7:16].reshape(-1, 3, 3)
-    m = a1 - a0[:, :, None] * c[:, None, :]
+    raw = _moments(tri, an, centroid, origin)
+    sums = np.ascontiguousarray(_subtree_sums(raw, start, skip).T)  # (34, N): rows, as raw's
+    c = sums[1:4] / sums[0]
+    a0, a1 = sums[4:7], sums[7:16].reshape(3, 3, -1)
+    m = a1 - a0[:, None, :] * c[None, :, :]
     s = {}  # s[i, j, k] = sum of an_i (x - c)_j (x - c)_k, j <= k
     for k, (j, l) in enumerate(PAIRS):
         for i in range(3):
-            s[i, j, l] = s[i, l, j] = (sums[:, 16 + 6 * i + k] - a1[:, i, j] * c[:, l] - a1[:, i, l] * c[:, j]
-                                       + a0[:, i] * c[:, j] * c[:, l])
-    fields[:, 0:3] = c + origin
+            s[i, j, l] = s[i, l, j] = (sums[16 + 6 * i + k] - a1[i, j] * c[l] - a1[i, l] * c[j]
+                                       + a0[i] * c[j] * c[l])
+    fields[:, 0:3] = (c + origin[:, None]).T
     fields[:, 3] = _radii(tri, fields[:, 0:3], start, end, skip)
-    fields[:, 4:7] = a0
-    fields[:, 7] = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
-    fields[:, 8:14] = np.stack([m[:, 0, 0], m[:, 1, 1], m[:, 2, 2], m[:, 0, 1] + m[:, 1, 0],
-                                m[:, 0, 2] + m[:, 2, 0], m[:, 1, 2] + m[:, 2, 1]], axis=1)
+    fields[:, 4:7] = a0.T
+    fields[:, 7] = m[0, 0] + m[1, 1] + m[2, 2]
+    fields[:, 8:14] = np.stack([m[0, 0], m[1, 1], m[2, 2], m[0, 1] + m[1, 0], m[0, 2] + m[2, 0], m[1, 2] + m[2, 1]],
+                               axis=1)
     for k in range(3):  # 2 sum_i s_iik + sum_j s_kjj
         fields[:, 14 + k] = 2.0 * (s[0, 0, k] + s[1, 1, k] + s[2, 2, k]) + s[k, 0, 0] + s[k, 1, 1] + s[k, 2, 2]
     x, y, z = 0, 1, 2
@@ -285,14 +281,40 @@ def _node_fields(tri, an, centroid, start, end, skip):
     return fields
 
 
+def _moments(tri, an, centroid, origin):
+    """(34, T) float64 rows of per-triangle values, summed over each node: area, area times
+    the centroid about ``origin`` (3,), area-weighted normal ``an`` (T, 3), its products with
+    the centroid, and with the second moments of the triangle ``tri`` (T, 3, 3) about the
+    origin. The kernel's ``moments`` computes the same values."""
+    raw = np.empty((34, len(tri)))
+    if _kernel is not None:
+        _kernel.moments(np.ascontiguousarray(tri.reshape(-1, 9)), np.ascontiguousarray(an),
+                        np.ascontiguousarray(centroid), np.ascontiguousarray(origin), raw)
+        return raw
+    p = np.ascontiguousarray((centroid - origin).T)  # (3, T): rows of per-triangle values, summed along them
+    u = [np.ascontiguousarray((tri[:, v] - centroid).T) for v in range(3)]  # corners about the centroid
+    an_t = np.ascontiguousarray(an.T)
+    raw[0] = _norms(an)
+    raw[1:4] = raw[0] * p
+    raw[4:7] = an_t
+    raw[7:16] = (an_t[:, None, :] * p[None, :, :]).reshape(9, -1)
+    for k, (i, j) in enumerate(PAIRS):  # E[(x - o)_i (x - o)_j] over the triangle
+        second = p[i] * p[j] + (u[0][i] * u[0][j] + u[1][i] * u[1][j] + u[2][i] * u[2][j]) / 12.0
+        raw[16 + k:34:6] = an_t * second
+    return raw
+
+
 def _radii(tri, centre, start, end, skip):
     """(N,) float64: at the leaves, the distance from the centre to the farthest corner of
     their triangles; above, a bound of it by the triangles' own spheres (about their
     centroids), one depth at a time (each triangle lies in one node of each depth down to
-    its leaf)."""
+    its leaf). The kernel's ``radii`` computes the same values."""
     n = len(skip)
     r = np.zeros(n)
     if not n:
+        return r
+    if _kernel is not None:
+        _kernel.radii(np.ascontiguousarray(tri.reshape(-1, 9)), np.ascontiguousarray(centre), start, end, skip, r)
         return r
     depth = _depths(skip)
     leaf = np.flatnonzero(skip == np.arange(n) + 1)
@@ -314,6 +336,7 @@ def _radii(tri, centre, start, end, skip):
         ox, oy, oz = gx[at] - cx[who], gy[at] - cy[who], gz[at] - cz[who]
         far = np.sqrt(ox * ox + oy * oy + oz * oz) + rho[at]
         r[k] = np.maximum.reduceat(far, np.cumsum(end[k] - start[k]) - (end[k] - start[k]))
+    r[np.isnan(r)] = np.nan  # (one NaN, whichever the operations made: a NaN radius never makes a node far)
     return r
 
 

@@ -287,11 +287,14 @@ def test_kernel_refuses_bad_arrays():
     good = kernel_args(tree, points)
     KERNEL.winding(*good)
     bad_links = []
+    inner = tree.links[1, 0]  # the end of the root's left subtree: a node inside it ends after it
     for row, col, value in ((0, 0, 0), (3, 0, 3), (0, 0, len(tree.links) + 1), (len(tree.links) - 1, 1, -1),
-                            (len(tree.links) - 1, 2, len(tree.triangles)), (len(tree.links) - 1, 2, -1)):
+                            (len(tree.links) - 1, 2, len(tree.triangles)), (len(tree.links) - 1, 2, -1),
+                            (2, 0, inner + 1)):
         links = tree.links.copy()
         links[row, col] = value
         bad_links.append(links)
+    assert 2 < inner < len(tree.links) - 1
     readonly = np.empty(5)
     readonly.flags.writeable = False
     bad = [
@@ -317,6 +320,7 @@ coordinate = st.one_of(finite, st.sampled_from([0.0, 1e-300, -1e-300, 1e300, -1e
        st.lists(st.tuples(*[coordinate] * 3), min_size=1, max_size=30),
        st.sampled_from([0.3, 1.0, 2.0]), st.integers(0, 2))
 def test_fuzzed_soups_give_the_same_bytes_on_both_paths(tris, points, accuracy, order):
+    """Winding numbers, and the trees built with the kernel's helpers and without."""
     tri = np.array(tris, dtype=np.float64).reshape(-1, 3, 3)
     tri = np.concatenate([tri, tri[:3, [0, 0, 1]]])  # and some zero-area copies
     points = np.array(points, dtype=np.float64)
@@ -326,28 +330,40 @@ def test_fuzzed_soups_give_the_same_bytes_on_both_paths(tris, points, accuracy, 
         saved, winding._kernel = winding._kernel, None
         try:
             n = winding_numbers(tree, points, accuracy=accuracy, order=order)
+            numpy_tree = WindingTree(tri)
         finally:
             winding._kernel = saved
     assert k.tobytes() == n.tobytes()
+    assert tree.nodes.tobytes() == numpy_tree.nodes.tobytes() and tree.links.tobytes() == numpy_tree.links.tobytes()
 
 
 @needs_kernel
 @settings(max_examples=60)
 @given(st.lists(st.tuples(st.integers(-3, 40), st.integers(-3, 80), st.integers(-3, 12)), min_size=1, max_size=30))
 def test_fuzzed_links_are_refused_or_walked_safely(rows):
-    """Random links: the kernel refuses them or walks them within its arrays (the
-    sanitizer run, benchmarks/winding_sanitizers.py, checks the second)."""
+    """Random links: the kernel refuses them, or walks them within its arrays (the
+    sanitizer run, benchmarks/winding_sanitizers.py, checks that) as the NumPy path does."""
     nodes = np.random.default_rng(len(rows)).normal(size=(len(rows), winding.FIELDS))
     links = np.array(rows, dtype=np.int64)
     tri = np.random.default_rng(1).normal(size=(64, 9))
-    out = np.empty(4)
+    points = np.random.default_rng(2).normal(size=(7, 3))
+    out = np.empty(7)
     try:
-        KERNEL.winding(np.zeros((4, 3)), nodes, links, tri, 1.0, 2, 2, out)
+        KERNEL.winding(points, nodes, links, tri, 1.0, 2, 2, out)
+        tree = type("Tree", (), {"nodes": nodes, "links": links, "triangles": tri})
+        with np.errstate(all="ignore"):
+            assert out.tobytes() == winding._numpy_winding(points, tree, 1.0, 2).tobytes()
     except ValueError:
         skip, first, count = links.T
         i = np.arange(len(links))
         assert np.any((skip <= i) | (skip > len(links)) | (first < 0) | (first > 64) | (count < 0)
-                      | (count > 64 - first))
+                      | (count > 64 - first)) or not nested(skip)
+
+
+def nested(skip):
+    """Whether the subtrees [i, skip[i]) of a preorder tree nest: none ends after one it
+    starts in."""
+    return all(skip[j] <= skip[i] for i in range(len(skip)) for j in range(i + 1, min(skip[i], len(skip))))
 
 
 @needs_kernel
@@ -388,3 +404,102 @@ def test_kernel_morton_refuses_bad_arrays():
     for bad in (np.array([2**63], np.uint64), np.zeros(3, np.int64)):
         with pytest.raises((TypeError, ValueError)):
             KERNEL.order(bad)
+
+
+@needs_kernel
+def test_kernel_radii_refuses_bad_arrays():
+    tree = WindingTree(icosphere(1))
+    skip, start, count = (tree.links[:, k].copy() for k in range(3))
+    end = np.array([(start[k:skip[k]] + count[k:skip[k]]).max() for k in range(len(skip))])  # its last leaf's end
+    centre = np.ascontiguousarray(tree.nodes[:, :3])
+    out = np.empty(len(skip))
+    KERNEL.radii(tree.triangles, centre, start, end, skip, out)
+    assert out.tobytes() == tree.nodes[:, 3].tobytes()
+    empty, beyond = end.copy(), end.copy()
+    empty[3], beyond[-1] = start[3], len(tree.triangles) + 1
+    for args in ((tree.triangles, centre, start, empty, skip, out), (tree.triangles, centre, start, beyond, skip, out),
+                 (tree.triangles, centre, start - 1, end, skip, out), (tree.triangles, centre[:-1], start, end, skip, out),
+                 (tree.triangles.reshape(-1, 3), centre, start, end, skip, out),
+                 (tree.triangles, centre, start, end, skip, np.empty(len(skip), np.float32))):
+        with pytest.raises((TypeError, ValueError)):
+            KERNEL.radii(*args)
+
+
+@needs_kernel
+def test_kernel_subtree_sums_are_numpys_and_refuse_bad_arrays(monkeypatch):
+    tree = WindingTree(icosphere(2))
+    skip, start = tree.links[:, 0].copy(), tree.links[:, 1].copy()
+    rng = np.random.default_rng(2)
+    rows = rng.normal(size=(5, len(tree.triangles))) * 10.0 ** rng.integers(-300, 300, size=(5, len(tree.triangles)))
+    rows[rng.random(rows.shape) < 0.2] = -0.0
+    rows[0, 7], rows[1, 9], rows[2, 11] = np.inf, -np.inf, np.nan
+    out = np.empty((len(skip), 5))
+    KERNEL.subtree_sums(rows, start, skip, out)
+    monkeypatch.setattr(winding, "_kernel", None)
+    with np.errstate(all="ignore"):
+        assert out.tobytes() == winding._subtree_sums(rows, start, skip).tobytes()
+    leaves = np.flatnonzero(tree.links[:, 2] > 0)
+    big = np.flatnonzero(tree.links[leaves[:-1], 2] >= 6)[0]
+    wide = start.copy()
+    wide[leaves[big + 1]] += 3  # the leaf before takes 3 more triangles: more than 8
+    for args in ((rows, wide, skip, out), (rows, start - 1, skip, out), (rows, start + len(tree.triangles), skip, out),
+                 (rows, start, np.where(skip == len(skip), len(skip) + 5, skip), out), (rows[0], start, skip, out),
+                 (rows, start, skip, out[:, :4].copy()), (rows, start, skip[:-1], out)):
+        with pytest.raises((TypeError, ValueError)):
+            KERNEL.subtree_sums(*args)
+
+
+@needs_kernel
+def test_kernel_moments_refuse_bad_arrays():
+    tri = icosphere(1)
+    an = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    centroid, origin = tri.mean(axis=1), np.zeros(3)
+    flat, out = tri.reshape(-1, 9), np.empty((34, len(tri)))
+    KERNEL.moments(flat, an, centroid, origin, out)
+    for args in ((flat, an[:-1], centroid, origin, out), (flat, an, centroid[:-1], origin, out),
+                 (flat, an, centroid, np.zeros(2), out), (flat, an, centroid, origin, out[:33]),
+                 (flat.reshape(-1, 3), an, centroid, origin, out), (flat, an, centroid, origin, out.astype(np.float32))):
+        with pytest.raises((TypeError, ValueError)):
+            KERNEL.moments(*args)
+
+
+def nested_links(rng, size, triangles):
+    """(N, 3) int64 links of a random forest of nested subtrees in preorder: inner nodes of
+    0 to 3 children (0: an inner node of no subtree), leaves of 0 to 4 triangles, and
+    some leaves over subtrees of their own (the walk skips those)."""
+    rows = []
+
+    def node(depth):
+        at = len(rows)
+        rows.append(None)
+        inner = depth < 5 and rng.random() < 0.6
+        if inner or rng.random() < 0.1:
+            for _ in range(rng.integers(0, 4)):
+                node(depth + 1)
+        count = 0 if inner else int(rng.integers(0, 5))
+        rows[at] = (len(rows), int(rng.integers(0, triangles - count + 1)), count)
+
+    while len(rows) < size:
+        node(0)
+    return np.array(rows, dtype=np.int64)
+
+
+@needs_kernel
+@pytest.mark.parametrize("seed", range(6))
+def test_kernel_walks_any_nested_links_as_the_numpy_path(seed):
+    """On random nested links (not only the trees WindingTree makes), each point's terms
+    are the NumPy walk's, in its order: the four lanes' shared walk never loses a lane."""
+    rng = np.random.default_rng(seed)
+    links = nested_links(rng, 300, 40)
+    nodes = rng.normal(size=(len(links), winding.FIELDS))
+    nodes[:, :3] = rng.uniform(-2, 2, size=(len(links), 3))
+    nodes[:, 3] = rng.uniform(0, 1, size=len(links))
+    tree = type("Tree", (), {"nodes": nodes, "links": links, "triangles": rng.uniform(-2, 2, size=(40, 9))})
+    points = rng.uniform(-2, 2, size=(400, 3))
+    assert (links[:, 2] == 0).any() and (links[:, 0] == np.arange(len(links)) + 1)[links[:, 2] == 0].any()
+    for beta, order in ((0.5, 2), (1.5, 1), (3.0, 0)):
+        out = np.empty(len(points))
+        KERNEL.winding(points, nodes, links, tree.triangles, beta, order, 2, out)
+        with np.errstate(all="ignore"):
+            want = winding._numpy_winding(points, tree, beta, order)
+        assert out.tobytes() == want.tobytes()
