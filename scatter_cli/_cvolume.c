@@ -290,6 +290,7 @@ typedef struct {
 typedef struct {
     Wide *nodes;      /* nodes[0] is the root's */
     Cyl4 *cyl;        /* per node */
+    uint8_t *cyls;    /* per node: whether it has a cylinder (a child of at most CYLINDER faces) */
     Faces4 *faces;    /* per leaf j (and an empty leaf ``leaves``): quads faces j * quads ... */
     int64_t quads;    /* quads of faces in a leaf: ceil(leaf / 4) */
     int64_t count, root; /* nodes made; the root's reference (a node, or ~0 for a single leaf) */
@@ -372,6 +373,7 @@ static int64_t wide_node(const Tree *t, WideTree *w, int64_t i, int d)
         cylinder_lane(t, y, lane, first_leaf * t->leaf, (first_leaf + span) * t->leaf, t->lo + 3 * c, t->hi + 3 * c);
     }
     w->nodes[at] = node;
+    w->cyls[at] = y->r[0] < INFINITY || y->r[1] < INFINITY || y->r[2] < INFINITY || y->r[3] < INFINITY;
     return at;
 }
 
@@ -406,7 +408,7 @@ static void disk_lane(Faces4 *q, int lane, const double *f)
 
 static void wide_free(WideTree *w)
 {
-    free(w->nodes), free(w->faces), free(w->cyl);
+    free(w->nodes), free(w->faces), free(w->cyl), free(w->cyls);
 }
 
 /* size bytes aligned to 64 (aligned_alloc wants a whole number of 64-byte blocks) */
@@ -428,8 +430,9 @@ static int wide_tree(const Tree *t, WideTree *w)
         count += (int64_t)1 << d;
     w->nodes = alloc64(sizeof(Wide) * (size_t)count);
     w->cyl = alloc64(sizeof(Cyl4) * (size_t)count);
+    w->cyls = malloc((size_t)count);
     w->faces = alloc64(sizeof(Faces4) * (size_t)((t->leaves + 1) * w->quads));
-    if (!w->nodes || !w->faces || !w->cyl) {
+    if (!w->nodes || !w->faces || !w->cyl || !w->cyls) {
         wide_free(w);
         return 0;
     }
@@ -561,7 +564,8 @@ TARGETS static void closest_one(const Tree *t, const WideTree *w, const double *
         __atomic_fetch_add(&nodes_opened, 1, __ATOMIC_RELAXED);
 #endif
         const Wide *n = w->nodes + ref;
-        v4d d = box4_d2(&n->box, p), dy = cyl4_d2(w->cyl + ref, p);
+        /* (the nodes near the root have no cylinder: one predictable branch, no square root) */
+        v4d d = box4_d2(&n->box, p), dy = w->cyls[ref] ? cyl4_d2(w->cyl + ref, p) : (v4d){0, 0, 0, 0};
         /* the children within the bound, the nearest on top */
         int64_t cr[4];
         double cd[4];
