@@ -18,8 +18,8 @@ The tree: a complete binary tree over leaves of ``LEAF`` faces (the leaf count r
 up to a power of two, the extra leaves empty), node i's children 2i+1 and 2i+2; each
 node's faces split across the longest side of their box centres' box (median_order).
 Queries follow one Morton curve through all the points of a call (in chunks of CHUNK),
-every query's walk starting bounded by the previous one's answer. Scenes are concatenated triangles: instances are copied, not
-shared.
+every query's walk starting bounded by the previous one's answer. Scenes are
+concatenated triangles: instances are copied, not shared.
 
 The compiled kernel ``_cvolume`` does the same float64 operations in the same order
 (tests/test_distance.py holds both paths to the same bytes) and builds the same tree;
