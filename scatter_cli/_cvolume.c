@@ -136,8 +136,9 @@ static inline double segment(const double *a, const double *u, const double *p, 
 static inline void copy3(const double *a, double *q) { q[0] = a[0], q[1] = a[1], q[2] = a[2]; }
 
 /* Ericson's closest point, each quantity computed when first needed */
-static void regions(const double *a, const double *b, const double *c, const double *ab, const double *ac,
-                    const double *p, double *q)
+__attribute__((always_inline)) static inline void regions(const double *a, const double *b, const double *c,
+                                                          const double *ab, const double *ac, const double *p,
+                                                          double *q)
 {
     double ap[3], bp[3], cp[3], bc[3];
     for (int k = 0; k < 3; k++)
@@ -186,7 +187,8 @@ static void regions(const double *a, const double *b, const double *c, const dou
         copy3(s, q);
 }
 
-static double closest_on(const double *t, int thin, const double *p, double *q)
+/* (inlined into closest_one: compiled for each of its targets, one call less per face) */
+__attribute__((always_inline)) static inline double closest_on(const double *t, int thin, const double *p, double *q)
 {
     const double *a = t, *b = t + 3, *c = t + 6;
     double ab[3], ac[3], bc[3];
@@ -228,14 +230,13 @@ static int64_t faces_tested, nodes_opened;
 /* ---- the wide tree that closest() walks ----
  *
  * Built at each call from the heap tree: a node holds the boxes of four descendants two
- * levels down (one level for the root when the depth is odd), in float rounded outward,
- * side by side so that one vector operation tests all four; the leaves (of the heap tree)
- * hold the boxes of their faces the same way, four at a time. Rounding a box outward only
- * grows it, and every rounded operation of the box distance (a difference, the larger of
- * two, a square, a sum) is monotone, so the computed distance to a grown box is never more
- * than the one to the box itself: a box is skipped only when the double box of the heap
- * tree would be, and that holds only boxes farther than the best distance plus ``tol``.
- * Testing the boxes two levels down without the one between skips less, never more. */
+ * levels down (one level for the root when the depth is odd), the heap tree's own float64
+ * boxes side by side so that one vector operation tests all four (each lane computing
+ * box_d2 exactly); the leaves (of the heap tree) hold the boxes of their faces the same
+ * way, four at a time. A box is skipped only when it is farther than the best distance
+ * plus ``tol``; testing the boxes two levels down without the one between skips less,
+ * never more. (Boxes kept in float, rounded outward, halve their memory but cost a
+ * conversion at every test: they measured slower.) */
 
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic ignored "-Wpsabi" /* vectors pass only between inlined functions */
@@ -247,11 +248,10 @@ typedef double v4d __attribute__((vector_size(32)));
 #else
 #define TARGETS
 #endif
-typedef float v4f __attribute__((vector_size(16)));
 typedef int64_t v4l __attribute__((vector_size(32)));
 
 typedef struct {
-    v4f lo[3], hi[3]; /* four boxes, by axis; an empty one: lo +inf, hi -inf */
+    v4d lo[3], hi[3]; /* four boxes, by axis; an empty one: lo +inf, hi -inf */
 } Box4;
 
 typedef struct {
@@ -290,6 +290,7 @@ typedef struct {
 typedef struct {
     Wide *nodes;      /* nodes[0] is the root's */
     Cyl4 *cyl;        /* per node */
+    uint8_t *cyls;    /* per node: whether it has a cylinder (a child of at most CYLINDER faces) */
     Faces4 *faces;    /* per leaf j (and an empty leaf ``leaves``): quads faces j * quads ... */
     int64_t quads;    /* quads of faces in a leaf: ceil(leaf / 4) */
     int64_t count, root; /* nodes made; the root's reference (a node, or ~0 for a single leaf) */
@@ -297,21 +298,12 @@ typedef struct {
     int64_t nf, leaves, leaf; /* of the heap tree it was made from */
 } WideTree;
 
-/* x rounded to float, down (up > 0: up) when it is not exact */
-static inline float outward(double x, int up)
-{
-    float f = (float)x;
-    if (up ? (double)f < x : (double)f > x)
-        f = nextafterf(f, up ? INFINITY : -INFINITY);
-    return f;
-}
-
 static void box_lane(Box4 *b, int lane, const double *lo, const double *hi)
 {
     int empty = !(lo[0] <= hi[0] && lo[1] <= hi[1] && lo[2] <= hi[2]);
     for (int k = 0; k < 3; k++) {
-        b->lo[k][lane] = empty ? INFINITY : outward(lo[k], 0);
-        b->hi[k][lane] = empty ? -INFINITY : outward(hi[k], 1);
+        b->lo[k][lane] = empty ? INFINITY : lo[k];
+        b->hi[k][lane] = empty ? -INFINITY : hi[k];
     }
 }
 
@@ -381,6 +373,7 @@ static int64_t wide_node(const Tree *t, WideTree *w, int64_t i, int d)
         cylinder_lane(t, y, lane, first_leaf * t->leaf, (first_leaf + span) * t->leaf, t->lo + 3 * c, t->hi + 3 * c);
     }
     w->nodes[at] = node;
+    w->cyls[at] = y->r[0] < INFINITY || y->r[1] < INFINITY || y->r[2] < INFINITY || y->r[3] < INFINITY;
     return at;
 }
 
@@ -415,7 +408,13 @@ static void disk_lane(Faces4 *q, int lane, const double *f)
 
 static void wide_free(WideTree *w)
 {
-    free(w->nodes), free(w->faces), free(w->cyl);
+    free(w->nodes), free(w->faces), free(w->cyl), free(w->cyls);
+}
+
+/* size bytes aligned to 64 (aligned_alloc wants a whole number of 64-byte blocks) */
+static void *alloc64(size_t size)
+{
+    return aligned_alloc(64, (size + 63) / 64 * 64);
 }
 
 /* the wide tree of t; 0 when out of memory */
@@ -429,10 +428,11 @@ static int wide_tree(const Tree *t, WideTree *w)
     int64_t count = 1; /* wide nodes: the root, then at depths d0, d0 + 2, ... under the leaves' */
     for (int d = depth % 2 ? 1 : 2; d < depth; d += 2)
         count += (int64_t)1 << d;
-    w->nodes = aligned_alloc(64, sizeof(Wide) * (size_t)count);
-    w->cyl = aligned_alloc(64, sizeof(Cyl4) * (size_t)count);
-    w->faces = aligned_alloc(64, sizeof(Faces4) * (size_t)((t->leaves + 1) * w->quads));
-    if (!w->nodes || !w->faces || !w->cyl) {
+    w->nodes = alloc64(sizeof(Wide) * (size_t)count);
+    w->cyl = alloc64(sizeof(Cyl4) * (size_t)count);
+    w->cyls = malloc((size_t)count);
+    w->faces = alloc64(sizeof(Faces4) * (size_t)((t->leaves + 1) * w->quads));
+    if (!w->nodes || !w->faces || !w->cyl || !w->cyls) {
         wide_free(w);
         return 0;
     }
@@ -461,13 +461,19 @@ static int wide_tree(const Tree *t, WideTree *w)
     return 1;
 }
 
+/* the lanes of *m (each 0 or -1) as bits */
+static inline unsigned mask4(const v4l *m)
+{
+    return (unsigned)(((*m)[0] & 1) | ((*m)[1] & 2) | ((*m)[2] & 4) | ((*m)[3] & 8));
+}
+
 /* squared distances from p to the four boxes of b, each computed as box_d2 does (an empty
  * box: +inf) */
 __attribute__((always_inline)) static inline v4d box4_d2(const Box4 *b, const double *p)
 {
     v4d s = {0, 0, 0, 0};
     for (int k = 0; k < 3; k++) {
-        v4d lo = __builtin_convertvector(b->lo[k], v4d) - p[k], hi = p[k] - __builtin_convertvector(b->hi[k], v4d);
+        v4d lo = b->lo[k] - p[k], hi = p[k] - b->hi[k];
         v4l m = lo > hi;
         v4d g = (v4d)(((v4l)lo & m) | ((v4l)hi & ~m));
         g = (v4d)((v4l)g & (g > 0));
@@ -530,10 +536,14 @@ TARGETS static void closest_one(const Tree *t, const WideTree *w, const double *
             for (int64_t qd = 0; qd < w->quads && s0 + 4 * qd < s1; qd++) {
                 const Faces4 *fq = w->faces + j * w->quads + qd;
                 v4d fd = box4_d2(&fq->box, p), dd = disk4_d2(fq, p);
-                for (int lane = 0; lane < 4; lane++) {
+                /* the faces in the bounds, one branch each; a lane is tested again when a
+                 * face before it has narrowed them */
+                int64_t left = s1 - s0 - 4 * qd;
+                v4l out = (fd > bound) | (dd > disk);
+                unsigned in = ~mask4(&out) & (left >= 4 ? 15u : (1u << left) - 1);
+                for (; in; in &= in - 1) {
+                    int lane = __builtin_ctz(in);
                     int64_t s = s0 + 4 * qd + lane;
-                    if (s >= s1)
-                        break;
                     if (fd[lane] > bound || dd[lane] > disk)
                         continue;
 #ifdef COUNT
@@ -554,7 +564,8 @@ TARGETS static void closest_one(const Tree *t, const WideTree *w, const double *
         __atomic_fetch_add(&nodes_opened, 1, __ATOMIC_RELAXED);
 #endif
         const Wide *n = w->nodes + ref;
-        v4d d = box4_d2(&n->box, p), dy = cyl4_d2(w->cyl + ref, p);
+        /* (the nodes near the root have no cylinder: one predictable branch, no square root) */
+        v4d d = box4_d2(&n->box, p), dy = w->cyls[ref] ? cyl4_d2(w->cyl + ref, p) : (v4d){0, 0, 0, 0};
         /* the children within the bound, the nearest on top */
         int64_t cr[4];
         double cd[4];

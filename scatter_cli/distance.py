@@ -17,9 +17,9 @@ of the three edges is taken.
 The tree: a complete binary tree over leaves of ``LEAF`` faces (the leaf count rounded
 up to a power of two, the extra leaves empty), node i's children 2i+1 and 2i+2; each
 node's faces split across the longest side of their box centres' box (median_order).
-Queries run in chunks, each in Morton order, every query's walk starting bounded by the
-previous one's answer. Scenes are concatenated triangles: instances are copied, not
-shared.
+Queries follow one Morton curve through all the points of a call (in chunks of CHUNK),
+every query's walk starting bounded by the previous one's answer. Scenes are
+concatenated triangles: instances are copied, not shared.
 
 The compiled kernel ``_cvolume`` does the same float64 operations in the same order
 (tests/test_distance.py holds both paths to the same bytes) and builds the same tree;
@@ -239,11 +239,16 @@ def closest_points(tree, points):
     dist, closest, face = np.empty(n), np.empty((n, 3)), np.empty(n, dtype=np.int64)
     tol = tolerance(tree, points)
     if _kernel is not None:
+        # one Morton curve through all the points, walked CHUNK points at a time (gathered in
+        # its order): the denser the points, the more each walk shares with the one before
+        visit = visit_order(points)
         for i in range(0, n, CHUNK):
-            part = points[i:i + CHUNK]
-            _kernel.closest(tree.triangles, tree.order, tree.thin, tree.lo, tree.hi, tree.leaf, part, visit_order(part),
-                            tol, dist[i:i + CHUNK], closest[i:i + CHUNK], face[i:i + CHUNK], native.worker_count(),
-                            tree.wide())
+            rows = visit[i:i + CHUNK]
+            m = len(rows)
+            part_dist, part_closest, part_face = np.empty(m), np.empty((m, 3)), np.empty(m, dtype=np.int64)
+            _kernel.closest(tree.triangles, tree.order, tree.thin, tree.lo, tree.hi, tree.leaf, points[rows],
+                            np.arange(m), tol, part_dist, part_closest, part_face, native.worker_count(), tree.wide())
+            dist[rows], closest[rows], face[rows] = part_dist, part_closest, part_face
     else:
         for i in range(0, n, BLOCK):
             dist[i:i + BLOCK], closest[i:i + BLOCK], face[i:i + BLOCK] = _closest_numpy(tree, points[i:i + BLOCK], tol)
