@@ -482,15 +482,23 @@ __attribute__((always_inline)) static inline v4d box4_d2(const Box4 *b, const do
     return s;
 }
 
+/* the heights h of p over the four planes through c[k] across unit n[k], and its
+ * distances l from the four axes (c, n) */
+__attribute__((always_inline)) static inline void axial4(const v4d c[3], const v4d n[3], const double *p, v4d *h, v4d *l)
+{
+    v4d v0 = p[0] - c[0], v1 = p[1] - c[1], v2 = p[2] - c[2];
+    *h = n[0] * v0 + n[1] * v1 + n[2] * v2;
+    v4d l0 = v0 - *h * n[0], l1 = v1 - *h * n[1], l2 = v2 - *h * n[2];
+    *l = l0 * l0 + l1 * l1 + l2 * l2;
+    for (int lane = 0; lane < 4; lane++)
+        (*l)[lane] = sqrt((*l)[lane]);
+}
+
 /* squared distances from p to the disks of the four faces of q (0 where there is none) */
 __attribute__((always_inline)) static inline v4d disk4_d2(const Faces4 *q, const double *p)
 {
-    v4d v0 = p[0] - q->c[0], v1 = p[1] - q->c[1], v2 = p[2] - q->c[2];
-    v4d h = q->n[0] * v0 + q->n[1] * v1 + q->n[2] * v2;
-    v4d l0 = v0 - h * q->n[0], l1 = v1 - h * q->n[1], l2 = v2 - h * q->n[2];
-    v4d l = l0 * l0 + l1 * l1 + l2 * l2;
-    for (int lane = 0; lane < 4; lane++)
-        l[lane] = sqrt(l[lane]);
+    v4d h, l;
+    axial4(q->c, q->n, p, &h, &l);
     v4d g = l - q->r;
     g = (v4d)((v4l)g & (g > 0));
     return h * h + g * g;
@@ -499,12 +507,8 @@ __attribute__((always_inline)) static inline v4d disk4_d2(const Faces4 *q, const
 /* squared distances from p to the four cylinders of y */
 __attribute__((always_inline)) static inline v4d cyl4_d2(const Cyl4 *y, const double *p)
 {
-    v4d v0 = p[0] - y->c[0], v1 = p[1] - y->c[1], v2 = p[2] - y->c[2];
-    v4d h = y->n[0] * v0 + y->n[1] * v1 + y->n[2] * v2;
-    v4d l0 = v0 - h * y->n[0], l1 = v1 - h * y->n[1], l2 = v2 - h * y->n[2];
-    v4d l = l0 * l0 + l1 * l1 + l2 * l2;
-    for (int lane = 0; lane < 4; lane++)
-        l[lane] = sqrt(l[lane]);
+    v4d h, l;
+    axial4(y->c, y->n, p, &h, &l);
     v4d a = (v4d)((v4l)h & ~(v4l){INT64_MIN, INT64_MIN, INT64_MIN, INT64_MIN}) - y->t, g = l - y->r;
     a = (v4d)((v4l)a & (a > 0)), g = (v4d)((v4l)g & (g > 0));
     return a * a + g * g;
