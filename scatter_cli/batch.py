@@ -252,15 +252,18 @@ def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing
     lanes = [Lane(setup, env, timeout, max_memory, skip_existing, stale,
                   WorkerProcess(setup, env, fork=True) if fork else None) for _ in range(jobs)]
 
+    def take():
+        while True:
+            with lock:
+                job = next(jobs_iter, None)
+            if job is None:
+                return
+            index, input, output = job
+            yield index, input, output, infer_format(output, fmt), None
+
     def work(lane):
         try:
-            while not lane.stopped:
-                with lock:
-                    job = next(jobs_iter, None)
-                if job is None:
-                    break
-                index, input, output = job
-                results.put((index, lane.process(input, output, infer_format(output, fmt))))
+            lane.run(take(), lambda index, rec: results.put((index, rec)))
         except BaseException as exc:  # noqa: BLE001 (handed to the main thread)
             if not lane.stopped:
                 results.put((None, exc))

@@ -214,4 +214,6 @@ def sample_group(jobs, *, setup, timeout, max_memory):
         lane = Lane(setup, None, timeout, max_memory)
         lane.key = key
         _local.lane = lane
-    return [lane.process(input, output, fmt, skip) for _, input, output, fmt, skip in jobs]
+    records = []
+    lane.run(jobs, lambda index, rec: records.append(rec))
+    return records

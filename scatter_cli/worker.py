@@ -19,6 +19,7 @@ spike shorter than the poll interval goes unseen.
 
 from __future__ import annotations
 
+import collections
 import gc
 import json
 import os
@@ -31,6 +32,7 @@ import threading
 import time
 
 POLL = 0.05  # seconds between checks of a running job's time and memory
+QUEUE_BELOW = 0.05  # seconds: after a job shorter than this, a lane queues the next behind the one running
 # bytes of resident memory above a worker's own after start-up past which it hands freed
 # memory back after a job (doing so after every job costs small meshes 15-25% of their time)
 TRIM_ABOVE = 64 << 20
@@ -159,8 +161,8 @@ class WorkerProcess:
             )
         self.proc.stdin.write((json.dumps(setup) + "\n").encode())
         self.ready = False
-        self.output = None  # the output of the job in flight
         self.killed_for = None
+        self.unread = b""  # what the child answered past the last line read
 
     def wait_ready(self):
         """Wait for the child's imports (start-up counts against no job's time limit)."""
@@ -168,30 +170,32 @@ class WorkerProcess:
             self._read_line(None, None)
             self.ready = True
 
-    def run(self, input, output, fmt, timeout=None, max_memory=None):
+    def send(self, input, output, fmt):
+        """Hand the child a job (it runs its jobs in the order sent, one at a time)."""
         self.wait_ready()
-        self.output = output
         try:
             self.proc.stdin.write((json.dumps({"input": input, "output": output, "format": fmt}) + "\n").encode())
         except OSError:
             raise WorkerLost(self._death()) from None
-        answer = json.loads(self._read_line(timeout, max_memory))
-        self.output = None
-        return answer
 
-    def _read_line(self, timeout, max_memory):
-        started = time.monotonic()
+    def receive(self, timeout=None, max_memory=None, started=None):
+        """The answer to the oldest job sent, which began at ``started`` (time.monotonic())."""
+        return json.loads(self._read_line(timeout, max_memory, started))
+
+    def _read_line(self, timeout, max_memory, started=None):
+        started = time.monotonic() if started is None else started
         out = self.proc.stdout
-        buf = b""
         while True:
+            line, newline, rest = self.unread.partition(b"\n")
+            if newline:  # (two answers can come in one read)
+                self.unread = rest
+                return line
             ready, _, _ = select.select([out], [], [], POLL)
             if ready:
                 block = os.read(out.fileno(), 65536)
                 if not block:
                     raise WorkerLost(self._death())
-                buf += block
-                if buf.endswith(b"\n"):
-                    return buf
+                self.unread += block
                 continue
             if self.killed_for:
                 raise WorkerLost(self._death())
@@ -248,6 +252,8 @@ def preload():
     """Import in this process what the workers forked from it need (NumPy, the sampler,
     the writers), so that none imports it again. Not trimesh: the fast readers load the
     plain formats without it (a worker imports it for the first mesh that needs it)."""
+    import numpy.random  # noqa: F401  (NumPy imports it on first use: the seeding of every mesh)
+
     from . import api, writers  # noqa: F401
 
 
@@ -422,34 +428,86 @@ class Lane:
         self.skip_existing = skip_existing
         self.stale = stale if stale is not None else StaleTemps()
         self.worker = worker
+        self.sent = collections.deque()  # jobs the child has been given and not answered, oldest first
         self.stopped = False
 
-    def process(self, input, output, fmt, skip=None):
-        """The report record of one mesh (``input``, ``output``, ``status``, ``error``, ...),
-        with ``warnings`` (lines naming the mesh) when sampling it warned.
+    def run(self, jobs, done):
+        """Run ``jobs`` (``(key, input, output, format, skip)`` each; ``skip``: whether an
+        existing output is skipped, None for the lane's ``skip_existing``) and call
+        ``done(key, record)`` for each, in the order given. A record has ``input``,
+        ``output``, ``status``, ``error``, ... and ``warnings`` (lines naming the mesh)
+        when sampling warned.
 
-        ``skip``: whether an existing output is skipped (default: the lane's ``skip_existing``).
+        After a job shorter than ``QUEUE_BELOW`` the next one is sent before its answer
+        comes, so that the child never waits for this process between small meshes.
+        A job that kills the child fails alone; the job queued behind it goes to the next child.
         """
+        jobs = iter(jobs)
+        last = None  # seconds the last job took
+        free_at = 0.0  # when the child answered its last job
+        while True:
+            depth = 2 if last is not None and last < QUEUE_BELOW else 1
+            while len(self.sent) < depth and not self.stopped:
+                job = next(jobs, None)
+                if job is None:
+                    break
+                skipped = self._skipped(job)
+                if skipped is not None:
+                    done(job[0], skipped)
+                else:
+                    self.sent.append((job, self._send(job)))
+            if not self.sent:
+                return
+            job, sent_at = self.sent[0]
+            started = max(sent_at, free_at)
+            answer = self._receive(job, started)
+            self.sent.popleft()
+            free_at = time.monotonic()
+            last = free_at - started
+            done(job[0], self._record(job, answer, last))
+
+    def _skipped(self, job):
+        """Clear what earlier runs left of the job's output; its record if it is skipped."""
+        _, input, output, _, skip = job
         t = time.perf_counter()
         self.stale.clear(output)
         if (self.skip_existing if skip is None else skip) and os.path.isfile(output):
             return record(input, output, "skipped", None, seconds=time.perf_counter() - t)
+        return None
+
+    def _send(self, job):
+        """Give the job to the child (a new one if there is none); when it was sent."""
+        _, input, output, fmt, _ = job
+        if self.worker is None:
+            self.worker = WorkerProcess(self.setup, self.env)
+        sent_at = time.monotonic()
         try:
-            if self.worker is None:
-                self.worker = WorkerProcess(self.setup, self.env)
-            if not self.worker.ready:
-                self.worker.wait_ready()
-                t = time.perf_counter()
-            answer = self.worker.run(input, output, fmt, self.timeout, self.max_memory)
+            self.worker.wait_ready()
+            sent_at = time.monotonic()
+            self.worker.send(input, output, fmt)
+        except WorkerLost:
+            pass  # the child died on a job before this one: reading that job's answer says so
+        return sent_at
+
+    def _receive(self, job, started):
+        """The answer to the oldest job sent; when the child dies, that job's failure, and
+        the jobs queued behind it are given to a new child."""
+        try:
+            return self.worker.receive(self.timeout, self.max_memory, started)
         except WorkerLost as lost:
             self.worker = None
-            remove_temps(output)
+            remove_temps(job[2])
             if self.stopped:
                 raise
-            answer = {"error": name_the_file(str(lost), input), "count": None, "faces": None, "area": None}
+            for k, (queued, _) in enumerate(list(self.sent)[1:], 1):
+                self.sent[k] = (queued, self._send(queued))
+            return {"error": name_the_file(str(lost), job[1]), "count": None, "faces": None, "area": None}
+
+    @staticmethod
+    def _record(job, answer, seconds):
+        _, input, output, _, _ = job
         status = "failed" if answer["error"] else "written"
-        rec = record(input, output, status, answer["error"], answer["count"], answer["faces"], answer["area"],
-                     time.perf_counter() - t)
+        rec = record(input, output, status, answer["error"], answer["count"], answer["faces"], answer["area"], seconds)
         if answer.get("warnings"):  # not a report field: the batch prints and drops them
             rec["warnings"] = [name_the_file(w, input) for w in answer["warnings"]]
         return rec
@@ -460,8 +518,8 @@ class Lane:
         worker = self.worker
         if worker is not None:
             worker.kill("interrupted")
-            if worker.output:
-                remove_temps(worker.output)
+            for job, _ in list(self.sent):
+                remove_temps(job[2])
 
     def close(self):
         if self.worker is not None:

@@ -11,9 +11,10 @@ import pytest
 import scatter_cli
 from scatter_cli import worker
 from scatter_cli.errors import ScatterUsageError
+from scatter_cli.options import SampleOptions
 
 from .batchtools import collection, no_temporary_files, outputs, reader_fd, reference, wait_for_reader
-from .conftest import SAMPLES, triangles_mesh
+from .conftest import ROOT, SAMPLES, triangles_mesh
 
 
 @pytest.fixture(scope="module")
@@ -165,3 +166,38 @@ def test_a_forked_worker_is_not_charged_for_the_memory_it_shares(tmp_path, monke
     records = scatter_cli.batch([str(fifo)], str(tmp_path / "again" / "{stem}.ply"), **args)
     assert "--max-memory" in records[0]["error"], records
     del ballast
+
+
+def test_the_job_queued_behind_a_killed_one_goes_to_the_next_worker(tmp_path, meshes):
+    """After a short job a lane sends the next one before the answer comes; here the FIFO
+    mesh runs with a good mesh queued behind it in the same worker. The worker is killed:
+    the FIFO mesh fails alone, the queued mesh is sampled by the next worker, byte for
+    byte as `scatter sample` writes it. A lane that forgot what it had queued would fail
+    the queued mesh with the FIFO's error, or lose it."""
+    base, paths, ref, _ = meshes
+    fifo = tmp_path / "in" / "fifo.csv.ply"
+    fifo.parent.mkdir()
+    os.mkfifo(fifo)
+    inputs = [paths[0], fifo, *paths[1:]]
+    out = tmp_path / "out"
+    stems = [os.path.splitext(p.name)[0] for p in inputs]  # NAME.FORMAT
+    jobs = [(i, str(p), str(out / stem), stem.rsplit(".", 1)[1], False) for i, (p, stem) in enumerate(zip(inputs, stems))]
+    setup = {"options": SampleOptions(count=300, attributes=("normal", "face")).check().as_dict(), "ascii": False,
+             "crs": None, "quiet": True}
+    lane = worker.Lane(setup, dict(os.environ, PYTHONPATH=str(ROOT)))
+    sent = []
+    real_send = lane._send
+    lane._send = lambda job: sent.append((job[0], len(lane.sent))) or real_send(job)
+    records = {}
+    thread = threading.Thread(target=lambda: lane.run(jobs, lambda key, rec: records.__setitem__(key, rec)))
+    thread.start()
+    reader = wait_for_reader(fifo)
+    os.kill(reader, 9)
+    os.close(reader_fd.pop())
+    thread.join(60)
+    lane.close()
+    assert (2, 1) in sent, sent  # mesh 2 was sent while the FIFO mesh (1) was running
+    assert [records[i]["status"] for i in range(len(inputs))] == ["written", "failed"] + ["written"] * (len(paths) - 1)
+    assert "SIGKILL" in records[1]["error"]
+    assert outputs(out) == ref
+    assert no_temporary_files(tmp_path)
