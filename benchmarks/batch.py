@@ -1,7 +1,7 @@
 """Collections: `scatter batch` against its peers on 300+ small real meshes.
 
     NUMPY_MADVISE_HUGEPAGE=0 PYTHONPATH=$PWD python benchmarks/batch.py [--meshes 304] [--repeats 3]
-        [--no-dask] [--out FILE]
+        [--no-dask] [--settle 35] [--out FILE]
 
 The collection: --meshes copies of the small untextured meshes of samples/ (not the large
 skull and koala, whose sampling time would hide the fixed costs) in OBJ, OFF, PLY, STL and GLB,
@@ -15,13 +15,17 @@ binary PLY. Timed as whole commands, start-up included, medians of back-to-back 
 - `scatter batch --from-list LIST -o OUT/{stem}.ply -n 2048 -a normal -j 2`: the time
   includes Python's start-up, the imports, starting the two worker processes (forked
   from the command after its imports) and stopping them;
-- a trimesh script: multiprocessing.Pool(2) mapping load, sample_surface, write PLY;
-- each of the two again, over the outputs of its run before (scatter replaces each file
-  through a new temporary file, the script rewrites it in place).
+- a trimesh script: multiprocessing.Pool(2) mapping load, sample_surface, write PLY
+  (trimesh imports SciPy when it is installed: the report says whether it was);
+- each of the two again, over the outputs of a run before (scatter replaces each file
+  through a new temporary file, the script rewrites it in place), after all the fresh rounds.
 
-Each of the first two writes into an empty folder (emptied before the run): on ext4,
-creating a file soon after many were deleted costs 0.7 to 0.9 CPU ms (the allocator skips
-recently freed inodes), rewriting one in place 0.15 ms, so both start from the same state.
+Every fresh run writes into a new, empty folder, and nothing is deleted before the end:
+on ext4, for about 30 s after many files were deleted, creating a file costs several
+times more (the inode allocator skips recently freed inodes), which would add the same
+time per file to both peers and hide their difference. For the same reason the timing
+starts --settle seconds after the collection is written (a run of this benchmark just
+before deletes its files at its end).
 - a shell loop of `scatter sample` (over the first --loop meshes, scaled to the whole);
 - `scatter batch --engine dask` on a local cluster of two one-thread workers started
   before the timing (`dask scheduler`, `dask worker --nthreads 1`): the time includes the
@@ -81,8 +85,9 @@ def one(job):
         f.write(rows.tobytes())
 
 if __name__ == "__main__":
-    lines = open(sys.argv[1]).read().split("\n")
-    jobs = [tuple(l.split("\t")) for l in lines if l]
+    out = sys.argv[2]
+    sources = [l for l in open(sys.argv[1]).read().split("\n") if l]
+    jobs = [(src, "%%s/%%s.ply" %% (out, src.rsplit("/", 1)[-1].rsplit(".", 1)[0])) for src in sources]
     with multiprocessing.Pool(2) as pool:
         pool.map(one, jobs, chunksize=1)
 ''' % COUNT
@@ -270,6 +275,8 @@ def main():
     ap.add_argument("--loop", type=int, default=20, help="meshes in the timed shell loop")
     ap.add_argument("--no-dask", action="store_true", help="leave the Dask engine out")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--settle", type=float, default=35.0,
+                    help="seconds to wait before timing, for the file system (see the module's docstring)")
     args = ap.parse_args()
     os.environ.setdefault("PYTHONPATH", str(ROOT))
     os.environ.pop("PYTHONDONTWRITEBYTECODE", None)  # an installed package has its bytecode cached
@@ -286,9 +293,6 @@ def main():
         listing.write_text("".join(f"{p}\n" for p in paths))
         one = work / "one.txt"
         one.write_text(f"{paths[0]}\n")
-        jobs_file = work / "jobs.tsv"
-        jobs_file.write_text("".join(f"{p}\t{work / 'tm' / (p.stem + '.ply')}\n" for p in paths))
-        (work / "tm").mkdir()
         script = work / "tm_pool.py"
         script.write_text(TRIMESH_SCRIPT)
         common = ["-n", COUNT, "-a", "normal", "-q"]
@@ -299,46 +303,57 @@ def main():
         cpus = {k: [] for k in kinds if k != "cluster"}  # CPU seconds of the command and the children it waited for
         cpu = {}
 
-        def batch_cmd(lst, out, *engine, fresh=True):
-            if fresh:
-                shutil.rmtree(out, ignore_errors=True)
+        folders = iter(range(1 << 30))
+
+        def new_folder(kind):
+            """A folder no run has written to (the next fresh run writes there; nothing is
+            deleted before the end: see the module's docstring)."""
+            folder = work / f"{kind}-{next(folders)}"
+            folder.mkdir()
+            return folder
+
+        def batch_cmd(lst, out, *engine):
             return scatter("batch", "--from-list", lst, "-o", f"{out}/{{stem}}.ply", *common, *engine)
 
-        def trimesh_cmd(fresh=True):
-            if fresh:  # the same empty folder the batch gets
-                shutil.rmtree(work / "tm", ignore_errors=True)
-                (work / "tm").mkdir()
-            return [sys.executable, str(script), str(jobs_file)]
+        def trimesh_cmd(out):
+            return [sys.executable, str(script), str(listing), str(out)]
+
+        time.sleep(args.settle)
 
         sample_one = scatter("sample", paths[0], *common, "-o", work / "one.ply")
-        for r in range(-1, args.repeats):  # round -1: the warm-up, not kept
-            def keep(kind, t, c=None):
-                if r >= 0:
-                    times[kind].append(t)
-                    if c is not None:
-                        cpus[kind].append(c["command"])
+        over = []  # each round's output folders, written over after all fresh rounds
 
-            t, c = timed(batch_cmd(listing, work / "out", "-j", 2))
-            keep("batch", t, c)
+        def keep(r, kind, t, c=None):
+            if r >= 0:  # round -1: the warm-up, not kept
+                times[kind].append(t)
+                if c is not None:
+                    cpus[kind].append(c["command"])
+
+        for r in range(-1, args.repeats):
+            batch_out, trimesh_out = new_folder("batch"), new_folder("trimesh")
+            t, c = timed(batch_cmd(listing, batch_out, "-j", 2))
+            keep(r, "batch", t, c)
             cpu["batch"] = c
-            keep("batch_over", *timed(batch_cmd(listing, work / "out", "-j", 2, fresh=False)))
-            keep("batch_one", *timed(batch_cmd(one, work / "out", "-j", 2)))
-            keep("sample_one", *timed(sample_one))
-            keep("trimesh", *timed(trimesh_cmd()))
-            keep("trimesh_over", *timed(trimesh_cmd(fresh=False)))
+            keep(r, "trimesh", *timed(trimesh_cmd(trimesh_out)))
+            keep(r, "batch_one", *timed(batch_cmd(one, new_folder("one"), "-j", 2)))
+            keep(r, "sample_one", *timed(sample_one))
+            over.append((batch_out, trimesh_out))
             if args.no_dask:
                 continue
             address, cluster, started = start_cluster()
-            keep("cluster", started)
+            keep(r, "cluster", started)
             try:
                 dask = ("--engine", "dask", "--scheduler", address)
-                t, cpu["dask_first"] = timed(batch_cmd(listing, work / "dask", *dask), cluster)
-                keep("dask_first", t)
-                t, cpu["dask"] = timed(batch_cmd(listing, work / "dask", *dask), cluster)
-                keep("dask", t)
-                keep("dask_one", timed(batch_cmd(one, work / "dask", *dask), cluster)[0])
+                t, cpu["dask_first"] = timed(batch_cmd(listing, new_folder("dask"), *dask), cluster)
+                keep(r, "dask_first", t)
+                t, cpu["dask"] = timed(batch_cmd(listing, new_folder("dask"), *dask), cluster)
+                keep(r, "dask", t)
+                keep(r, "dask_one", timed(batch_cmd(one, new_folder("dask"), *dask), cluster)[0])
             finally:
                 stop_cluster(cluster)
+        for r, (batch_out, trimesh_out) in enumerate(over, -1):
+            keep(r, "batch_over", *timed(batch_cmd(listing, batch_out, "-j", 2)))
+            keep(r, "trimesh_over", *timed(trimesh_cmd(trimesh_out)))
         memory = batch_memory(listing, work / "mem", n)
         subset = paths[:: max(1, n // args.loop)][: args.loop]
         loop = " ; ".join(f"{sys.executable} -m scatter_cli sample {p} -n {COUNT} -a normal -o {work}/loop.ply"
@@ -361,11 +376,15 @@ def report(args, n, times, cpu, memory, t_loop, looped, stages, load_before, cpu
     rate["loop"] = n / t_loop
     per_mesh = {k: (med[k] - med[k + "_one"]) / (n - 1) for k in ("batch",) + (() if args.no_dask else ("dask",))}
     load = os.getloadavg()
+    ratios = [t / b for t, b in zip(times["trimesh"], times["batch"])]
+    scipy_version = subprocess.run([sys.executable, "-c", "import scipy; print(scipy.__version__)"],
+                                   capture_output=True, text=True).stdout.strip()
     lines = [
         f"# scatter batch: {n} small meshes, {COUNT} points with normals each (binary PLY)",
         "",
         f"Command: `NUMPY_MADVISE_HUGEPAGE=0 PYTHONPATH=$PWD python benchmarks/batch.py --meshes {args.meshes} "
-        f"--repeats {args.repeats} --loop {args.loop}{' --no-dask' if args.no_dask else ''}` "
+        f"--repeats {args.repeats} --loop {args.loop}{' --no-dask' if args.no_dask else ''}"
+        f"{f' --settle {args.settle:g}' if args.settle != 35 else ''}` "
         f"({time.strftime('%Y-%m-%d', time.gmtime())}; load average (1, 5, 15 min) before "
         f"{' '.join(f'{x:.1f}' for x in load_before)}, after {' '.join(f'{x:.1f}' for x in load)} "
         f"on {os.cpu_count()} CPUs)",
@@ -375,7 +394,7 @@ def report(args, n, times, cpu, memory, t_loop, looped, stages, load_before, cpu
         f"| scatter batch -j 2 (starting its 2 workers included) | {med['batch']:.2f} | {rate['batch']:.1f} | 1 |",
         f"| trimesh + multiprocessing.Pool(2) | {med['trimesh']:.2f} | {rate['trimesh']:.1f} | "
         f"{rate['batch'] / rate['trimesh']:.2f}x faster |",
-        f"| the same two, over the outputs of the run before: scatter batch -j 2 (files replaced atomically) | "
+        f"| the same two, over the outputs of a fresh round: scatter batch -j 2 (files replaced atomically) | "
         f"{med['batch_over']:.2f} | {n / med['batch_over']:.1f} | 1 |",
         f"| trimesh + multiprocessing.Pool(2) (files rewritten in place) | {med['trimesh_over']:.2f} | "
         f"{n / med['trimesh_over']:.1f} | {med['trimesh_over'] / med['batch_over']:.2f}x faster |",
@@ -390,6 +409,12 @@ def report(args, n, times, cpu, memory, t_loop, looped, stages, load_before, cpu
             f"{rate['dask']:.1f} | {med['dask'] / med['batch']:.2f}x the time |",
         ]
     lines += [
+        "",
+        f"Each round's trimesh time over its batch time (the two run back to back, so a change in the "
+        f"machine's speed moves both): median {statistics.median(ratios):.2f}x, all "
+        + ", ".join(f"{x:.2f}" for x in ratios) + ". "
+        + (f"trimesh imported SciPy {scipy_version} (installed here), as it does wherever SciPy is installed."
+           if scipy_version else "SciPy is not installed here: trimesh imported without it."),
         "",
         "All runs (s): " + "; ".join(f"{k} " + ", ".join(f"{t:.2f}" for t in v) for k, v in times.items()),
         "",

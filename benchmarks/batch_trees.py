@@ -1,12 +1,12 @@
 """Two checkouts of scatter and the trimesh script, batch against batch, interleaved.
 
-    NUMPY_MADVISE_HUGEPAGE=0 python benchmarks/batch_trees.py BEFORE AFTER [--rounds 7] [--meshes 304]
+    NUMPY_MADVISE_HUGEPAGE=0 python benchmarks/batch_trees.py BEFORE AFTER [--rounds 7] [--meshes 304] [--settle 35]
 
 BEFORE and AFTER are folders holding a built `scatter_cli` (their kernels built in
 place). The collection is benchmarks/batch.py's (small meshes in five formats); each
 round runs, one after the other: `scatter batch -j 2` of BEFORE, a batch of its first
 mesh, the same two of AFTER, then batch.py's trimesh script; every command writes into
-an emptied folder. A warm-up round comes first. Rounds interleave so that a change in
+a new, empty folder. A warm-up round comes first. Rounds interleave so that a change in
 the machine's speed (a shared host's is large) moves all of them alike: the ratios of
 each round's medians are what to compare, not the seconds of different runs.
 """
@@ -39,7 +39,7 @@ def run(cmd, env, cwd):
 
 
 def fresh(folder):
-    shutil.rmtree(folder, ignore_errors=True)
+    """A new empty folder (nothing is deleted before the end: see benchmarks/batch.py)."""
     folder.mkdir()
     return folder
 
@@ -50,6 +50,7 @@ def main():
     ap.add_argument("after")
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--meshes", type=int, default=304)
+    ap.add_argument("--settle", type=float, default=35.0, help="seconds to wait before timing (benchmarks/batch.py)")
     args = ap.parse_args()
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONUNBUFFERED", "PYTHONDONTWRITEBYTECODE", "CI")}
     trees = {"before": Path(args.before).resolve(), "after": Path(args.after).resolve()}
@@ -61,22 +62,22 @@ def main():
         listing, one = work / "meshes.txt", work / "one.txt"
         listing.write_text("".join(f"{p}\n" for p in paths))
         one.write_text(f"{paths[0]}\n")
-        jobs = work / "jobs.tsv"
-        jobs.write_text("".join(f"{p}\t{work / 'tm' / (p.stem + '.ply')}\n" for p in paths))
         script = work / "tm_pool.py"
         script.write_text(bench.TRIMESH_SCRIPT)
         runs = {k: [] for k in ("before", "before_one", "after", "after_one", "trimesh")}
+        time.sleep(args.settle)
         print(f"load before: {os.getloadavg()[0]:.2f}; {len(paths)} meshes")
+        folders = iter(range(1 << 30))
         for r in range(-1, args.rounds):
             got = {}
             for name, root in trees.items():
                 tree_env = dict(env, PYTHONPATH=str(root))
                 for kind, lst in ((name, listing), (name + "_one", one)):
-                    out = fresh(work / "out")
+                    out = fresh(work / f"out-{next(folders)}")
                     got[kind] = run([sys.executable, "-m", "scatter_cli", "batch", "--from-list", str(lst), "-o",
                                      f"{out}/{{stem}}.ply", *COMMON], tree_env, work)
-            fresh(work / "tm")
-            got["trimesh"] = run([sys.executable, str(script), str(jobs)], env, work)
+            out = fresh(work / f"out-{next(folders)}")
+            got["trimesh"] = run([sys.executable, str(script), str(listing), str(out)], env, work)
             if r >= 0:
                 for k, v in got.items():
                     runs[k].append(v)
