@@ -199,10 +199,12 @@ def sample_to(mesh, options: SampleOptions, path, format=None, ascii=False, *, c
     from .writers import run_precision
 
     fmt = output_format(path, format, ascii, crs)
-    options = dataclasses.replace(options, precision=run_precision(fmt, options.precision))
+    precision = run_precision(fmt, options.precision)
+    if precision != options.precision:
+        options = dataclasses.replace(options, precision=precision)
     run = prepare(mesh, options=options, warn=warn)
     t = time.perf_counter()
-    write(run, path, fmt, ascii, crs=crs, progress=progress)
+    _write(run, path, fmt, ascii, crs, progress)
     run.info["timings"]["sample_and_write"] = time.perf_counter() - t
     return run
 
@@ -212,10 +214,14 @@ def write(run: Run, path, format=None, ascii=False, *, crs=None, progress=False)
     ``format`` (default: from the suffix of ``path``), streamed chunk by chunk;
     ``crs``: LAS/LAZ's coordinate system; ``progress``: a progress line on standard
     error. Returns the writer's report (also in ``run.info["output"]`` when not empty)."""
+    return _write(run, path, output_format(path, format, ascii, crs), ascii, crs, progress)
+
+
+def _write(run, path, fmt, ascii, crs, progress):
+    """:func:`write` with the format ``fmt`` already known and checked."""
     from .progress import with_progress
     from .writers import write_samples
 
-    fmt = output_format(path, format, ascii, crs)
     report = write_samples(with_progress(run.chunks(), run.size, progress), path, fmt, run.layout, run.size,
                            ascii, crs=crs, **output_options(run, fmt))
     if report:

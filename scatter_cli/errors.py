@@ -1,8 +1,5 @@
 """The two kinds of failure the command line reports, and OS errors on an output turned into them."""
 
-import contextlib
-
-
 class ScatterError(Exception):
     """A failure the user can act on: printed as one ``error: ...`` line, exit 1."""
 
@@ -26,15 +23,25 @@ class ScatterUsageError(ScatterError):
 STDOUT = "standard output"
 
 
-@contextlib.contextmanager
-def writing(name):
-    """Turn OS errors while writing ``name`` into one-line ScatterErrors naming it.
+class writing:
+    """``with writing(name):`` turns OS errors while writing ``name`` into one-line
+    ScatterErrors naming it.
 
     A broken pipe (the reader left: a pipe, a FIFO, /dev/stdout) becomes OutputClosed.
+    (A class, not a generator: a batch enters it several times per mesh.)
     """
-    try:
-        yield
-    except OSError as exc:
-        if isinstance(exc, BrokenPipeError):
+
+    __slots__ = ("name",)
+
+    def __init__(self, name):
+        self.name = name
+
+    def __enter__(self):
+        return None
+
+    def __exit__(self, kind, exc, traceback):
+        if kind is None or not issubclass(kind, OSError):
+            return False
+        if issubclass(kind, BrokenPipeError):
             raise OutputClosed() from None
-        raise ScatterError(f"{name}: cannot write: {exc.strerror or exc}") from None
+        raise ScatterError(f"{self.name}: cannot write: {exc.strerror or exc}") from None

@@ -11,7 +11,6 @@ records the signal, which is raised when the held step ends.
 
 from __future__ import annotations
 
-import contextlib
 import signal
 
 
@@ -43,17 +42,21 @@ def install():
         signal.signal(signal.SIGINT, _on_signal)
 
 
-@contextlib.contextmanager
-def held():
-    """Hold SIGINT and SIGTERM for the duration (a writer's step): one that arrives is
-    raised as the step ends, whatever the step raised. Without :func:`install` (the
-    Python API) this does nothing."""
-    global _holding, _pending
-    _holding += 1
-    try:
-        yield
-    finally:
+class held:
+    """``with held():`` holds SIGINT and SIGTERM for the duration (a writer's step): one
+    that arrives is raised as the step ends, whatever the step raised. Without
+    :func:`install` (the Python API) this does nothing."""
+
+    __slots__ = ()
+
+    def __enter__(self):
+        global _holding
+        _holding += 1
+
+    def __exit__(self, kind, exc, traceback):
+        global _holding, _pending
         _holding -= 1
         if not _holding and _pending is not None:
             signum, _pending = _pending, None
             raise _RAISES[signum]()
+        return False

@@ -22,7 +22,7 @@ import numpy as np
 from . import readers
 from .errors import ScatterError, ScatterUsageError
 from .inputs import INPUT_FORMATS, STDIN_FORMATS
-from .sourcefile import check_readable, is_stream, stream_bytes
+from .sourcefile import check_readable, stream_bytes
 from .surface import Geometry, Instance, Surface, Unsampled, select_objects
 
 # Called before trimesh is first imported, when set: the command line imports it with
@@ -85,7 +85,7 @@ def load_surface(source, *, input_format: str | None = None, objects=None, plain
               smooth, color, uv)
     loader = LOADERS.get(kind, TRIMESH)
     surface = None
-    if loader.fast is not None and plain and not objects and not is_stream(path):
+    if loader.fast is not None and plain and not objects and path != "-":
         surface = _read_fast(job, loader.fast)
     if surface is None:
         surface = loader.full(job)
@@ -120,7 +120,8 @@ def _read_fast(job, read):
     One geometry makes a mesh, several a scene, as trimesh.load makes them; the names
     follow trimesh's for an OBJ split by material (file name, then name_1, name_2...).
     """
-    check_readable(job.path)
+    if check_readable(job.path):
+        return None  # a pipe: read once, whole
     parts = readers.read_file(job.path, read, job.smooth, job.color, job.uv)
     if parts is None:
         return None
@@ -193,8 +194,7 @@ def _trimesh_file(job):
                                     f"({', '.join(STDIN_FORMATS)})")
         file_obj = io.BytesIO(stream_bytes(path, "<stdin>: no data on standard input"))
     else:
-        check_readable(path)
-        stream = is_stream(path)
+        stream = check_readable(path)
         if not file_type:
             pipe = "a pipe has " if stream else ""
             raise ScatterUsageError(f"{path}: {pipe}no file suffix to tell the format; pass --input-format")

@@ -42,7 +42,12 @@ def _cores() -> int:
 
 def worker_count() -> int:
     """Threads for sampling and thinning: SCATTER_THREADS, else the cores, at most 4."""
-    env = os.environ.get("SCATTER_THREADS", "").strip()
+    return _threads(os.environ.get("SCATTER_THREADS", ""))
+
+
+@functools.lru_cache(maxsize=8)  # asked several times per mesh
+def _threads(env) -> int:
+    env = env.strip()
     if not env:
         return max(1, min(4, _cores()))
     try:

@@ -97,7 +97,10 @@ class SampleOptions:
 
     def check(self) -> "SampleOptions":
         """Raise ScatterUsageError for any option, or combination, that is wrong whatever
-        the mesh; returns ``self``."""
+        the mesh; returns ``self``. (Checked once: a batch worker runs one set of options
+        on every mesh.)"""
+        if self.__dict__.get("_checked"):
+            return self
         _check_numbers(self)
         check_attributes(self.attributes, self.volume_run)
         if self.weight:
@@ -113,6 +116,7 @@ class SampleOptions:
                 from .thinning import poisson_candidates
 
                 poisson_candidates(self.count, self.oversampling, usage=True)
+        object.__setattr__(self, "_checked", True)  # not a field: equality, as_dict and replace ignore it
         return self
 
 

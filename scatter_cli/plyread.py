@@ -107,11 +107,16 @@ def _rgba(c):
     return c.astype(np.uint8).astype(np.float64)
 
 
+MAP_FROM = 1 << 20  # bytes: a smaller file is read (mapping it costs more system calls than it saves)
+
+
 def _contents(f):
-    """The bytes of file ``f``: mapped read-only where possible (reading a large file into
-    fresh memory costs more than converting it), else read. A mapping stays open only as
-    long as arrays view it."""
+    """The bytes of file ``f``: a large file mapped read-only where possible (reading it
+    into fresh memory costs more than converting it), else read. A mapping stays open
+    only as long as arrays view it."""
     try:
+        if os.fstat(f.fileno()).st_size < MAP_FROM:
+            return f.read()
         return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
     except (OSError, ValueError):  # a file system that cannot map
         f.seek(0)

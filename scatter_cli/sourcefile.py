@@ -10,16 +10,24 @@ import sys
 from .errors import ScatterError
 
 
-def check_readable(path):
-    """Raise ScatterError when ``path`` is missing, a folder, unreadable or an empty file."""
-    if not os.path.exists(path):
-        raise ScatterError(f"{path}: no such file")
-    if os.path.isdir(path):
+def check_readable(path) -> bool:
+    """Raise ScatterError when ``path`` is missing, a folder, unreadable or an empty file;
+    else return whether it is a stream (see :func:`is_stream`). One stat: a batch asks
+    this of every mesh."""
+    if path == "-":
+        return True
+    try:
+        status = os.stat(path)
+    except OSError:
+        raise ScatterError(f"{path}: no such file") from None
+    if stat.S_ISDIR(status.st_mode):
         raise ScatterError(f"{path}: is a directory, not a mesh file")
     if not os.access(path, os.R_OK):
         raise ScatterError(f"{path}: permission denied")
-    if not is_stream(path) and os.path.getsize(path) == 0:
+    stream = not stat.S_ISREG(status.st_mode)
+    if not stream and status.st_size == 0:
         raise ScatterError(f"{path}: the file is empty")
+    return stream
 
 
 def is_stream(path):

@@ -31,6 +31,8 @@ import sys
 import threading
 import time
 
+from .options import SampleOptions
+
 POLL = 0.05  # seconds between checks of a running job's time and memory
 QUEUE_BELOW = 0.05  # seconds: after a job shorter than this, a lane queues the next behind the one running
 # bytes of resident memory above a worker's own after start-up past which it hands freed
@@ -58,6 +60,7 @@ def serve():
     gc.freeze()  # what the warm-up made lives for good: collections skip it (and leave its pages shared)
     settled = resident_bytes(os.getpid())
     answer.write('{"ready": true}\n')
+    setup = dict(setup, options=SampleOptions(**setup["options"]))  # built (and checked) once
     for line in sys.stdin:
         job = json.loads(line)
         warnings = []  # handed to the parent, which prints them between its progress lines
@@ -74,21 +77,22 @@ _made = set()  # output folders this process has made or found (a batch writes m
 def sample_file(input, output, fmt, setup, warn=None):
     """Sample ``input`` to ``output`` in format ``fmt`` as ``scatter sample INPUT -o OUTPUT`` does.
 
-    ``setup``: ``{"options": SampleOptions.as_dict(), "ascii": bool, "crs": --crs or None}``.
+    ``setup``: ``{"options": SampleOptions or its as_dict(), "ascii": bool, "crs": --crs or None}``.
 
     Returns ``{"error": None or one line, "count", "faces", "area"}``.
     """
     from . import api
     from .errors import ScatterError
-    from .options import SampleOptions
 
     try:
         folder = os.path.dirname(output)
         if folder and folder not in _made:
             os.makedirs(folder, exist_ok=True)
             _made.add(folder)
-        run = api.sample_to(input, SampleOptions(**setup["options"]), output, fmt, setup.get("ascii", False),
-                            crs=setup.get("crs"), warn=warn)
+        options = setup["options"]
+        if isinstance(options, dict):
+            options = SampleOptions(**options)
+        run = api.sample_to(input, options, output, fmt, setup.get("ascii", False), crs=setup.get("crs"), warn=warn)
         return {"error": None, "count": run.size, "faces": int(run.info["faces"]), "area": float(run.info["area"])}
     except ScatterError as exc:
         message = str(exc)

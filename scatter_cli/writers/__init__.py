@@ -46,10 +46,10 @@ def write_samples(chunks, path, fmt, layout, count, ascii=False, bounds=None, cr
         from .crs import crs_wkt
 
         options["wkt"] = crs_wkt(crs)
-    check_room(path, file_size(fmt, layout, count, ascii, bounds=bounds, **options))
+    size = file_size(fmt, layout, count, ascii, bounds=bounds, **options)
     if fmt == "usd":
         options["path"] = path
-    with open_output(path) as stream:
+    with open_output(path, size) as stream:
         return write_stream(chunks, stream, fmt, layout, count, ascii, bounds, **options)
 
 

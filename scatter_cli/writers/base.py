@@ -77,9 +77,11 @@ def check_room(path, size):
         return
     path = os.fspath(path)
     existing = _stat(path)
-    if existing is not None and not stat.S_ISREG(existing.st_mode):
-        return
-    folder = os.path.dirname(os.path.abspath(path))
+    if existing is None or stat.S_ISREG(existing.st_mode):
+        _check_room(path, os.path.dirname(os.path.abspath(path)), size)
+
+
+def _check_room(path, folder, size):
     try:
         fs = os.statvfs(folder)
     except OSError:
@@ -109,13 +111,14 @@ def _bytes(n):
 
 
 @contextlib.contextmanager
-def open_output(path):
+def open_output(path, size=None):
     """A binary stream for ``path``; ``None`` or ``'-'`` is standard output.
 
     Regular files are written atomically through a temporary file in the same folder
     (``.NAME.XXXXXXXX.part``), which gets the mode an ordinary ``open(path, 'w')`` would
     give: the existing file's, or 0666 less the umask. Devices and pipes (``/dev/null``,
-    a FIFO) are written in place.
+    a FIFO) are written in place. ``size``: the bytes the file will have, when known: a
+    file system without that room is refused first (:func:`check_room`).
     """
     if is_stdout(path):
         with writing(STDOUT):
@@ -131,6 +134,8 @@ def open_output(path):
             yield stream
         return
     folder = os.path.dirname(os.path.abspath(path))
+    if size is not None:
+        _check_room(path, folder, size)
     with writing(path):
         fd, tmp = _create_temp(path, folder)
     try:
