@@ -232,12 +232,14 @@ def available_cpus() -> int:
 def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing, done):
     """``jobs`` lanes (threads, each driving one worker process) take meshes one at a time.
 
-    The workers are forked from this process, after it has imported what they need, when
-    it may fork (:func:`scatter_cli.worker.can_fork`): none imports NumPy again.
+    The workers come warm, none importing NumPy again: from the fork server the command
+    started (:mod:`scatter_cli.forkserver`), else forked from this process after it has
+    imported what they need, when it may fork (:func:`scatter_cli.worker.can_fork`).
     """
     import queue
     import threading
 
+    from . import forkserver
     from .worker import Lane, StaleTemps, WorkerProcess, can_fork, preload
     from .writers import infer_format
 
@@ -246,11 +248,17 @@ def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing
     stale = StaleTemps()
     lock = threading.Lock()
     results = queue.Queue()
-    fork = can_fork()
+    server = forkserver.claim()
+    fork = server is None and can_fork()
     if fork:
         preload()
-    lanes = [Lane(setup, env, timeout, max_memory, skip_existing, stale,
-                  WorkerProcess(setup, env, fork=True) if fork else None) for _ in range(jobs)]
+    try:
+        lanes = [Lane(setup, env, timeout, max_memory, skip_existing, stale,
+                      WorkerProcess(setup, env, fork=fork, server=server) if fork or server else None)
+                 for _ in range(jobs)]
+    finally:
+        if server is not None:
+            server.close()
 
     def take():
         while True:

@@ -270,8 +270,7 @@ def batch(
 
       scatter batch /shared/meshes -o /shared/pts/{rel}.ply --engine dask --scheduler tcp://head:8786
     """
-    process.lean_trimesh()
-    from .batch import run_batch
+    from .batch import run_batch  # (no NumPy here: the workers import it, and trimesh when a mesh needs it)
 
     result = run_batch(inputs or [], output, from_list=from_list, jobs=jobs, skip_existing=skip_existing,
                        timeout=timeout, max_memory=max_memory, report=report, engine=engine, scheduler=scheduler,

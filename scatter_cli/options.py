@@ -195,9 +195,11 @@ def check_attributes(names, volume=False):
 def check_sobol_count(method, count, error=ScatterUsageError):
     """``--method sobol`` past 2^32 points: a usage error for a count given, ``error``
     (a failure of the mesh) for a ``--density`` count."""
-    from .methods import SOBOL_MAX_COUNT
+    if method != "sobol":
+        return
+    from .methods import SOBOL_MAX_COUNT  # (NumPy: only for sobol)
 
-    if method == "sobol" and count > SOBOL_MAX_COUNT:
+    if count > SOBOL_MAX_COUNT:
         raise error(f"--method sobol gives at most 2^32 = {SOBOL_MAX_COUNT:,} points per run, not {count:,}")
 
 

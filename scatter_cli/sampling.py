@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import native
+from . import native, seeding
 from .errors import ScatterError
 from .areas import norms
 from .surface import Surface, apply_matrix, cofactor, cofactors, corners, face_cross, transformed_columns
@@ -259,10 +259,12 @@ def uniforms(seed: int, start: int, stop: int):
 @functools.lru_cache(maxsize=64)  # a batch asks for the same seed and start for every mesh
 def generator_state(seed: int, start: int):
     """(state high, state low, inc high, inc low): the 128-bit PCG64DXSM state, as four
-    uint64, from which the kernel draws point ``start`` onwards."""
-    state = _stream(seed, start).state["state"]
+    uint64, from which the kernel draws point ``start`` onwards: ``_stream(seed, start)``'s,
+    computed without importing numpy.random (:mod:`scatter_cli.seeding`)."""
+    state, inc = seeding.pcg64_state(int(seed))
+    state = seeding.advance(state, inc, DRAWS_PER_POINT * int(start))
     mask = (1 << 64) - 1
-    return state["state"] >> 64, state["state"] & mask, state["inc"] >> 64, state["inc"] & mask
+    return state >> 64, state & mask, inc >> 64, inc & mask
 
 
 def _stream(seed, start):

@@ -52,7 +52,7 @@ def serve():
     answer = os.fdopen(os.dup(1), "w", buffering=1)
     os.dup2(2, 1)  # stray prints go to standard error, not into the answers
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent decides
-    _die_with_parent()
+    die_with_parent()
     setup = json.loads(sys.stdin.readline() or "null")
     if setup is None:
         return
@@ -120,7 +120,7 @@ def _warm_up():
     lean_trimesh()  # trimesh as the command line imports it (SciPy hidden), when a mesh needs it
 
 
-def _die_with_parent():
+def die_with_parent():
     """Ask Linux to kill this child when its parent dies, so none is left working for nobody."""
     try:
         import ctypes
@@ -147,15 +147,16 @@ def _trim_heap():
 class WorkerProcess:
     """One child; ``run(job)`` sends it one job and waits for its answer.
 
-    ``fork``: fork it from this process (:class:`Forked`, see :func:`can_fork`) instead of
-    starting ``python -m scatter_cli.worker``.
+    ``fork``: fork it (:class:`Forked`: by ``server``, a
+    :class:`~scatter_cli.forkserver.Server`, or else from this process, see
+    :func:`can_fork`) instead of starting ``python -m scatter_cli.worker``.
     """
 
-    def __init__(self, setup, env=None, fork=False):
+    def __init__(self, setup, env=None, fork=False, server=None):
         self.proc = None
-        if fork:
+        if fork or server is not None:
             try:
-                self.proc = Forked(env)
+                self.proc = Forked(env, server)
             except OSError:  # no room for another process now: try the ordinary way
                 pass
         if self.proc is None:
@@ -256,32 +257,34 @@ def preload():
     """Import in this process what the workers forked from it need (NumPy, the sampler,
     the writers), so that none imports it again. Not trimesh: the fast readers load the
     plain formats without it (a worker imports it for the first mesh that needs it)."""
-    import numpy.random  # noqa: F401  (NumPy imports it on first use: the seeding of every mesh)
-
     from . import api, writers  # noqa: F401
 
 
 class Forked:
-    """A worker forked from this process (which has imported what it needs: :func:`preload`),
+    """A worker forked from this process (which has imported what it needs: :func:`preload`)
+    or by ``server`` (:mod:`scatter_cli.forkserver`; a child of this process all the same),
     in place of ``subprocess.Popen``: ``pid``, ``stdin``, ``stdout``, ``wait``, ``kill``.
 
-    Fork only where :func:`can_fork` says so. The child keeps standard error; its standard
-    input and output are pipes to this process, every other file of this process is closed
-    in it (another worker's pipe held open would hide that worker's death), and it leaves
-    with ``os._exit``, so buffers and handlers of this process never run there.
+    Fork here only where :func:`can_fork` says so. The child keeps standard error; its
+    standard input and output are pipes to this process, every other file of this process
+    is closed in it (another worker's pipe held open would hide that worker's death), and
+    it leaves with ``os._exit``, so buffers and handlers of this process never run there.
     """
 
-    def __init__(self, env=None):
+    def __init__(self, env=None, server=None):
         job_r, job_w = os.pipe()
         answer_r, answer_w = os.pipe()
         try:
-            self.pid = os.fork()
+            if server is not None:
+                self.pid = server.fork(env, job_r, answer_w)
+            else:
+                self.pid = os.fork()
+                if self.pid == 0:
+                    forked_child(job_r, answer_w, env)
         except OSError:
             for fd in (job_r, job_w, answer_r, answer_w):
                 os.close(fd)
             raise
-        if self.pid == 0:
-            _forked_child(job_r, answer_w, env)
         os.close(job_r)
         os.close(answer_w)
         self.stdin = os.fdopen(job_w, "wb", buffering=0)
@@ -315,7 +318,7 @@ class Forked:
                 pass
 
 
-def _forked_child(job_r, answer_w, env):
+def forked_child(job_r, answer_w, env):
     """The forked worker: standard input and output on the pipes, then :func:`serve`."""
     code = 1
     try:
