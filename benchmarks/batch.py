@@ -1,7 +1,7 @@
 """Collections: `scatter batch` against its peers on 300+ small real meshes.
 
     NUMPY_MADVISE_HUGEPAGE=0 PYTHONPATH=$PWD python benchmarks/batch.py [--meshes 304] [--repeats 3]
-        [--no-dask] [--settle 35] [--out FILE]
+        [--no-dask] [--settle 60] [--folder DIR] [--out FILE]
 
 The collection: --meshes copies of the small untextured meshes of samples/ (not the large
 skull and koala, whose sampling time would hide the fixed costs) in OBJ, OFF, PLY, STL and GLB,
@@ -21,11 +21,14 @@ binary PLY. Timed as whole commands, start-up included, medians of back-to-back 
   through a new temporary file, the script rewrites it in place), after all the fresh rounds.
 
 Every fresh run writes into a new, empty folder, and nothing is deleted before the end:
-on ext4, for about 30 s after many files were deleted, creating a file costs several
-times more (the inode allocator skips recently freed inodes), which would add the same
-time per file to both peers and hide their difference. For the same reason the timing
-starts --settle seconds after the collection is written (a run of this benchmark just
-before deletes its files at its end).
+on ext4 without a journal (this machine's root file system), for 60 s after files were
+deleted (360 s while their inode table is not yet written back), creating a file skips
+the recently freed inodes, at a cost that grows with their number: several times the
+usual cost per file after a few thousand deletions. That adds the same time per file to
+both peers and hides their difference. For the same reason the timing starts --settle
+seconds after the collection is written (a run of this benchmark just before deletes its
+files at its end; so does a test run). --folder puts the work on another file system:
+a tmpfs (/dev/shm) has no such history.
 - a shell loop of `scatter sample` (over the first --loop meshes, scaled to the whole);
 - `scatter batch --engine dask` on a local cluster of two one-thread workers started
   before the timing (`dask scheduler`, `dask worker --nthreads 1`): the time includes the
@@ -275,15 +278,17 @@ def main():
     ap.add_argument("--loop", type=int, default=20, help="meshes in the timed shell loop")
     ap.add_argument("--no-dask", action="store_true", help="leave the Dask engine out")
     ap.add_argument("--out", default=None)
-    ap.add_argument("--settle", type=float, default=35.0,
+    ap.add_argument("--settle", type=float, default=60.0,
                     help="seconds to wait before timing, for the file system (see the module's docstring)")
+    ap.add_argument("--folder", default=None,
+                    help="where the collection and the outputs go [default: the system's temporary folder]")
     args = ap.parse_args()
     os.environ.setdefault("PYTHONPATH", str(ROOT))
     os.environ.pop("PYTHONDONTWRITEBYTECODE", None)  # an installed package has its bytecode cached
     subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "scatter_cli")], check=True,
                    stdout=subprocess.DEVNULL)
     load_before = os.getloadavg()
-    work = Path(tempfile.mkdtemp(prefix="scatter-batch-bench-"))
+    work = Path(tempfile.mkdtemp(prefix="scatter-batch-bench-", dir=args.folder))
     try:
         src = work / "meshes"
         src.mkdir()
@@ -384,7 +389,7 @@ def report(args, n, times, cpu, memory, t_loop, looped, stages, load_before, cpu
         "",
         f"Command: `NUMPY_MADVISE_HUGEPAGE=0 PYTHONPATH=$PWD python benchmarks/batch.py --meshes {args.meshes} "
         f"--repeats {args.repeats} --loop {args.loop}{' --no-dask' if args.no_dask else ''}"
-        f"{f' --settle {args.settle:g}' if args.settle != 35 else ''}` "
+        f"{f' --settle {args.settle:g}' if args.settle != 60 else ''}{f' --folder {args.folder}' if args.folder else ''}` "
         f"({time.strftime('%Y-%m-%d', time.gmtime())}; load average (1, 5, 15 min) before "
         f"{' '.join(f'{x:.1f}' for x in load_before)}, after {' '.join(f'{x:.1f}' for x in load)} "
         f"on {os.cpu_count()} CPUs)",

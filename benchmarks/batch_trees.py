@@ -1,6 +1,6 @@
 """Two checkouts of scatter and the trimesh script, batch against batch, interleaved.
 
-    NUMPY_MADVISE_HUGEPAGE=0 python benchmarks/batch_trees.py BEFORE AFTER [--rounds 7] [--meshes 304] [--settle 35]
+    NUMPY_MADVISE_HUGEPAGE=0 python benchmarks/batch_trees.py BEFORE AFTER [--rounds 7] [--meshes 304] [--settle 60] [--folder DIR]
 
 BEFORE and AFTER are folders holding a built `scatter_cli` (their kernels built in
 place). The collection is benchmarks/batch.py's (small meshes in five formats); each
@@ -50,13 +50,14 @@ def main():
     ap.add_argument("after")
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--meshes", type=int, default=304)
-    ap.add_argument("--settle", type=float, default=35.0, help="seconds to wait before timing (benchmarks/batch.py)")
+    ap.add_argument("--settle", type=float, default=60.0, help="seconds to wait before timing (benchmarks/batch.py)")
+    ap.add_argument("--folder", default=None, help="where the work goes (benchmarks/batch.py)")
     args = ap.parse_args()
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONUNBUFFERED", "PYTHONDONTWRITEBYTECODE", "CI")}
     trees = {"before": Path(args.before).resolve(), "after": Path(args.after).resolve()}
     for root in trees.values():
         subprocess.run([sys.executable, "-m", "compileall", "-q", str(root / "scatter_cli")], check=True)
-    work = Path(tempfile.mkdtemp(prefix="scatter-batch-trees-"))
+    work = Path(tempfile.mkdtemp(prefix="scatter-batch-trees-", dir=args.folder))
     try:
         paths = bench.make_collection(fresh(work / "meshes"), -(-args.meshes // len(bench.SMALL)))[: args.meshes]
         listing, one = work / "meshes.txt", work / "one.txt"

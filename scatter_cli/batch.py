@@ -269,9 +269,15 @@ def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing
             index, input, output = job
             yield index, input, output, infer_format(output, fmt), None
 
+    done_lock = threading.Lock()
+
+    def finished(index, rec):  # in the lane's thread: no hop to the main thread per mesh
+        with done_lock:
+            done(index, rec)
+
     def work(lane):
         try:
-            lane.run(take(), lambda index, rec: results.put((index, rec)))
+            lane.run(take(), finished)
         except BaseException as exc:  # noqa: BLE001 (handed to the main thread)
             if not lane.stopped:
                 results.put((None, exc))
@@ -284,17 +290,15 @@ def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing
         t.start()
     try:
         running = len(threads)
-        while running:
+        while running:  # the lanes' ends and failures (the main thread takes the signals)
             try:
-                index, rec = results.get(timeout=1.0)
+                _, failure = results.get(timeout=1.0)
             except queue.Empty:
                 continue
-            if index is not None:
-                done(index, rec)
-            elif rec is None:
+            if failure is None:
                 running -= 1
             else:
-                raise rec
+                raise failure
     except BaseException:
         for lane in lanes:
             lane.stop()

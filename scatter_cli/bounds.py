@@ -64,10 +64,13 @@ def _box(v, matrices):
     return lo, hi
 
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
 def float32_error_bound(bounds) -> float:
     """Largest distance rounding to float32 can move a point inside ``bounds`` (2, 3)."""
     biggest = np.abs(bounds).max(axis=0)
-    if not (biggest <= np.finfo(np.float32).max).all():  # would round to inf (spacing: NaN)
+    if not (biggest <= FLOAT32_MAX).all():  # would round to inf (spacing: NaN)
         return math.inf
     half_ulp = np.spacing(biggest.astype(np.float32)).astype(np.float64) / 2
     return float(np.sqrt(np.sum(half_ulp**2)))
@@ -80,8 +83,9 @@ def choose_precision(bounds, precision, source, warn=None):
         raise ScatterError(f"{source}: coordinates beyond the float32 range; use --precision float64 or auto")
     if precision != "auto":
         return np.dtype(precision)
+    extent = bounds[1] - bounds[0]
     with np.errstate(over="ignore"):
-        diag = float(np.linalg.norm(bounds[1] - bounds[0]))
+        diag = math.sqrt(float(extent.dot(extent)))  # np.linalg.norm's own arithmetic, without its overhead
     err = float32_error_bound(bounds)
     if math.isinf(err) or err > AUTO_PRECISION_TOLERANCE * diag:
         if warn:

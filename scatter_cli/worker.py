@@ -60,7 +60,7 @@ def serve():
     gc.freeze()  # what the warm-up made lives for good: collections skip it (and leave its pages shared)
     settled = resident_bytes(os.getpid())
     answer.write('{"ready": true}\n')
-    setup = dict(setup, options=SampleOptions(**setup["options"]))  # built (and checked) once
+    setup = dict(setup, options=SampleOptions(**setup["options"]))  # built (and checked) once, not per mesh
     for line in sys.stdin:
         job = json.loads(line)
         warnings = []  # handed to the parent, which prints them between its progress lines
@@ -77,7 +77,7 @@ _made = set()  # output folders this process has made or found (a batch writes m
 def sample_file(input, output, fmt, setup, warn=None):
     """Sample ``input`` to ``output`` in format ``fmt`` as ``scatter sample INPUT -o OUTPUT`` does.
 
-    ``setup``: ``{"options": SampleOptions or its as_dict(), "ascii": bool, "crs": --crs or None}``.
+    ``setup``: ``{"options": SampleOptions, "ascii": bool, "crs": --crs or None}``.
 
     Returns ``{"error": None or one line, "count", "faces", "area"}``.
     """
@@ -89,10 +89,8 @@ def sample_file(input, output, fmt, setup, warn=None):
         if folder and folder not in _made:
             os.makedirs(folder, exist_ok=True)
             _made.add(folder)
-        options = setup["options"]
-        if isinstance(options, dict):
-            options = SampleOptions(**options)
-        run = api.sample_to(input, options, output, fmt, setup.get("ascii", False), crs=setup.get("crs"), warn=warn)
+        run = api.sample_to(input, setup["options"], output, fmt, setup.get("ascii", False), crs=setup.get("crs"),
+                            warn=warn)
         return {"error": None, "count": run.size, "faces": int(run.info["faces"]), "area": float(run.info["area"])}
     except ScatterError as exc:
         message = str(exc)
@@ -145,7 +143,8 @@ def _trim_heap():
 # ---------------------------------------------------------------- the parent side ----
 
 class WorkerProcess:
-    """One child; ``run(job)`` sends it one job and waits for its answer.
+    """One child; ``send(...)`` hands it a job, ``receive(...)`` waits for the answer to
+    the oldest job it has not answered.
 
     ``fork``: fork it (:class:`Forked`: by ``server``, a
     :class:`~scatter_cli.forkserver.Server`, or else from this process, see
