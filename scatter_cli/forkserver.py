@@ -107,9 +107,12 @@ class Server:
             raise OSError("the fork server stopped")
         try:
             _send(self.sock, json.dumps(env).encode(), [stdin_fd, stdout_fd])
-            reply = self.sock.recv(64)
-            if not reply.endswith(b"\n"):
-                raise OSError("the fork server stopped")
+            reply = b""
+            while not reply.endswith(b"\n"):
+                more = self.sock.recv(64)
+                if not more:
+                    raise OSError("the fork server stopped")
+                reply += more
             return int(reply)
         except (OSError, ValueError):
             self.close(kill=True)

@@ -3,10 +3,10 @@
 The child (``python -m scatter_cli.worker``) imports NumPy and trimesh once, then reads
 jobs, one JSON line each, from standard input, samples each mesh to its output itself
 (``api.prepare`` and the writers, exactly as ``scatter sample`` does) and answers one JSON
-line. The parent side, :class:`Lane`, hands it one job at a time and watches it: a job
-past its timeout or its memory limit is killed with its process, a crash (segfault, OOM
-kill) is seen as the pipe closing; either way that job fails, its temporary output is
-removed and the next job gets a fresh child. Both engines use it: the local one runs
+line. The parent side, :class:`Lane`, hands it its jobs (the next one queued behind a
+short one) and watches it: a job past its timeout or its memory limit is killed with its
+process, a crash (segfault, OOM kill) is seen as the pipe closing; either way that job
+fails, its temporary output is removed and the jobs after it go to a fresh child. Both engines use it: the local one runs
 ``-j`` lanes, the Dask one a lane per Dask worker thread.
 
 The memory limit is checked by polling the child's resident set size (``/proc/PID/statm``)
