@@ -99,3 +99,31 @@ def test_without_the_subreaper_a_worker_is_lost(tmp_path):
     assert claimed["parent"] == claimed["me"] and claimed["status"] == -signal.SIGKILL
     lost = run("no-claim")
     assert lost["parent"] != lost["me"] and lost["status"] == "not a child"
+
+
+FALLBACK = textwrap.dedent("""
+    import json, os, signal, sys
+    from scatter_cli import forkserver
+    from scatter_cli.options import SampleOptions
+    from scatter_cli.worker import WorkerProcess
+
+    assert forkserver.start()
+    os.kill(forkserver._server.pid, signal.SIGKILL)  # the server dies before it is asked
+    server = forkserver.claim()
+    setup = {"options": SampleOptions(count=100).as_dict(), "ascii": False, "crs": None, "quiet": True}
+    worker = WorkerProcess(setup, dict(os.environ), server=server)
+    worker.send(sys.argv[1], sys.argv[2], "ply")
+    answer = worker.receive(timeout=60)
+    worker.close()
+    print(json.dumps({"worker": type(worker.proc).__name__, "error": answer["error"], "count": answer["count"]}))
+""")
+
+
+def test_a_dead_server_leaves_the_batch_to_started_workers(tmp_path):
+    """A fork server that died (killed, out of memory) costs only speed: the worker is
+    started as a new process instead, and samples the mesh."""
+    done = run_user([sys.executable, "-c", FALLBACK, str(ROOT / "samples" / "icosahedron_binary.stl"),
+                     str(tmp_path / "out.ply")], cwd=tmp_path, env={"PYTHONPATH": str(ROOT)})
+    assert done.returncode == 0, done.stderr.decode()
+    assert json.loads(done.stdout) == {"worker": "Popen", "error": None, "count": 100}
+    assert (tmp_path / "out.ply").stat().st_size > 100 * 12
