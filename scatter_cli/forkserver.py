@@ -205,7 +205,10 @@ def _adopted(middle, wait=5.0):
 
 
 def _send(sock, data, fds):
-    socket.send_fds(sock, [len(data).to_bytes(4, "little") + data], fds)
+    message = len(data).to_bytes(4, "little") + data
+    sent = socket.send_fds(sock, [message], fds)
+    if sent < len(message):  # a stream socket may take a large message in parts
+        sock.sendall(message[sent:])
 
 
 def _receive(sock):

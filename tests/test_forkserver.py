@@ -127,3 +127,24 @@ def test_a_dead_server_leaves_the_batch_to_started_workers(tmp_path):
     assert done.returncode == 0, done.stderr.decode()
     assert json.loads(done.stdout) == {"worker": "Popen", "error": None, "count": 100}
     assert (tmp_path / "out.ply").stat().st_size > 100 * 12
+
+
+def test_a_large_environment_reaches_the_worker(tmp_path):
+    """The worker's environment travels to the server as one message on a stream socket;
+    one of several megabytes, more than the socket takes at once, arrives whole: the
+    server forks the worker (a message cut short would leave it waiting for the rest, and
+    the command would give up on it)."""
+    script = textwrap.dedent("""
+        import os, sys
+        from scatter_cli import forkserver
+        from scatter_cli.worker import Forked
+
+        forkserver.REPLY_WITHIN = 20
+        assert forkserver.start()
+        worker = Forked(dict(os.environ, BIG="x" * 3_000_000), forkserver.claim())
+        worker.kill()
+        print(worker.wait())
+    """)
+    done = run_user([sys.executable, "-c", script], cwd=tmp_path, env={"PYTHONPATH": str(ROOT)})
+    assert done.returncode == 0, done.stderr.decode()
+    assert done.stdout.split() == [str(-signal.SIGKILL).encode()]
