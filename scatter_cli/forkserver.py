@@ -42,8 +42,8 @@ def wanted(argv) -> bool:
     words = [a for a in argv if not a.startswith("-")]
     if not words or words[0] != "batch":
         return False
-    return not any(a in ("-h", "--help", "--engine", "--scheduler") or a.startswith(("--engine=", "--scheduler="))
-                   for a in argv)
+    dask = any(a == "--engine=dask" or (a == "--engine" and b == "dask") for a, b in zip(argv, argv[1:] + [""]))
+    return not dask and not any(a in ("-h", "--help", "--scheduler") or a.startswith("--scheduler=") for a in argv)
 
 
 def start() -> bool:

@@ -22,6 +22,8 @@ from .conftest import ROOT, popen_user, run_user, scatter_command
     (["sample", "m.ply", "-o", "batch.ply"], False),
     (["batch", "--help"], False),
     (["batch", "in/", "-o", "o/{stem}.ply", "--engine", "dask"], False),
+    (["batch", "in/", "-o", "o/{stem}.ply", "--engine=dask"], False),
+    (["batch", "in/", "-o", "o/{stem}.ply", "--engine", "local"], True),
     (["batch", "in/", "-o", "o/{stem}.ply", "--scheduler=tcp://h:8786"], False),
     ([], False),
 ])
