@@ -12,8 +12,8 @@ from .errors import ScatterError
 
 def check_readable(path) -> bool:
     """Raise ScatterError when ``path`` is missing, a folder, unreadable or an empty file;
-    else return whether it is a stream (see :func:`is_stream`). One stat: a batch asks
-    this of every mesh."""
+    else return whether it is a stream: standard input, or a pipe, socket or device, read
+    once with no size. One stat: a batch asks this of every mesh."""
     if path == "-":
         return True
     try:
@@ -28,17 +28,6 @@ def check_readable(path) -> bool:
     if not stream and status.st_size == 0:
         raise ScatterError(f"{path}: the file is empty")
     return stream
-
-
-def is_stream(path):
-    """Whether ``path`` is standard input or a pipe, socket or device: read once, no size."""
-    if path == "-":
-        return True
-    try:
-        mode = os.stat(path).st_mode
-    except OSError:
-        return False
-    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
 def stream_bytes(path, empty):

@@ -29,7 +29,7 @@ import tempfile
 import numpy as np
 
 from .errors import ScatterError, ScatterUsageError
-from .sourcefile import check_readable, is_stream, stream_bytes
+from .sourcefile import check_readable, stream_bytes
 from .surface import Geometry, Instance, Surface, Unsampled, corners, doubled_areas
 from .usdmesh import Topology, fan_faces, with_primvars
 
@@ -45,7 +45,7 @@ def load_usd(path: str, input_format=None, *, objects=None, plain=False) -> Surf
     name = "<stdin>" if path == "-" else path
     _import_pxr(name)
     with _diagnostics() as printed:
-        if is_stream(path):  # USD reads files by name: a pipe's bytes go to a file first
+        if check_readable(path):  # USD reads files by name: a pipe's bytes go to a file first
             data = stream_bytes(path, f"{name}: no data to read")
             suffix = (input_format or os.path.splitext(path)[1].lstrip(".") or "usd").lower()
             with tempfile.TemporaryDirectory() as tmp:
@@ -54,7 +54,6 @@ def load_usd(path: str, input_format=None, *, objects=None, plain=False) -> Surf
                     f.write(data)
                 surface, aliases = _StageReader(_open(copy, name), name, plain).surface()
         else:
-            check_readable(path)
             surface, aliases = _StageReader(_open(path, name), name, plain).surface()
     # USD's own warnings (a reference that does not resolve, ...) as the run's warnings
     surface.warnings += [f"{name}: {m}" for m in map(_diagnostic, printed) if m]

@@ -6,8 +6,8 @@ jobs, one JSON line each, from standard input, samples each mesh to its output i
 line. The parent side, :class:`Lane`, hands it its jobs (the next one queued behind a
 short one) and watches it: a job past its timeout or its memory limit is killed with its
 process, a crash (segfault, OOM kill) is seen as the pipe closing; either way that job
-fails, its temporary output is removed and the jobs after it go to a fresh child. Both engines use it: the local one runs
-``-j`` lanes, the Dask one a lane per Dask worker thread.
+fails, its temporary output is removed and the jobs after it go to a fresh child. Both
+engines use it: the local one runs ``-j`` lanes, the Dask one a lane per Dask worker thread.
 
 The memory limit is checked by polling the child's resident set size (``/proc/PID/statm``)
 every ``POLL`` seconds rather than with ``RLIMIT_AS``: an address-space limit counts
