@@ -1,13 +1,22 @@
-"""Build the optional compiled kernels (see scatter_cli/native.py).
+"""Build the optional compiled kernels (see scatter_cli/core/native.py).
 
 Everything else lives in pyproject.toml. The extensions are optional: without a C
 compiler the install goes on and scatter runs its NumPy path, which gives the same bytes.
 """
 
+import importlib.util
 import os
 
 import numpy
 from setuptools import Extension, setup
+
+
+def _registry():
+    """native.KERNELS (kernel -> its package), read without importing the package."""
+    spec = importlib.util.spec_from_file_location("_native", os.path.join("scatter_cli", "core", "native.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.KERNELS
 
 # No fused multiply-add and no fast math: the kernels must round exactly as the NumPy path
 # does. (-fno-math-errno only lets sqrt be inlined: no input of ours is negative;
@@ -23,12 +32,14 @@ SANITIZE = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer", "-fno-san
 SANITIZED = os.environ.get("SCATTER_SANITIZE", "") not in ("", "0")
 
 
-def kernel(name):
+def kernel(name, package):
     flags = FLAGS + SANITIZE if SANITIZED else FLAGS
-    return Extension(f"scatter_cli.{name}", [f"scatter_cli/{name}.c"], depends=["scatter_cli/_ckernel.h", "scatter_cli/_cmorton.h", "scatter_cli/_cthreads.h"],
-                     include_dirs=[numpy.get_include()],
+    folder = package.replace(".", "/")
+    return Extension(f"{package}.{name}", [f"{folder}/{name}.c"], depends=HEADERS,
+                     include_dirs=[numpy.get_include(), "scatter_cli/core"],
                      extra_compile_args=flags, extra_link_args=SANITIZE if SANITIZED else [], optional=True)
 
 
-setup(ext_modules=[kernel("_csampling"), kernel("_cthinning"), kernel("_cstable"), kernel("_creaders"),
-                     kernel("_cenclosure"), kernel("_cembree"), kernel("_cwinding"), kernel("_cvolume")])
+# the headers every kernel may include (-I scatter_cli/core)
+HEADERS = ["scatter_cli/core/_ckernel.h", "scatter_cli/core/_cmorton.h", "scatter_cli/core/_cthreads.h"]
+setup(ext_modules=[kernel(name, package) for name, package in _registry().items()])

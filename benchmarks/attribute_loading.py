@@ -78,7 +78,7 @@ def whole_commands(paths, runs, work):
 
 
 def loads(paths, runs):
-    from scatter_cli.loaders import load_surface
+    from scatter_cli.loading.load import load_surface
 
     print("part 2: load only, one process, median s")
     for label, path in paths.items():

@@ -24,9 +24,9 @@ import batch as bench  # noqa: E402
 
 PASSES = r'''
 import os, sys
-from scatter_cli import worker
-from scatter_cli.options import SampleOptions
-from scatter_cli.process import lean_trimesh, single_threaded_blas
+from scatter_cli.engines import worker
+from scatter_cli.run.options import SampleOptions
+from scatter_cli.core.process import lean_trimesh, single_threaded_blas
 single_threaded_blas()
 worker.preload()
 lean_trimesh()

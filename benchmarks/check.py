@@ -43,7 +43,7 @@ def terrain(path, grid):
 
 def check_stages(mesh, count):
     """{stage: seconds} of one run_check, from its progress callback."""
-    from scatter_cli.check import run_check
+    from scatter_cli.commands.check import run_check
 
     marks = []
     run_check(mesh, count=count, seed=1, out=lambda line: None, progress=lambda s: marks.append((s, time.perf_counter())))

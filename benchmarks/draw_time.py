@@ -20,8 +20,8 @@ import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from scatter_cli import sampling  # noqa: E402
-from scatter_cli.loaders import load_surface  # noqa: E402
+from scatter_cli.sampling import plan as sampling  # noqa: E402
+from scatter_cli.loading.load import load_surface  # noqa: E402
 
 POINTS = 6 << 20  # per timing, whatever the chunk
 

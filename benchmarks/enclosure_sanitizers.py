@@ -1,6 +1,6 @@
 """The enclosure kernel under AddressSanitizer and UndefinedBehaviorSanitizer.
 
-Builds scatter_cli/_cenclosure.c with -fsanitize=address,undefined into a copy of the
+Builds scatter_cli/sampling/exterior/_cenclosure.c with -fsanitize=address,undefined into a copy of the
 package (and of the tests and benchmarks, which they import) in a temporary directory, then, with the sanitizer runtimes
 preloaded, runs tests/test_enclosure_native.py (built scenes, 60 hypothesis scenes of
 random shells, degenerate input: NaN/inf, huge and tiny coordinates, duplicate and
@@ -23,7 +23,7 @@ from sanitized import ROOT, sanitized_copy  # noqa: E402
 
 BIG = r'''
 import numpy as np, sys, trimesh
-from scatter_cli import enclosure
+from scatter_cli.sampling.exterior import enclosure
 assert enclosure._kernel is not None and sys.argv[1] in enclosure._kernel.__file__
 outer, inner = trimesh.creation.icosphere(8), trimesh.creation.icosphere(7, radius=0.5)
 v = np.vstack([outer.vertices, inner.vertices])
@@ -44,7 +44,7 @@ def main():
         tests = ["tests/test_enclosure_native.py", "tests/test_enclosure.py"]
         # the tests must see the sanitized kernel: a conftest appended to the copy checks it
         with open(Path(tmp) / "tests" / "conftest.py", "a") as conf:
-            conf.write(f"\nfrom scatter_cli import enclosure as _e\nassert {tmp!r} in _e._kernel.__file__\n")
+            conf.write(f"\nfrom scatter_cli.sampling.exterior import enclosure as _e\nassert {tmp!r} in _e._kernel.__file__\n")
         subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests], env=env, check=True, cwd=tmp)
         subprocess.run([sys.executable, "-c", BIG, tmp], env=env, check=True, cwd=tmp)
 

@@ -3,7 +3,7 @@
     PYTHONPATH=. python benchmarks/fuzz_loaders.py [--inputs 20000] [--seed 0] [--only glb ...]
 
 Every input must load and sample, or fail with a ScatterError (one-line `error:`); and
-where the fast readers (scatter_cli/readers.py) answer, trimesh must load the same
+where the fast readers (scatter_cli/loading/fast.py) answer, trimesh must load the same
 triangles. Any other outcome is printed with the input that caused it (saved under
 --save); an input that takes more than --hang seconds stops the run, left in --save.
 benchmarks/sanitize_readers.sh runs this under ASan and UBSan.

@@ -1,5 +1,5 @@
 """Builders and checks shared by the hard-case tests (tests/) and benchmarks/hard_cases.py:
-meshes of separate triangles, the exact on-face test, the in-triangle chi-square (through scatter_cli.chisquare).
+meshes of separate triangles, the exact on-face test, the in-triangle chi-square (through scatter_cli.stats.chisquare).
 
 Here rather than in tests/ so that a benchmark never imports a test module."""
 
@@ -9,7 +9,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from scatter_cli.chisquare import chi2_gof
+from scatter_cli.stats.chisquare import chi2_gof
 
 EPS = np.finfo(np.float64).eps
 ALPHA = 1e-3  # significance level of every statistical test in the hard-case suite
@@ -62,7 +62,7 @@ def exact_face_errors(points, tri, limit=400, seed=0, dtype=np.float64):
 
 
 def pooled_pvalue(observed, expected, min_expected=5.0):
-    """The p-value of the pooled chi-square (scatter_cli.chisquare.chi2_gof) of counts
+    """The p-value of the pooled chi-square (scatter_cli.stats.chisquare.chi2_gof) of counts
     in bins with no order of their own (faces, area groups): pooled smallest expectation
     first."""
     return chi2_gof(observed, expected, min_expected, smallest_first=True)[2]

@@ -156,7 +156,7 @@ def small_files(folder, count):
 def part_small_files(paths, runs):
     import trimesh
 
-    from scatter_cli.loaders import load_surface
+    from scatter_cli.loading.load import load_surface
 
     fast, slow = [], []
     for _ in range(runs):

@@ -230,7 +230,7 @@ def detect_tools():
     _, where = probe_python("import scatter_cli as m; print(m.__file__)")
     tools["ours"] = {"ok": error is None, "note": error, "version": dist_version("ours"),
                      "path": where}
-    _, kernels = probe_python("from scatter_cli import pairs, sampling; "
+    _, kernels = probe_python("from scatter_cli.sampling.poisson import pairs; from scatter_cli.sampling import plan as sampling; "
                               "print(sampling._kernel is not None and pairs._kernel is not None)")
     if error is None and kernels.strip() != "True":
         tools["ours"]["note"] = "compiled kernels NOT built: NumPy path only"

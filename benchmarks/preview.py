@@ -101,7 +101,7 @@ def matplotlib_rate(folder, k=20, size=256):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from scatter_cli.pointfiles import read_points
+    from scatter_cli.writers.pointfiles import read_points
 
     files = sorted(folder.iterdir())[:k]
     t, c = time.perf_counter(), time.process_time()

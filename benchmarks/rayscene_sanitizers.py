@@ -1,7 +1,7 @@
 """The Embree scene kernel and the face-normal kernel under AddressSanitizer and
 UndefinedBehaviorSanitizer.
 
-Builds scatter_cli/_cembree.c and scatter_cli/_csampling.c with
+Builds scatter_cli/sampling/exterior/_cembree.c and scatter_cli/sampling/_csampling.c with
 -fsanitize=address,undefined into a copy of the package (and of the tests and benchmarks,
 which they import) in a temporary directory, then, with the sanitizer runtimes preloaded, runs
 tests/test_rayscene.py (verdicts against embreex, awkward meshes with NaN, inf, huge and
@@ -23,8 +23,8 @@ from sanitized import ROOT, sanitized_copy  # noqa: E402
 
 BIG = r'''
 import numpy as np, sys, trimesh
-from scatter_cli import rayscene, exterior_rays
-from scatter_cli.surface import Geometry, Instance, Surface
+from scatter_cli.sampling.exterior import rayscene, rays as exterior_rays
+from scatter_cli.surface.model import Geometry, Instance, Surface
 assert sys.argv[1] in rayscene._compiled().__file__ and sys.argv[1] in exterior_rays._kernel.__file__
 outer, inner = trimesh.creation.icosphere(8), trimesh.creation.icosphere(7, radius=0.5)
 v = np.vstack([outer.vertices, inner.vertices])
@@ -45,7 +45,7 @@ def main():
         env["SCATTER_REQUIRE_KERNELS"] = "1"
         os.symlink(ROOT / "samples", Path(tmp) / "samples")
         with open(Path(tmp) / "tests" / "conftest.py", "a") as conf:  # the tests must see the sanitized kernels
-            conf.write(f"\nfrom scatter_cli import rayscene as _r, exterior_rays as _v\n"
+            conf.write(f"\nfrom scatter_cli.sampling.exterior import rayscene as _r, rays as _v\n"
                        f"assert {tmp!r} in _r._compiled().__file__ and {tmp!r} in _v._kernel.__file__\n")
         tests = ["tests/test_rayscene.py", "tests/test_exterior.py"]
         subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests], env=env, check=True, cwd=tmp)

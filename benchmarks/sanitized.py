@@ -13,11 +13,19 @@ from pathlib import Path
 import numpy
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from scatter_cli.core.native import KERNELS  # noqa: E402 (kernel -> its package)
+
+
+def folder(kernel):
+    """The folder of ``kernel``'s C file, relative to the repository."""
+    return Path(*KERNELS[kernel].split("."))
 
 
 def sanitized_copy(tmp, kernel, also=()):
     """Copy scatter_cli (and the folders ``also``, such as "tests") into ``tmp``, build
-    scatter_cli/KERNEL.c there with the sanitizers (``kernel``: a name or a tuple of
+    KERNEL.c there (in its folder of the package) with the sanitizers (``kernel``: a name or a tuple of
     names), and return the environment that runs Python on the copy with the sanitizer
     runtimes preloaded."""
     runtimes = [glob.glob(f"/usr/lib/gcc/x86_64-linux-gnu/*/lib{n}.so")[:1] for n in ("asan", "ubsan")]
@@ -30,27 +38,28 @@ def sanitized_copy(tmp, kernel, also=()):
     for name in also:
         shutil.copytree(ROOT / name, Path(tmp) / name, ignore=shutil.ignore_patterns("__pycache__"))
     for k in kernels:
-        out = pkg / (k + sysconfig.get_config_var("EXT_SUFFIX"))
+        out = Path(tmp) / folder(k) / (k + sysconfig.get_config_var("EXT_SUFFIX"))
         subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-g", "-fsanitize=address,undefined",
                         "-fno-sanitize-recover=undefined", "-ffp-contract=off", "-I" + sysconfig.get_paths()["include"],
-                        "-I" + numpy.get_include(), str(ROOT / "scatter_cli" / f"{k}.c"), "-o", str(out)], check=True)
+                        "-I" + numpy.get_include(), "-I" + str(ROOT / "scatter_cli" / "core"),
+                        str(ROOT / folder(k) / f"{k}.c"), "-o", str(out)], check=True)
     env = dict(os.environ, PYTHONPATH=str(tmp), LD_PRELOAD=":".join(r[0] for r in runtimes), ASAN_OPTIONS="detect_leaks=0")
     env.pop("SCATTER_NUMPY", None)
     return env
 
 
 def run_sanitized(kernel, module, tests, script):
-    """Build scatter_cli/KERNEL.c with the sanitizers in a temporary copy (tests and
-    benchmarks beside it, samples linked), then run there, on 2 threads: the test file
-    ``tests`` (a conftest line checks that scatter_cli.MODULE's kernel is the sanitized
-    one) and the Python ``script`` (the copy's path as its argv[1]). Any report aborts."""
+    """Build KERNEL.c with the sanitizers in a temporary copy (tests and benchmarks beside
+    it, samples linked), then run there, on 2 threads: the test file ``tests`` (a conftest
+    line checks that the kernel of ``module``, a dotted name under scatter_cli, is the
+    sanitized one) and the Python ``script`` (the copy's path as its argv[1]). Any report aborts."""
     with tempfile.TemporaryDirectory() as tmp:
         env = sanitized_copy(tmp, kernel, also=("tests", "benchmarks"))
         env["SCATTER_REQUIRE_KERNELS"] = "1"
         env["SCATTER_THREADS"] = "2"
         os.symlink(ROOT / "samples", Path(tmp) / "samples")
         with open(Path(tmp) / "tests" / "conftest.py", "a") as conf:
-            conf.write(f"\nfrom scatter_cli import {module} as _m\nassert {tmp!r} in _m._kernel.__file__\n")
+            conf.write(f"\nimport scatter_cli.{module} as _m\nassert {tmp!r} in _m._kernel.__file__\n")
         subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", tests], env=env, check=True,
                        cwd=tmp)
         subprocess.run([sys.executable, "-c", script, tmp], env=env, check=True, cwd=tmp)

@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from scatter_cli import api  # noqa: E402
-from scatter_cli.loaders import load_surface  # noqa: E402
+from scatter_cli.loading.load import load_surface  # noqa: E402
 
 
 def icosphere_ply(directory):

@@ -1,6 +1,6 @@
 """The stable kernel under AddressSanitizer and UndefinedBehaviorSanitizer.
 
-Builds scatter_cli/_cstable.c with -fsanitize=address,undefined into a copy of the package
+Builds scatter_cli/sampling/stable/_cstable.c with -fsanitize=address,undefined into a copy of the package
 in a temporary directory, then runs, with the sanitizer runtimes preloaded, --stable on
 the sample meshes and on random meshes with degenerate, duplicated and non-finite faces,
 and calls the kernel with out-of-range indices (it must refuse them). Any report aborts.
@@ -23,7 +23,7 @@ from sanitized import ROOT, sanitized_copy  # noqa: E402
 CHECK = r'''
 import numpy as np, os, sys, trimesh
 import scatter_cli
-from scatter_cli import stable, stable_arrivals, stable_order
+from scatter_cli.sampling.stable import source as stable, arrivals as stable_arrivals, order as stable_order
 assert stable._kernel is not None and sys.argv[1] in stable._kernel.__file__
 rng = np.random.default_rng(0)
 for name in ("skull.ply", "cesiummilktruck.glb", "narrow_triangles.obj", "moebius-160-10.ply"):

@@ -15,8 +15,8 @@ import time
 import numpy as np
 import trimesh
 
-from scatter_cli.spacing import relative_radius, spacing_stats
-from scatter_cli.thinning import thin_to_count
+from scatter_cli.sampling.poisson.spacing import relative_radius, spacing_stats
+from scatter_cli.sampling.poisson.thinning import thin_to_count
 
 
 def main():

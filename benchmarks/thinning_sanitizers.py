@@ -1,7 +1,7 @@
 """The thinning kernel (grid, pair search, greedy thinning) under AddressSanitizer and
 UndefinedBehaviorSanitizer.
 
-Builds scatter_cli/_cthinning.c with -fsanitize=address,undefined into a copy of the
+Builds scatter_cli/sampling/poisson/_cthinning.c with -fsanitize=address,undefined into a copy of the
 package (and of the tests and benchmarks, which they import) in a temporary directory, then, with the
 sanitizer runtimes preloaded, runs tests/test_native.py (the thinning kernels against
 their NumPy twins, the bad calls they must refuse), tests/test_thinning.py and the
@@ -27,7 +27,7 @@ def main():
         env["SCATTER_REQUIRE_KERNELS"] = "1"
         os.symlink(ROOT / "samples", Path(tmp) / "samples")
         with open(Path(tmp) / "tests" / "conftest.py", "a") as conf:  # the tests must see the sanitized kernel
-            conf.write(f"\nfrom scatter_cli import pairs as _p\nassert {tmp!r} in _p._kernel.__file__\n")
+            conf.write(f"\nfrom scatter_cli.sampling.poisson import pairs as _p\nassert {tmp!r} in _p._kernel.__file__\n")
         tests = [t for t in ("tests/test_native.py", "tests/test_thinning.py", "tests/test_kernel_parity.py")
                  if (Path(tmp) / t).exists()]
         for plain in ("", "1"):

@@ -95,7 +95,7 @@ print("{}")
 
 FLATTEN = r"""
 import sys, numpy as np, trimesh
-from scatter_cli.loaders import load_surface
+from scatter_cli.loading.load import load_surface
 s = load_surface(sys.argv[1], plain=True)
 v, f, o = [], [], 0
 for inst in s.instances:
@@ -115,7 +115,7 @@ def reset_peak():
     with open("/proc/self/clear_refs", "w") as f:
         f.write("5")
 import numpy as np
-from scatter_cli.loaders import load_surface
+from scatter_cli.loading.load import load_surface
 path, tiny, what = sys.argv[1], sys.argv[2], sys.argv[3]
 r0 = status("VmRSS")
 from pxr import Usd, UsdGeom

@@ -6,7 +6,7 @@ its time (a warm-up on 10^4 points, then the median of back-to-back runs on all 
 building its tree or scene each time) and its ratio to the fastest peer of the same run:
 
 - scatter: distance (distance.closest_points), parity (parity.parity_inside, 3 rays),
-  distance + parity, and distance + winding when scatter_cli/winding.py is present
+  distance + parity, and distance + winding when scatter_cli/volume/winding.py is present
   (`--sign winding`). One tree for distance and parity; queries in chunks of CHUNK points.
 - peers: Open3D ``RaycastingScene.compute_signed_distance`` (float32, Embree), point-cloud-
   utils ``signed_distance_to_mesh`` (fast winding number signs), libigl
@@ -41,10 +41,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from scatter_cli import distance, parity  # noqa: E402
+from scatter_cli.volume import distance, parity  # noqa: E402
 
 try:  # the winding numbers of --sign winding, when present
-    from scatter_cli import winding
+    from scatter_cli.volume import winding
 except ImportError:
     winding = None
 

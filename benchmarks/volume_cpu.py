@@ -22,7 +22,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import volume as bench  # noqa: E402
 
-from scatter_cli import winding  # noqa: E402
+from scatter_cli.volume import winding  # noqa: E402
 
 
 def winding_labels(v, f, p):

@@ -1,7 +1,7 @@
 """The volume kernel (closest points, ray parity, tree order) under AddressSanitizer and
 UndefinedBehaviorSanitizer.
 
-Builds scatter_cli/_cvolume.c with -fsanitize=address,undefined into a copy of the
+Builds scatter_cli/volume/_cvolume.c with -fsanitize=address,undefined into a copy of the
 package (and of the tests and benchmarks) in a temporary directory, then, with the
 sanitizer runtimes preloaded, runs tests/test_distance.py (brute-force comparisons on
 closed, open, self-intersecting and instanced meshes, grazing rays, the kernel against
@@ -22,7 +22,7 @@ from sanitized import run_sanitized  # noqa: E402
 
 BIG = r'''
 import numpy as np, sys, trimesh
-from scatter_cli import distance, parity
+from scatter_cli.volume import distance, parity
 assert distance._kernel is not None and sys.argv[1] in distance._kernel.__file__
 m = trimesh.load("samples/skull.ply", process=False)
 tree = distance.TriangleTree(np.asarray(m.vertices, float), np.asarray(m.faces, np.int64))
@@ -37,7 +37,7 @@ print("volume kernel: skull, 10^5 points under the sanitizers:", round(float(d.m
 
 
 def main():
-    run_sanitized("_cvolume", "distance", "tests/test_distance.py", BIG)
+    run_sanitized("_cvolume", "volume.distance", "tests/test_distance.py", BIG)
 
 
 if __name__ == "__main__":

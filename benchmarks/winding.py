@@ -1,4 +1,4 @@
-"""Winding numbers: scatter's tree (scatter_cli/winding.py) against libigl and Open3D.
+"""Winding numbers: scatter's tree (scatter_cli/volume/winding.py) against libigl and Open3D.
 
 On the skull sample (100,002 faces, closed) and a closed 327,680-face icosphere, N points
 (default 10^6) uniform in the box grown by 0.1 of its largest side: the time of
@@ -29,7 +29,8 @@ import trimesh
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from scatter_cli import native, winding  # noqa: E402
+from scatter_cli.core import native
+from scatter_cli.volume import winding  # noqa: E402
 
 
 def meshes():

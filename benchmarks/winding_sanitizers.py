@@ -1,6 +1,6 @@
 """The winding-number kernel under AddressSanitizer and UndefinedBehaviorSanitizer.
 
-Builds scatter_cli/_cwinding.c with -fsanitize=address,undefined into a copy of the
+Builds scatter_cli/volume/_cwinding.c with -fsanitize=address,undefined into a copy of the
 package (and of the tests and benchmarks, which they import) in a temporary directory,
 then, with the sanitizer runtimes preloaded, runs tests/test_winding.py (brute-force
 cases, kernel/NumPy parity, bad arrays the kernel must refuse, fuzzed soups with NaN,
@@ -21,7 +21,7 @@ from sanitized import run_sanitized  # noqa: E402
 
 BIG = r'''
 import numpy as np, sys, trimesh
-from scatter_cli import winding
+from scatter_cli.volume import winding
 assert winding._kernel is not None and sys.argv[1] in winding._kernel.__file__
 m = trimesh.load("samples/skull.ply", force="mesh")
 tree = winding.WindingTree(np.asarray(m.vertices, float), np.asarray(m.faces, np.int64))
@@ -36,7 +36,7 @@ print("winding kernel: skull, 20,000 points under the sanitizers, same bytes as 
 
 
 def main():
-    run_sanitized("_cwinding", "winding", "tests/test_winding.py", BIG)
+    run_sanitized("_cwinding", "volume.winding", "tests/test_winding.py", BIG)
 
 
 if __name__ == "__main__":

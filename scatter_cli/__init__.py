@@ -12,10 +12,26 @@ DISTRIBUTION = "mesh-scatter"
 
 __all__ = ["sample", "prepare", "batch", "preview", "load_surface", "Samples", "ScatterError", "version"]
 
-# The function, not the module of the same name (which imports only the standard library).
-from .batch import batch  # noqa: E402
-from .preview import preview  # noqa: E402
-
+# The layers, lowest first: a module may import from its own layer and the layers below,
+# never from one above (tests/test_layers.py holds every module to it, function-level
+# imports included). A module's layer is the longest entry that names it or a folder above it.
+LAYERS = (
+    ("errors", "core"),  # the two kinds of failure; machinery that knows no mesh
+    ("stats",),  # statistics: chi-square, exact surface measures
+    ("surface",),  # the surface model
+    ("loading",),  # mesh files -> surface
+    ("sampling",),  # surface -> points: the plan, warps, methods, weights, sources
+    ("sampling.poisson",),  # Poisson-disk thinning
+    ("sampling.stable",),  # --stable
+    ("sampling.exterior",),  # --exterior
+    ("volume",),  # points in space and their labels
+    ("run",),  # options, the pipeline, chunks of points and attributes
+    ("writers",),  # the table of formats; chunks -> files, and files read back
+    ("api",),  # the Python API
+    ("engines",),  # scatter batch: worker processes, Dask
+    ("commands",),  # info, check, bench, merge, preview
+    ("cli", "__main__"),  # the command line
+)
 
 def version() -> str:
     """The installed package's version; from pyproject.toml when run from a checkout."""
@@ -46,12 +62,20 @@ def __getattr__(name):
         from . import api
 
         return getattr(api, name)
+    if name == "batch":
+        from .engines.batch import batch
+
+        return batch
+    if name == "preview":
+        from .commands.preview import preview
+
+        return preview
     if name == "load_surface":
-        from .loaders import load_surface
+        from .loading.load import load_surface
 
         return load_surface
     if name == "Samples":
-        from .columns import Samples
+        from .run.columns import Samples
 
         return Samples
     if name == "ScatterError":

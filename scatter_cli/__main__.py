@@ -5,8 +5,8 @@ import sys
 
 def main():
     """Start a batch's fork server first (it imports what the workers need while the
-    command reads its arguments: :mod:`scatter_cli.forkserver`), then run the command."""
-    from . import forkserver
+    command reads its arguments: :mod:`scatter_cli.engines.forkserver`), then run the command."""
+    from .engines import forkserver
 
     if forkserver.wanted(sys.argv[1:]):
         forkserver.start()

@@ -1,8 +1,8 @@
 """The Python API that the command line wraps: ``sample``, the streaming ``prepare`` and ``write``.
 
 A run flows one way: file -> surface -> source -> chunks -> writer. ``prepare`` checks
-the options (:class:`~scatter_cli.options.SampleOptions`), loads the surface, builds its
-source of points (:mod:`scatter_cli.pipeline`) and returns a :class:`Run`, whose
+the options (:class:`~scatter_cli.run.options.SampleOptions`), loads the surface, builds its
+source of points (:mod:`scatter_cli.run.pipeline`) and returns a :class:`Run`, whose
 ``chunks()`` a writer streams; :func:`write` writes a run to a file, as ``scatter
 sample`` and every ``scatter batch`` worker do.
 """
@@ -15,15 +15,15 @@ import time
 
 import numpy as np
 
-from .attributes import AttributeMaker
-from .bounds import choose_precision, in_frame, normal_frame, sampled_bounds
-from .options import SampleOptions
-from .pipeline import surface_source, volume_source
-from .columns import ATTRIBUTES, Samples, column_layout
-from .sampling import chunk_ranges, run_chunks
-from .sources import Source
-from .loaders import load_surface
-from .surface import Surface
+from .run.attributes import AttributeMaker
+from .run.bounds import choose_precision, in_frame, normal_frame, sampled_bounds
+from .run.options import SampleOptions
+from .run.pipeline import surface_source, volume_source
+from .run.columns import ATTRIBUTES, Samples, column_layout
+from .sampling.plan import chunk_ranges, run_chunks
+from .sampling.sources import Source
+from .loading.load import load_surface
+from .surface.model import Surface
 
 # attributes the fast readers give as trimesh would (else the file goes to trimesh)
 FAST_READER_ATTRIBUTES = {"face", "bary", "normal", "object", "orient", "smooth-normal", "color", "uv"}
@@ -98,7 +98,7 @@ class Run:
 
     def spacing(self):
         """d_min, mean nearest-neighbour distance and rho of the output (thinning runs)."""
-        from .spacing import spacing_stats
+        from .sampling.poisson.spacing import spacing_stats
 
         return spacing_stats(self.kept.points, self.source.area)
 
@@ -128,7 +128,7 @@ def prepare(mesh, count=None, *, options: SampleOptions | None = None, warn=None
     """Check the options, load ``mesh`` (if a path) and prepare its run; see :func:`sample`.
 
     The options: ``options``, or ``count`` and the keyword arguments of
-    :class:`~scatter_cli.options.SampleOptions` (``shard``: ``(K, M)``, the run keeps
+    :class:`~scatter_cli.run.options.SampleOptions` (``shard``: ``(K, M)``, the run keeps
     points floor(K*N/M) .. floor((K+1)*N/M) - 1 of the run without it, and draws only
     those; ``oversampling``: candidates per output point for Poisson thinning).
     ``warn(message)`` is called with each warning. Usage errors (ScatterUsageError) come
@@ -169,7 +169,7 @@ def sample(mesh, count=None, **options) -> Samples:
 
     mesh: a path, a ``trimesh.Trimesh`` or a ``trimesh.Scene``; ``count`` (default
     10,000) and the options: the keyword arguments of
-    :class:`~scatter_cli.options.SampleOptions` (``exterior``: only the surface seen from
+    :class:`~scatter_cli.run.options.SampleOptions` (``exterior``: only the surface seen from
     outside, docs/exterior.md, needs embreex). Returns :class:`Samples` with ``.points``
     (count, 3) and one array per requested attribute. The result is a pure function of
     the mesh, the options and ``seed``, whatever ``chunk_size``.
@@ -219,7 +219,7 @@ def write(run: Run, path, format=None, ascii=False, *, crs=None, progress=False)
 
 def _write(run, path, fmt, ascii, crs, progress):
     """:func:`write` with the format ``fmt`` already known and checked."""
-    from .progress import with_progress
+    from .core.progress import with_progress
     from .writers import write_samples
 
     report = write_samples(with_progress(run.chunks(), run.size, progress), path, fmt, run.layout, run.size,

@@ -1,6 +1,6 @@
 """The ``scatter`` command line: a thin typer shell over :mod:`scatter_cli.api`.
 
-How the process runs (signals, exit codes, standard output) is :mod:`scatter_cli.process`.
+How the process runs (signals, exit codes, standard output) is :mod:`scatter_cli.core.process`.
 """
 
 import json
@@ -10,11 +10,12 @@ from typing import Annotated, List, Optional
 
 import typer
 
-from . import process
+from .core import process
 from .errors import ScatterUsageError
-from .inputs import INPUT_FORMATS
-from .options import DEFAULT_COUNT, SampleOptions, whole_number
-from .outputs import ASCII_FORMATS, ATTRIBUTES, FORMATS
+from .loading.formats import INPUT_FORMATS
+from .run.options import DEFAULT_COUNT, SampleOptions, whole_number
+from .run.fields import ATTRIBUTES
+from .writers.formats import ASCII_FORMATS, FORMATS
 
 app = typer.Typer(
     add_completion=False,
@@ -27,6 +28,13 @@ app = typer.Typer(
     "  scatter sample scene.glb --poisson -n 5000 -a normal,color | head\n\n"
     "  scatter info mesh.ply",
 )
+
+
+def lean_trimesh():
+    """trimesh imported without SciPy when a mesh needs it (the command line only)."""
+    from .loading.load import lean_trimesh
+
+    lean_trimesh()
 
 
 def _warner(quiet):
@@ -127,7 +135,7 @@ def sample(
 
       scatter sample chair.obj --normalize unit-sphere --near 0.0707,0.0224 --box-share 0.06 -a sdf -o chair.npy
     """
-    process.lean_trimesh()
+    lean_trimesh()
     from . import api
 
     started = time.perf_counter()
@@ -159,8 +167,8 @@ def info(
     exterior: Annotated[bool, typer.Option("--exterior", help="Also the exterior area (estimate and standard error) and faces seen from outside (needs embreex).")] = False,
 ):
     """Faces, vertices, area, bounding box, degenerate faces, attributes and objects of MESH."""
-    process.lean_trimesh()
-    from .info import describe, format_text
+    lean_trimesh()
+    from .commands.info import describe, format_text
 
     report = describe(mesh, input_format=input_format, exterior=exterior)
     process.echo(json.dumps(report, indent=2) if as_json else format_text(report))
@@ -179,7 +187,7 @@ def check(
     Exits 0 when scatter's points are consistent with the exact surface distribution
     (and so at least as good as pymeshlab's), 1 when not.
     """
-    from .check import run_check
+    from .commands.check import run_check
 
     raise typer.Exit(run_check(mesh, count=count, seed=seed, poisson=poisson, radius=radius, out=process.echo))
 
@@ -203,7 +211,7 @@ def bench(
     table, JSON and a PNG plot to --out. Needs matplotlib for the plot
     (pip install matplotlib).
     """
-    from .bench import run_bench
+    from .commands.bench import run_bench
 
     parsed = None
     if counts:
@@ -270,7 +278,7 @@ def batch(
 
       scatter batch /shared/meshes -o /shared/pts/{rel}.ply --engine dask --scheduler tcp://head:8786
     """
-    from .batch import run_batch  # (no NumPy here: the workers import it, and trimesh when a mesh needs it)
+    from .engines.batch import run_batch  # (no NumPy here: the workers import it, and trimesh when a mesh needs it)
 
     result = run_batch(inputs or [], output, from_list=from_list, jobs=jobs, skip_existing=skip_existing,
                        timeout=timeout, max_memory=max_memory, report=report, engine=engine, scheduler=scheduler,
@@ -294,7 +302,7 @@ def merge(
 
       scatter merge part-0.ply part-1.ply part-2.ply -o whole.ply
     """
-    from .merge import merge as join
+    from .commands.merge import merge as join
 
     join(parts, output, fmt)
 
@@ -332,9 +340,9 @@ def preview(
 
       scatter preview meshes/ -n 5000 --view front --view top -o sheets/page-{page}.png
     """
-    process.lean_trimesh()
-    from .preview import preview as draw_sheets
-    from .preview import summary
+    lean_trimesh()
+    from .commands.preview import preview as draw_sheets
+    from .commands.preview import summary
 
     options = SampleOptions.of(locals()).as_dict()
     def error_line(message):

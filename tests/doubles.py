@@ -1,13 +1,13 @@
 """Test doubles: broken samplers that the statistical tests must reject.
 
 Each is built the way the real ones are, through the point-source protocol
-(:mod:`scatter_cli.sources`) or as a plan a real source draws from.
+(:mod:`scatter_cli.sampling.sources`) or as a plan a real source draws from.
 """
 
 import numpy as np
 
-from scatter_cli.sampling import SamplePlan, _guide_table, uniforms
-from scatter_cli.warps import square_to_triangle
+from scatter_cli.sampling.plan import SamplePlan, _guide_table, uniforms
+from scatter_cli.sampling.warps import square_to_triangle
 
 
 class UnweightedSource:

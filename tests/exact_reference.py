@@ -1,12 +1,12 @@
 """Exact quantities of a surface that only the tests use: the area below a height,
 equal-area slabs of exactly 1/k each and their probabilities, the second moment about
-the origin. Built on the closed forms per triangle of :mod:`scatter_cli.surface_measures`
-and :mod:`scatter_cli.slab_heights`."""
+the origin. Built on the closed forms per triangle of :mod:`scatter_cli.stats.measures`
+and :mod:`scatter_cli.stats.slabs`."""
 
 import numpy as np
 
-from scatter_cli.slab_heights import below_fraction as _below_fraction
-from scatter_cli.surface_measures import (
+from scatter_cli.stats.slabs import below_fraction as _below_fraction
+from scatter_cli.stats.measures import (
     _chunks,
     _edges,
     _kept,

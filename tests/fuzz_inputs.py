@@ -246,8 +246,8 @@ def differential(data: bytes, suffix: str, workdir) -> str:
     import os
 
     from scatter_cli.errors import ScatterError
-    from scatter_cli.loaders import read_mesh
-    from scatter_cli.loaders import load_surface
+    from scatter_cli.loading.load import read_mesh
+    from scatter_cli.loading.load import load_surface
 
     path = os.path.join(workdir, f"diff.{suffix}")
     with open(path, "wb") as f:
@@ -281,7 +281,7 @@ def _same_attributes(path, suffix, slow):
     alike)."""
     import scatter_cli
     from scatter_cli.errors import ScatterError
-    from scatter_cli.loaders import read_mesh
+    from scatter_cli.loading.load import read_mesh
 
     other = "color" if suffix == "ply" else "uv"
     if read_mesh(path, suffix, smooth=True, **{other: True}) is None:

@@ -15,9 +15,9 @@ import sys
 CHILD = r"""
 import gc, json, os, sys
 import numpy as np
-import scatter_cli.gltfread, scatter_cli.plyread, scatter_cli.readers
-from scatter_cli.native import kernel
-from scatter_cli.loaders import load_surface
+import scatter_cli.loading.gltf, scatter_cli.loading.ply, scatter_cli.loading.fast
+from scatter_cli.core.native import kernel
+from scatter_cli.loading.load import load_surface
 kernel("_creaders")
 gc.collect()
 with open("/proc/self/statm") as f:

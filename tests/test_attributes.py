@@ -10,14 +10,14 @@ import trimesh
 from scipy import stats
 
 import scatter_cli
-from scatter_cli.attributes import AttributeMaker
+from scatter_cli.run.attributes import AttributeMaker
 from scatter_cli.errors import ScatterError, ScatterUsageError
-from scatter_cli.sampling import RawChunk
-from scatter_cli.loaders import load_surface
-from scatter_cli.surface import Geometry
-from scatter_cli.texture import CLAMP_TO_EDGE, MIRRORED_REPEAT, REPEAT, bilinear, wrap_index
-from scatter_cli.surface_data import vertex_normal_table
-from scatter_cli.weighting import barycentric
+from scatter_cli.sampling.plan import RawChunk
+from scatter_cli.loading.load import load_surface
+from scatter_cli.surface.model import Geometry
+from scatter_cli.surface.texture import CLAMP_TO_EDGE, MIRRORED_REPEAT, REPEAT, bilinear, wrap_index
+from scatter_cli.surface.data import vertex_normal_table
+from scatter_cli.sampling.weighting import barycentric
 
 from .conftest import SAMPLES, run_scatter, scaled_scene
 
@@ -281,7 +281,7 @@ def test_vertex_colour_weight_is_exact_inside_a_face():
     counts = np.bincount(locate(bary, subs), minlength=len(subs))
     assert stats.chisquare(counts, expect).pvalue > ALPHA
     # Must-fail: the plain uniform warp on the same face.
-    from scatter_cli.warps import square_to_triangle
+    from scatter_cli.sampling.warps import square_to_triangle
 
     b = square_to_triangle(u[:, :2])
     uni = np.bincount(locate(np.column_stack([1 - b.sum(1), b]), subs), minlength=len(subs))
@@ -344,8 +344,8 @@ def test_bad_weights_are_clear_errors():
 # -- only what is asked for is computed ---------------------------------------------------
 
 def test_xyz_only_decodes_no_texture_and_computes_no_normals(monkeypatch):
-    import scatter_cli.texture as texture
-    import scatter_cli.surface_data as visuals
+    import scatter_cli.surface.texture as texture
+    import scatter_cli.surface.data as visuals
 
     calls = []
     monkeypatch.setattr(texture, "decode", lambda *a, **k: calls.append("decode"))

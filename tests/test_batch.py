@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import scatter_cli
-from scatter_cli import worker
+from scatter_cli.engines import worker
 from scatter_cli.errors import ScatterUsageError
-from scatter_cli.options import SampleOptions
+from scatter_cli.run.options import SampleOptions
 
 from .batchtools import collection, no_temporary_files, outputs, reader_fd, reference, wait_for_reader
 from .conftest import ROOT, SAMPLES, triangles_mesh
@@ -83,7 +83,7 @@ def bad_meshes(folder):
 @pytest.fixture(params=["forked", "started"])
 def workers(request, monkeypatch):
     """How the local engine starts its workers: forked from this process (as the command
-    does), or each started as `python -m scatter_cli.worker` (a program with threads)."""
+    does), or each started as `python -m scatter_cli.engines.worker` (a program with threads)."""
     monkeypatch.setattr(worker, "can_fork", lambda: request.param == "forked")
     return request.param
 
@@ -136,7 +136,7 @@ def test_a_worker_killed_mid_batch_fails_its_mesh_alone(tmp_path, meshes, worker
         inputs, str(tmp_path / "out" / "{stem}"), jobs=2, count=300, attributes="normal,face")))
     thread.start()
     reader = wait_for_reader(fifo)
-    assert ("scatter_cli.worker" in open(f"/proc/{reader}/cmdline").read()) is (workers == "started")
+    assert ("scatter_cli.engines.worker" in open(f"/proc/{reader}/cmdline").read()) is (workers == "started")
     os.kill(reader, 9)
     os.close(reader_fd.pop())
     thread.join(60)

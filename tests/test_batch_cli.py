@@ -230,7 +230,7 @@ def test_a_rerun_clears_what_a_batch_killed_with_sigkill_left(tmp_path):
             worker = next(pid for pid in children(proc.pid))
             os.kill(worker, signal.SIGSTOP)  # b stays half-written until the worker is killed
     with open(f"/proc/{worker}/cmdline", "rb") as f:
-        assert b"scatter_cli.worker" not in f.read()  # forked from the command, as it forks them
+        assert b"scatter_cli.engines.worker" not in f.read()  # forked from the command, as it forks them
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     deadline = time.monotonic() + 60

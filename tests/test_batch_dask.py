@@ -14,7 +14,7 @@ import threading
 import pytest
 
 import scatter_cli
-from scatter_cli import dask_engine
+from scatter_cli.engines import dask_engine
 
 from .conftest import ROOT, SAMPLES, popen_user, scatter_command
 from .batchtools import (HANG, Feeder, alive, collection, outputs, parent_of, reference, run_elsewhere,

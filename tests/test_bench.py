@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from scatter_cli import bench
-from scatter_cli.surface_measures import smooth_test_function
-from scatter_cli.loaders import load_surface
+from scatter_cli.commands import bench
+from scatter_cli.stats.measures import smooth_test_function
+from scatter_cli.loading.load import load_surface
 
 from .conftest import run_scatter, run_user
 

@@ -5,9 +5,9 @@ import pytest
 
 pytest.importorskip("pymeshlab")
 
-from scatter_cli.check import ALPHA, run_check  # noqa: E402
-from scatter_cli.sampling import SamplePlan  # noqa: E402
-from scatter_cli.loaders import load_surface  # noqa: E402
+from scatter_cli.commands.check import ALPHA, run_check  # noqa: E402
+from scatter_cli.sampling.plan import SamplePlan  # noqa: E402
+from scatter_cli.loading.load import load_surface  # noqa: E402
 
 from .conftest import run_scatter  # noqa: E402
 from .doubles import UnweightedSource  # noqa: E402
@@ -69,7 +69,7 @@ def test_check_counts_points_an_ulp_off_in_the_region_they_are_on(three_cubes):
     """pymeshlab's points on the top face sit an ulp above the highest vertex (checked
     here, so the case is exercised); they must count in the top face's slab, not in a
     slab of probability 0 that makes the two sets 'differ' (p 1e-26 before the fix)."""
-    from scatter_cli.check import pymeshlab_sampler, world_mesh
+    from scatter_cli.commands.check import pymeshlab_sampler, world_mesh
 
     vertices, faces, _ = world_mesh(load_surface(three_cubes))
     tri = vertices[faces]
@@ -85,7 +85,7 @@ def test_check_says_which_sampler_fits_when_the_sets_differ(three_cubes, monkeyp
     """With pymeshlab replaced by a sampler that ignores the areas, the sets differ:
     check names the slab, each sampler's count there against the exact area, and that
     pymeshlab is the one that does not fit; scatter still passes."""
-    from scatter_cli import check
+    from scatter_cli.commands import check
 
     def unweighted(vertices, faces, count, poisson=False, radius=None):
         tri = vertices[faces]
@@ -112,7 +112,7 @@ def test_check_fails_a_sampler_a_hair_off_the_surface(three_cubes):
     above the surface (far more than rounding, far less than any slab) must FAIL, as
     points off the surface; the moments do not notice them."""
     def lifted(surface, count, seed):
-        from scatter_cli.check import scatter_sampler
+        from scatter_cli.commands.check import scatter_sampler
 
         p = scatter_sampler(surface, count, seed)
         p[:, 2] += 4e-7 * (p[:, 2] >= p[:, 2].max() - 1e-9)  # the tops' points
@@ -129,7 +129,7 @@ def test_check_fails_a_sampler_that_thins_the_highest_top(three_cubes):
     """A sampler that drops a third of the points of the highest cube's top (the face at
     the rounding-prone end of the z slabs) must FAIL."""
     def thin_top(surface, count, seed):
-        from scatter_cli.check import scatter_sampler
+        from scatter_cli.commands.check import scatter_sampler
 
         p = scatter_sampler(surface, 2 * count, seed)
         top = p[:, 2] >= p[:, 2].max() - 1e-9
@@ -158,7 +158,7 @@ def test_exact_slabs_work_is_a_small_multiple_of_the_faces(monkeypatch):
     bracket's faces narrowed to those with a vertex height inside; the bisection this
     replaced evaluated 64 per face, and narrowed 20 more), and their probabilities are
     exact (they sum to one, the area below each edge agrees with a direct evaluation)."""
-    from scatter_cli import slab_heights, uniformity
+    from scatter_cli.stats import slabs as slab_heights, uniformity
 
     tri = _terrain()
     areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
@@ -181,7 +181,7 @@ def test_exact_slabs_work_is_a_small_multiple_of_the_faces(monkeypatch):
 def _area_below(tri, areas, d, t):
     """The area of ``tri`` below height t along d, by the closed form per face."""
     h = np.sort(tri @ d, axis=1)
-    from scatter_cli.slab_heights import below_fraction
+    from scatter_cli.stats.slabs import below_fraction
 
     return float(areas @ below_fraction(h[:, 0], h[:, 1], h[:, 2], t))
 
@@ -191,7 +191,7 @@ def test_check_shows_its_stages_on_a_terminal():
     line cleared at the end; nothing when it is not."""
     import io
 
-    from scatter_cli.check import _Stage
+    from scatter_cli.commands.check import _Stage
 
     class Tty(io.StringIO):
         def isatty(self):
@@ -215,7 +215,7 @@ def test_check_reads_a_binary_ply_as_sample_does_without_trimesh(monkeypatch, tm
     trimesh, as check did, fails here."""
     import trimesh
 
-    from scatter_cli import loaders
+    from scatter_cli.loading import load as loaders
 
     path = tmp_path / "terrain.ply"
     tri = _terrain(30)

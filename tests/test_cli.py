@@ -293,7 +293,8 @@ def test_version():
 
 
 def test_help_lists_every_format_and_attribute():
-    from scatter_cli.outputs import ATTRIBUTES, FORMATS
+    from scatter_cli.run.fields import ATTRIBUTES
+    from scatter_cli.writers.formats import FORMATS
 
     text = " ".join(run_scatter("sample", "--help", check=True).stdout.decode().split())
     assert "|".join(FORMATS) in text

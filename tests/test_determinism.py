@@ -7,7 +7,7 @@ import pytest
 
 import scatter_cli
 from scatter_cli.api import prepare
-from scatter_cli.sampling import uniforms
+from scatter_cli.sampling.plan import uniforms
 
 from .conftest import run_scatter
 

@@ -1,4 +1,4 @@
-"""Exact closest points (scatter_cli/distance.py) and ray-parity labels (scatter_cli/parity.py)
+"""Exact closest points (scatter_cli/volume/distance.py) and ray-parity labels (scatter_cli/volume/parity.py)
 against brute force written here, O(points x faces): the distance to each triangle as the
 least of its interior projection and its three edges, and the winding number as a sum of
 solid angles (van Oosterom and Strackee). Each check is paired with a broken variant that
@@ -14,7 +14,7 @@ import trimesh
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from scatter_cli import distance, parity
+from scatter_cli.volume import distance, parity
 
 from .conftest import SAMPLES
 

@@ -13,7 +13,7 @@ import trimesh
 
 import scatter_cli
 from scatter_cli.errors import ScatterError
-from scatter_cli.loaders import load_surface
+from scatter_cli.loading.load import load_surface
 
 from .conftest import SAMPLES, run_scatter
 from .gltfwrite import glb_bytes

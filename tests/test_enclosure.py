@@ -1,4 +1,4 @@
-"""Enclosed faces (scatter_cli/enclosure.py): faces certified hidden without a ray must be
+"""Enclosed faces (scatter_cli/sampling/exterior/enclosure.py): faces certified hidden without a ray must be
 hidden by the rays too (the certificate changes no verdict), and the certificate must find
 the faces sealed inside closed shells. Each check is paired with a broken certificate
 (open surfaces taken for shells, or shells' clearance ignored) that must fail it."""
@@ -11,10 +11,10 @@ from .conftest import triangles_mesh
 
 pytest.importorskip("embreex")
 
-from scatter_cli import enclosure, exterior_rays  # noqa: E402
-from scatter_cli.exterior import classify  # noqa: E402
-from scatter_cli.sampling import RawChunk, SamplePlan  # noqa: E402
-from scatter_cli.loaders import load_surface  # noqa: E402
+from scatter_cli.sampling.exterior import enclosure, rays as exterior_rays  # noqa: E402
+from scatter_cli.sampling.exterior.filter import classify  # noqa: E402
+from scatter_cli.sampling.plan import RawChunk, SamplePlan  # noqa: E402
+from scatter_cli.loading.load import load_surface  # noqa: E402
 
 
 def truth(surface, cells):

@@ -1,4 +1,4 @@
-"""The compiled enclosure kernel (scatter_cli/_cenclosure.c) certifies exactly the faces
+"""The compiled enclosure kernel (scatter_cli/sampling/exterior/_cenclosure.c) certifies exactly the faces
 that enclosure.py's NumPy path certifies, and finds the same closed parts, on built
 scenes, random nested shells (hypothesis) and degenerate input: non-finite and huge
 coordinates, zero-area and duplicated faces. The comparison is paired with a kernel fed
@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from scatter_cli import enclosure
+from scatter_cli.sampling.exterior import enclosure
 
 from . import exterior_scenes as es
 from .test_enclosure import nested_boxes, random_rotation

@@ -14,10 +14,10 @@ pytest.importorskip("embreex")
 from scipy import stats  # noqa: E402
 
 import scatter_cli  # noqa: E402
-from scatter_cli import exterior_rays  # noqa: E402
-from scatter_cli.exterior import classify  # noqa: E402
-from scatter_cli.sampling import SamplePlan  # noqa: E402
-from scatter_cli.loaders import load_surface  # noqa: E402
+from scatter_cli.sampling.exterior import rays as exterior_rays  # noqa: E402
+from scatter_cli.sampling.exterior.filter import classify  # noqa: E402
+from scatter_cli.sampling.plan import SamplePlan  # noqa: E402
+from scatter_cli.loading.load import load_surface  # noqa: E402
 
 LEVEL = 1e-3
 
@@ -244,7 +244,7 @@ def test_density_keeps_the_exterior_points_of_the_plain_run():
 
 def test_exterior_area_estimate_and_face_counts(box_file):
     """Exact exterior area 54 of 60 (the inner box's 6 is hidden): within 4 standard errors."""
-    from scatter_cli.info import describe
+    from scatter_cli.commands.info import describe
 
     report = describe(box_file, exterior=True)["exterior"]
     assert abs(report["area"] - 54.0) < 4 * report["area_se"]
@@ -304,7 +304,7 @@ def test_real_mesh_all_exterior_and_uniform(name):
     expected = n * np.bincount(bins, weights=area, minlength=50) / area.sum()
     assert stats.chisquare(counts, expected).pvalue > LEVEL
     many = exterior_rays.Occluder(surface, design_size=1024)
-    from scatter_cli.sampling import RawChunk
+    from scatter_cli.sampling.plan import RawChunk
 
     chunk = RawChunk(0, s.points, s.attributes["face"], np.zeros(n, np.int64), None)
     assert classify(many, chunk, 77)[0].all()
@@ -313,7 +313,7 @@ def test_real_mesh_all_exterior_and_uniform(name):
 def test_cad_part_points_all_exterior_by_many_more_rays():
     """A CAD part whose pieces overlap (2 % of its area is hidden): every point kept is
     exterior for a classifier with 16x more directions."""
-    from scatter_cli.sampling import RawChunk
+    from scatter_cli.sampling.plan import RawChunk
 
     path = SAMPLES / "pediment_join_plate_12.stl"
     s = scatter_cli.sample(path, 10000, seed=3, exterior=True, attributes=["face"], precision="float64")
@@ -323,7 +323,7 @@ def test_cad_part_points_all_exterior_by_many_more_rays():
 
 
 def test_bounded_source_short_of_exterior_points_says_so():
-    from scatter_cli.exterior import ExteriorSource, ShortStream
+    from scatter_cli.sampling.exterior.filter import ExteriorSource, ShortStream
 
     run = scatter_cli.prepare(es.box_in_box()[0], 10, exterior=True)
     occluder = run.source.occluder
@@ -336,7 +336,7 @@ def test_bounded_source_short_of_exterior_points_says_so():
 def test_kept_candidates_give_the_points_drawn_again(box_file, keep, monkeypatch):
     """The pass keeps the exterior candidates it found for the output while they fit
     KEEP_POINTS; past it (or with none kept) the output draws them again: same points."""
-    from scatter_cli import exterior
+    from scatter_cli.sampling.exterior import filter as exterior
 
     def run(limit):
         monkeypatch.setattr(exterior, "KEEP_POINTS", limit)

@@ -12,8 +12,8 @@ pytest.importorskip("embreex")
 from scipy import stats  # noqa: E402
 
 import scatter_cli  # noqa: E402
-from scatter_cli import exterior  # noqa: E402
-from scatter_cli.loaders import load_surface  # noqa: E402
+from scatter_cli.sampling.exterior import filter as exterior  # noqa: E402
+from scatter_cli.loading.load import load_surface  # noqa: E402
 
 LEVEL = 1e-3
 

@@ -1,4 +1,4 @@
-"""scatter_cli.forkserver: a batch's workers forked by a server the command starts first,
+"""scatter_cli.engines.forkserver: a batch's workers forked by a server the command starts first,
 each of them the command's own child (adopted through PR_SET_CHILD_SUBREAPER)."""
 
 import json
@@ -10,7 +10,7 @@ import textwrap
 
 import pytest
 
-from scatter_cli import forkserver
+from scatter_cli.engines import forkserver
 
 from .batchtools import collection, outputs, parent_of, reader_fd, reference, wait_for_reader
 from .conftest import ROOT, popen_user, run_user, scatter_command
@@ -56,7 +56,7 @@ def test_a_batch_worker_is_the_commands_child(tmp_path, server):
         reader = wait_for_reader(fifo, over=lambda: proc.poll() is not None)
         assert parent_of(reader) == proc.pid
         assert numpy_mapped(proc.pid) is (server == "0")
-        assert "scatter_cli.worker" not in open(f"/proc/{reader}/cmdline").read()  # forked, not started
+        assert "scatter_cli.engines.worker" not in open(f"/proc/{reader}/cmdline").read()  # forked, not started
         os.kill(reader, signal.SIGKILL)
         os.close(reader_fd.pop())
         err = proc.communicate(timeout=120)[1].decode()
@@ -71,8 +71,8 @@ def test_a_batch_worker_is_the_commands_child(tmp_path, server):
 
 SCRIPT = textwrap.dedent("""
     import json, os, sys
-    from scatter_cli import forkserver
-    from scatter_cli.worker import Forked
+    from scatter_cli.engines import forkserver
+    from scatter_cli.engines.worker import Forked
 
     assert forkserver.start()
     server = forkserver.claim() if sys.argv[1] == "claim" else forkserver._server
@@ -105,9 +105,9 @@ def test_without_the_subreaper_a_worker_is_lost(tmp_path):
 
 FALLBACK = textwrap.dedent("""
     import json, os, signal, sys
-    from scatter_cli import forkserver
-    from scatter_cli.options import SampleOptions
-    from scatter_cli.worker import WorkerProcess
+    from scatter_cli.engines import forkserver
+    from scatter_cli.run.options import SampleOptions
+    from scatter_cli.engines.worker import WorkerProcess
 
     assert forkserver.start()
     os.kill(forkserver._server.pid, signal.SIGKILL)  # the server dies before it is asked
@@ -138,8 +138,8 @@ def test_a_large_environment_reaches_the_worker(tmp_path):
     the command would give up on it)."""
     script = textwrap.dedent("""
         import os, sys
-        from scatter_cli import forkserver
-        from scatter_cli.worker import Forked
+        from scatter_cli.engines import forkserver
+        from scatter_cli.engines.worker import Forked
 
         forkserver.REPLY_WITHIN = 20
         assert forkserver.start()

@@ -1,4 +1,4 @@
-"""The fast GLB reader (scatter_cli/gltfread.py) gives what trimesh's scene load gives.
+"""The fast GLB reader (scatter_cli/loading/gltf.py) gives what trimesh's scene load gives.
 
 Per placed geometry: the same world-space triangles, corners in the same order, the
 instances in the same order, and the same sampled bytes (face, bary, object); or it
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import scatter_cli
-from scatter_cli.loaders import load_surface, read_mesh
+from scatter_cli.loading.load import load_surface, read_mesh
 
 from .conftest import run_scatter
 from .gltfwrite import GLB
@@ -139,7 +139,7 @@ def test_the_fast_path_keeps_each_instance_transform():
 
 
 def read_mesh_bytes(data):
-    from scatter_cli.gltfread import read_glb
+    from scatter_cli.loading.gltf import read_glb
 
     return read_glb(data)
 
@@ -205,7 +205,7 @@ def test_a_node_graph_trimesh_cannot_walk_is_a_one_line_error(tmp_path):
 
 
 def test_a_primitive_with_normals_goes_to_trimesh_when_smooth_normals_are_wanted():
-    from scatter_cli.gltfread import read_glb
+    from scatter_cli.loading.gltf import read_glb
 
     g = case_instanced()
     g.doc["meshes"][1]["primitives"][0]["attributes"]["NORMAL"] = g.add(np.ones((6, 3), dtype="<f4"), 5126, "VEC3")

@@ -13,10 +13,10 @@ from hypothesis import strategies as st
 
 import scatter_cli
 from scatter_cli.api import prepare
-from scatter_cli.sampling import SamplePlan
-from scatter_cli.sources import RandomSource
-from scatter_cli.loaders import load_surface
-from scatter_cli.warps import square_to_triangle
+from scatter_cli.sampling.plan import SamplePlan
+from scatter_cli.sampling.sources import RandomSource
+from scatter_cli.loading.load import load_surface
+from scatter_cli.sampling.warps import square_to_triangle
 
 from benchmarks.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_pvalue, recover_bary,
                                   spread_triangles, triangles_mesh, two_sum_le_one, uniform_in_triangle_pvalue)
@@ -76,7 +76,7 @@ def test_zero_area_faces_get_no_points_and_nothing_is_nan():
 
 
 def test_info_counts_zero_area_faces():
-    from scatter_cli.info import describe
+    from scatter_cli.commands.info import describe
 
     report = describe(degenerate_mesh())
     assert report["faces"] == 9
@@ -272,7 +272,7 @@ def signed_zero_vertices(n, seed):
 def test_column_bounds_are_numpys_bit_for_bit(n, rows):
     """The blocked bounds (precision, LAS offsets) are v.min/max(axis=0)'s, signed zeros
     and infinities included, whatever the block size; NaN wins as in NumPy."""
-    from scatter_cli.surface import column_bounds
+    from scatter_cli.surface.model import column_bounds
 
     for seed in range(4):
         v = signed_zero_vertices(n, seed)
@@ -285,7 +285,7 @@ def test_column_bounds_are_numpys_bit_for_bit(n, rows):
 def test_column_bounds_without_the_last_block_fail_the_same_check():
     """The paired failure: bounds that skip the last partial block (a loop over whole
     blocks only) miss the extremes in it."""
-    from scatter_cli.surface import column_bounds
+    from scatter_cli.surface.model import column_bounds
 
     v = np.random.default_rng(0).standard_normal((65, 3))
     v[64] = [-9.0, 9.0, -9.0]

@@ -1,11 +1,11 @@
-"""SplitMix64 is written once in Python (scatter_cli.hashing) and gives SplitMix64's bits."""
+"""SplitMix64 is written once in Python (scatter_cli.core.hashing) and gives SplitMix64's bits."""
 
 import re
 from pathlib import Path
 
 import numpy as np
 
-from scatter_cli import hashing
+from scatter_cli.core import hashing
 
 PACKAGE = Path(__file__).resolve().parents[1] / "scatter_cli"
 
@@ -24,5 +24,5 @@ def test_splitmix64_constants_appear_in_one_python_module():
     """The finaliser's multipliers are in hashing.py and in no other Python module (the C
     kernels keep their own copy)."""
     pattern = re.compile(r"0x(BF58476D1CE4E5B9|94D049BB133111EB)", re.IGNORECASE)
-    holders = sorted(p.name for p in PACKAGE.glob("*.py") if pattern.search(p.read_text()))
+    holders = sorted(p.name for p in PACKAGE.rglob("*.py") if pattern.search(p.read_text()))
     assert holders == ["hashing.py"]

@@ -8,9 +8,10 @@ from collections import defaultdict
 import numpy as np
 import pytest
 
-from scatter_cli import info, topology
-from scatter_cli.loaders import load_surface
-from scatter_cli.surface import Geometry, Instance, Surface, corners, doubled_areas
+from scatter_cli.commands import info
+from scatter_cli.surface import topology
+from scatter_cli.loading.load import load_surface
+from scatter_cli.surface.model import Geometry, Instance, Surface, corners, doubled_areas
 
 from .conftest import SAMPLES, run_scatter
 

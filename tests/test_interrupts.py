@@ -10,7 +10,8 @@ import time
 
 import pytest
 
-from scatter_cli import api, interrupts
+from scatter_cli import api
+from scatter_cli.core import interrupts
 from scatter_cli.writers import FORMATS, write_stream
 
 from .conftest import SAMPLES, popen_user, scatter_command

@@ -17,10 +17,15 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli import (distance, enclosure, native, normals, pairs, parity, rayscene, readers, sampling,
-                         stable, thinning, winding)
-from scatter_cli.loaders import load_surface
-from scatter_cli.surface import Geometry, Instance, Surface
+from scatter_cli.volume import distance, parity, winding
+from scatter_cli.sampling.exterior import enclosure, rayscene
+from scatter_cli.core import native
+from scatter_cli.sampling import normals, plan as sampling
+from scatter_cli.sampling.poisson import pairs, thinning
+from scatter_cli.loading import fast as readers
+from scatter_cli.sampling.stable import source as stable
+from scatter_cli.loading.load import load_surface
+from scatter_cli.surface.model import Geometry, Instance, Surface
 
 from . import exterior_scenes as es
 from .conftest import SAMPLES, spread_triangles, triangles_mesh
@@ -275,8 +280,8 @@ def volume_points(tri, n=3000, seed=5):
 
 def volume_triangles(name):
     if name == "scene":
-        from scatter_cli.pipeline import plan_surface
-        from scatter_cli.volume import world_triangles
+        from scatter_cli.run.pipeline import plan_surface
+        from scatter_cli.volume.source import world_triangles
 
         return world_triangles(plan_surface(load_surface(SAMPLES / "cesiummilktruck.glb"))[0])[0]
     mesh = load_surface(SAMPLES / name)

@@ -11,7 +11,7 @@ import scatter_cli.api as api
 import scatter_cli.writers.las as las_module
 from scatter_cli.api import sampled_bounds
 from scatter_cli.errors import ScatterError
-from scatter_cli.sampling import chunk_ranges
+from scatter_cli.sampling.plan import chunk_ranges
 from scatter_cli.writers import run_precision, write_samples
 
 from .conftest import SAMPLES
@@ -229,7 +229,7 @@ def test_a_crs_that_is_neither_epsg_nor_wkt_is_a_usage_error(tmp_path, value):
 @pytest.mark.parametrize("suffix", ["las", "laz"])
 def test_merge_keeps_the_crs_and_refuses_another(tmp_path, suffix):
     pytest.importorskip("pyproj")
-    from scatter_cli.merge import merge
+    from scatter_cli.commands.merge import merge
 
     write(tmp_path / f"whole.{suffix}", crs="EPSG:2056")
     write(tmp_path / f"a.{suffix}", span=(0, 1234), crs="EPSG:2056")

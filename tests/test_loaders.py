@@ -1,69 +1,19 @@
 """The loader table: every input format read through it, standard input, and what a loader
 says about a file (warnings, a missing material library) instead of a puzzle."""
 
-import ast
-from pathlib import Path
-
 import numpy as np
 import pytest
 import trimesh
 
-import scatter_cli
-from scatter_cli import inputs, loaders
+from scatter_cli.loading import formats as inputs, load as loaders
 
 from .conftest import SAMPLES, run_scatter
 from .test_cli import assert_one_line_error
-
-PACKAGE = Path(scatter_cli.__file__).parent
-LOADING = {"surface", "loaders", "sourcefile", "readers", "plyread", "objsplit", "gltfread", "draco", "usdread",
-           "usdprims", "inputs", "native"}
 
 
 def test_the_table_names_every_input_format():
     assert set(loaders.LOADERS) == set(inputs.INPUT_FORMATS)
     assert {k for k, v in loaders.LOADERS.items() if v.fast is not None} == {"ply", "obj", "stl", "off", "glb"}
-
-
-def package_imports(name, root=PACKAGE):
-    """The package modules ``name`` imports, at module level or inside functions."""
-    tree = ast.parse((root / f"{name}.py").read_text())
-    found = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and node.level == 1:
-            if node.module:
-                found.add(node.module.split(".")[0])
-            else:
-                found.update(a.name for a in node.names)
-    return found & {p.stem for p in root.glob("*.py")}
-
-
-def cycle_through(start, root=PACKAGE):
-    """A cycle of imports that passes through ``start`` (a list of module names), or None."""
-    stack, seen = [(start, [start])], set()
-    while stack:
-        name, path = stack.pop()
-        for other in package_imports(name, root):
-            if other == start:
-                return path + [start]
-            if other not in seen:
-                seen.add(other)
-                stack.append((other, path + [other]))
-    return None
-
-
-@pytest.mark.parametrize("module", sorted(LOADING & {p.stem for p in PACKAGE.glob("*.py")}))
-def test_no_loading_module_is_in_an_import_cycle(module):
-    assert cycle_through(module) is None
-
-
-def test_the_cycle_finder_sees_a_function_level_import(tmp_path):
-    """The broken variant: surface.py importing the loaders inside a function is a cycle."""
-    for p in PACKAGE.glob("*.py"):
-        (tmp_path / p.name).write_text(p.read_text())
-    with open(tmp_path / "surface.py", "a") as f:
-        f.write("\n\ndef load(path):\n    from .loaders import load_surface\n\n    return load_surface(path)\n")
-    assert cycle_through("surface", tmp_path) == ["surface", "loaders", "surface"]
-
 
 # -- standard input ------------------------------------------------------------------------
 

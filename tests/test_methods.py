@@ -10,11 +10,12 @@ from scipy import stats as sps
 from scipy.stats import qmc
 
 import scatter_cli
-from scatter_cli import bench, methods, warps
+from scatter_cli.commands import bench
+from scatter_cli.sampling import methods, warps
 from scatter_cli.api import prepare
 from scatter_cli.errors import ScatterUsageError
-from scatter_cli.sampling import SamplePlan
-from scatter_cli.loaders import load_surface
+from scatter_cli.sampling.plan import SamplePlan
+from scatter_cli.loading.load import load_surface
 
 from .conftest import spread_triangles, triangles_mesh
 from .test_warps import bin_index
@@ -156,8 +157,8 @@ def test_the_error_comparison_does_not_reject_for_equal_samplers(sphere):
 
 
 def test_api_methods_sample_the_surface(sample_mesh):
-    from scatter_cli import uniformity
-    from scatter_cli.check import world_triangles
+    from scatter_cli.stats import uniformity
+    from scatter_cli.commands.check import world_triangles
 
     surface = load_surface(sample_mesh("spot_triangulated.obj"))
     tri, areas = world_triangles(surface)

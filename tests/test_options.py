@@ -4,7 +4,7 @@ the file is read (a large mesh is not loaded and planned only to be refused)."""
 import pytest
 
 from scatter_cli import api
-from scatter_cli.options import SampleOptions
+from scatter_cli.run.options import SampleOptions
 from scatter_cli.errors import ScatterUsageError
 
 from .conftest import run_scatter
@@ -124,7 +124,7 @@ def test_the_command_line_and_the_options_share_their_defaults():
 
 
 def test_whole_numbers_as_users_type_them():
-    from scatter_cli.options import whole_number
+    from scatter_cli.run.options import whole_number
 
     assert [whole_number(t) for t in ("100", "1e6", "2.5e3", "1E3", "1_000", "100000000000000000001")] == \
         [100, 10**6, 2500, 1000, 1000, 10**20 + 1]  # exact, not through a float

@@ -5,7 +5,7 @@ import pytest
 from scipy import stats
 
 import scatter_cli
-from scatter_cli.orient import align_z, orientations, spin_uniforms
+from scatter_cli.run.orient import align_z, orientations, spin_uniforms
 
 from .conftest import SAMPLES
 

@@ -53,7 +53,7 @@ def test_merge_joins_shards_into_the_run(tmp_path, suffix, ascii):
     if suffix != "pcd":
         pytest.importorskip("laspy")
     from scatter_cli import api
-    from scatter_cli.merge import merge
+    from scatter_cli.commands.merge import merge
     from scatter_cli.writers import run_precision, write_samples
 
     def write(path, shard=None):
@@ -101,7 +101,7 @@ def test_the_size_known_beforehand_is_the_size_written(tmp_path, fmt, crs, attri
 @pytest.mark.parametrize("fmt,ascii", [("csv", False), ("xyz", False), ("ply", True), ("pcd", True), ("laz", False),
                                        ("usd", False)])
 def test_text_compressed_and_in_memory_sizes_are_not_known(fmt, ascii):
-    from scatter_cli.columns import column_layout
+    from scatter_cli.run.columns import column_layout
     from scatter_cli.writers import file_size
 
     assert file_size(fmt, column_layout({}, np.dtype("<f4")), 10, ascii, bounds=np.eye(2, 3)) is None

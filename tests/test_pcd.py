@@ -65,7 +65,7 @@ def test_shards_merge_to_the_run(tmp_path, ascii):
 
 
 def _range(run, a, b):
-    from scatter_cli.sampling import chunk_ranges
+    from scatter_cli.sampling.plan import chunk_ranges
 
     for i, j in chunk_ranges(b - a, 128):
         yield run._job(a + i, a + j)

@@ -7,9 +7,9 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli import plyread
-from scatter_cli.plyread import read_triangles, read_triangles_from
-from scatter_cli.loaders import load_surface
+from scatter_cli.loading import ply as plyread
+from scatter_cli.loading.ply import read_triangles, read_triangles_from
+from scatter_cli.loading.load import load_surface
 
 from .conftest import SAMPLES, run_user, scatter_command
 

@@ -6,10 +6,11 @@ import pytest
 from scipy.spatial import cKDTree
 
 import scatter_cli
-from scatter_cli import api, uniformity
-from scatter_cli.check import world_triangles
-from scatter_cli.loaders import load_surface
-from scatter_cli.spacing import relative_radius
+from scatter_cli import api
+from scatter_cli.stats import uniformity
+from scatter_cli.commands.check import world_triangles
+from scatter_cli.loading.load import load_surface
+from scatter_cli.sampling.poisson.spacing import relative_radius
 
 from .conftest import run_scatter
 
@@ -121,7 +122,7 @@ def test_stats_report_rho(sample_mesh, tmp_path):
 
 def test_check_poisson_against_pymeshlab(sample_mesh):
     pytest.importorskip("pymeshlab")
-    from scatter_cli.check import run_check
+    from scatter_cli.commands.check import run_check
 
     lines = []
     assert run_check(sample_mesh("skull.ply"), count=5000, poisson=True, out=lines.append) == 0, "\n".join(lines)

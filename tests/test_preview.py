@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from scatter_cli import render
+from scatter_cli.commands import preview as PREVIEW  # the module (the package's `preview` is the function)
+from scatter_cli.commands import render
 from scatter_cli.errors import ScatterError
-from scatter_cli.pointfiles import read_points
+from scatter_cli.writers.pointfiles import read_points
 
 from .conftest import SAMPLES, run_scatter, run_user, scatter_command
 
-PREVIEW = sys.modules["scatter_cli.preview"]  # the module (the package's `preview` is the function)
 WHITE = render.BACKGROUND
 
 

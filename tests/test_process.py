@@ -1,4 +1,4 @@
-"""The process settings of the ``scatter`` command (scatter_cli/process.py)."""
+"""The process settings of the ``scatter`` command (scatter_cli/core/process.py)."""
 
 import os
 import sys
@@ -10,7 +10,7 @@ from .conftest import run_user
 REUSE = """
 import resource, sys
 import numpy as np
-from scatter_cli import process
+from scatter_cli.core import process
 if sys.argv[1] == "keep":
     process.keep_freed_memory()
 faults = 0
@@ -41,7 +41,7 @@ def test_freed_memory_is_reused_without_faults():
 def test_a_users_own_malloc_settings_are_left_alone(monkeypatch):
     """MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_ or GLIBC_TUNABLES malloc settings: no
     mallopt call (the user's choice stands); other variables do not count."""
-    from scatter_cli import process
+    from scatter_cli.core import process
 
     calls = []
     monkeypatch.setattr("ctypes.CDLL", lambda name: type("Libc", (), {"mallopt": lambda self, *a: calls.append(a)})())
@@ -62,7 +62,7 @@ def test_a_users_own_malloc_settings_are_left_alone(monkeypatch):
 
 THREADS = """
 import os, sys
-from scatter_cli import process
+from scatter_cli.core import process
 if sys.argv[1] == "single":
     process.single_threaded_blas()
 import numpy as np
@@ -76,7 +76,7 @@ print(len(os.listdir("/proc/self/task")))
 def test_blas_runs_on_one_thread_unless_the_user_chose(tmp_path):
     """The command starts NumPy's BLAS with one thread; without the setting (the broken
     variant) it starts more, and a count the user set is kept."""
-    from scatter_cli.process import _BLAS_THREADS
+    from scatter_cli.core.process import _BLAS_THREADS
 
     unset = dict.fromkeys(_BLAS_THREADS, "")  # empty: OpenBLAS's default, and not a user's choice
 

@@ -1,4 +1,4 @@
-"""The compiled Embree scene (scatter_cli/_cembree.c) gives embreex's verdicts, and the
+"""The compiled Embree scene (scatter_cli/sampling/exterior/_cembree.c) gives embreex's verdicts, and the
 face-normal kernel gives normals.face_normals' NumPy values, bit for bit.
 
 embreex builds its scene by copying the mesh element by element; the kernel shares the
@@ -13,8 +13,9 @@ import os
 import numpy as np
 import pytest
 
-from scatter_cli import normals, rayscene
-from scatter_cli.loaders import load_surface
+from scatter_cli.sampling import normals
+from scatter_cli.sampling.exterior import rayscene
+from scatter_cli.loading.load import load_surface
 
 from . import exterior_scenes as es
 from .conftest import run_scatter

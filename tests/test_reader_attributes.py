@@ -17,9 +17,9 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli import plyread
-from scatter_cli.loaders import load_surface, read_mesh
-from scatter_cli.surface_data import VertexTables, uv_table, vertex_normal_table, weighted_vertex_normals
+from scatter_cli.loading import ply as plyread
+from scatter_cli.loading.load import load_surface, read_mesh
+from scatter_cli.surface.data import VertexTables, uv_table, vertex_normal_table, weighted_vertex_normals
 
 from .conftest import run_scatter, run_user
 from .loadmemory import load_memory
@@ -349,7 +349,7 @@ def test_the_obj_comparison_fails_a_split_in_file_order(tmp_path, monkeypatch):
     use (a natural guess) instead of trimesh's hash order: the same corners and the same
     sampled UVs (which do not see the order), but other vertex arrays, which the exact
     comparison catches."""
-    from scatter_cli import objsplit
+    from scatter_cli.loading import obj as objsplit
 
     path = tmp_path / "q.obj"
     path.write_bytes(OBJ_CASES["all quads, v/vt/vn"].encode())

@@ -15,7 +15,7 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli.loaders import load_surface, read_mesh
+from scatter_cli.loading.load import load_surface, read_mesh
 
 from .conftest import SAMPLES, run_scatter, run_user
 from .fuzz_inputs import SEEDS
@@ -225,7 +225,7 @@ def test_a_plain_text_job_never_imports_trimesh(suffix, attributes, tmp_path):
 
 def test_numbers_convert_as_python_floats_do():
     """Every path of the number parser (exact small, exact 128-bit, strtod) rounds correctly."""
-    from scatter_cli import _creaders
+    from scatter_cli.loading import _creaders
 
     rng = np.random.default_rng(1)
     x = rng.standard_normal(6000) * 10.0 ** rng.integers(-30, 30, 6000)
@@ -254,7 +254,7 @@ def big_ascii_stl(facets=48000, seed=0):
 def test_ascii_stl_read_in_parts_is_read_as_in_one(case):
     """The reader splits a large file at line breaks and reads the parts on threads; the
     parts decide in file order, so the result is the one-part result in every case."""
-    from scatter_cli import _creaders
+    from scatter_cli.loading import _creaders
 
     rows = big_ascii_stl()
     k = len(rows) // 5

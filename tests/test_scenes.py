@@ -12,8 +12,8 @@ from scipy import stats
 
 import scatter_cli
 from scatter_cli.errors import ScatterError, ScatterUsageError
-from scatter_cli.sampling import SamplePlan
-from scatter_cli.loaders import load_surface
+from scatter_cli.sampling.plan import SamplePlan
+from scatter_cli.loading.load import load_surface
 
 from .conftest import SAMPLES, run_scatter, scaled_scene
 

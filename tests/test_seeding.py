@@ -1,4 +1,4 @@
-"""scatter_cli.seeding: NumPy's PCG64DXSM seeding and advance in plain integers, checked
+"""scatter_cli.core.seeding: NumPy's PCG64DXSM seeding and advance in plain integers, checked
 against NumPy itself, with broken variants that must differ."""
 
 import numpy as np
@@ -6,7 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from scatter_cli import sampling, seeding
+from scatter_cli.sampling import plan as sampling
+from scatter_cli.core import seeding
 
 SEEDS = st.integers(min_value=0, max_value=2**200)
 STEPS = st.integers(min_value=0, max_value=2**130)

@@ -8,9 +8,9 @@ area weights and must fail the same test.
 import numpy as np
 import pytest
 
-from scatter_cli.sampling import SamplePlan
-from scatter_cli.sources import RandomSource
-from scatter_cli.loaders import load_surface
+from scatter_cli.sampling.plan import SamplePlan
+from scatter_cli.sampling.sources import RandomSource
+from scatter_cli.loading.load import load_surface
 
 from benchmarks.hardcheck import pooled_pvalue
 from .conftest import spread_triangles, triangles_mesh

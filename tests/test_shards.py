@@ -5,7 +5,7 @@ import pytest
 
 from scatter_cli import api
 from scatter_cli.errors import ScatterError, ScatterUsageError
-from scatter_cli.merge import merge
+from scatter_cli.commands.merge import merge
 from scatter_cli.writers import infer_format, write_samples
 
 from .conftest import SAMPLES

@@ -11,12 +11,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from scatter_cli import api
-from scatter_cli.sampling import SamplePlan
-from scatter_cli.pipeline import plan_surface
-from scatter_cli.sources import METHOD_SOURCES, make_source
-from scatter_cli.sampling import RawChunk
-from scatter_cli.thinning import ThinnedSource, dart_thrown, thinned
-from scatter_cli.loaders import load_surface
+from scatter_cli.sampling.plan import SamplePlan
+from scatter_cli.run.pipeline import plan_surface
+from scatter_cli.sampling.sources import METHOD_SOURCES, make_source
+from scatter_cli.sampling.plan import RawChunk
+from scatter_cli.sampling.poisson.thinning import ThinnedSource, dart_thrown, thinned
+from scatter_cli.loading.load import load_surface
 
 from .conftest import SAMPLES
 from .doubles import RestartingSource
@@ -46,7 +46,7 @@ def _thinned(want_bary, radius=None):
 
 
 def _stable(want_bary, **how):
-    from scatter_cli.stable import StableSource
+    from scatter_cli.sampling.stable.source import StableSource
 
     return StableSource(surface("cesiummilktruck.glb"), 4, want_bary=want_bary, **how)
 
@@ -56,8 +56,8 @@ def _dart_thrown(want_bary):
 
 
 def _exterior(want_bary, method="random", **how):
-    from scatter_cli.exterior import ExteriorSource, ExteriorSubset
-    from scatter_cli.exterior_rays import Occluder
+    from scatter_cli.sampling.exterior.filter import ExteriorSource, ExteriorSubset
+    from scatter_cli.sampling.exterior.rays import Occluder
 
     plan = SamplePlan(surface("cesiummilktruck.glb"))
     occluder = Occluder(plan.surface)

@@ -11,10 +11,11 @@ import os
 import numpy as np
 import pytest
 
-from scatter_cli import stable, stable_arrivals, stable_faces, stable_order, stable_weights, thinning
-from scatter_cli.chisquare import chi2_gof
-from scatter_cli.stable import StableSource
-from scatter_cli.loaders import load_surface
+from scatter_cli.sampling.stable import source as stable, arrivals as stable_arrivals, faces as stable_faces, order as stable_order, weights as stable_weights
+from scatter_cli.sampling.poisson import thinning
+from scatter_cli.stats.chisquare import chi2_gof
+from scatter_cli.sampling.stable.source import StableSource
+from scatter_cli.loading.load import load_surface
 
 from .conftest import SAMPLES, spread_triangles, triangles_mesh
 
@@ -487,7 +488,7 @@ def test_scene_instances_are_keyed_in_world_space():
     their vertices are moved in the file instead (by the same float64 operations)."""
     import trimesh
 
-    from scatter_cli.surface import apply_matrix
+    from scatter_cli.surface.model import apply_matrix
 
     from .conftest import scaled_scene
 
@@ -507,8 +508,8 @@ def test_scene_instances_are_keyed_in_world_space():
 def test_vertex_colour_weight_rate_is_area_times_mean_weight():
     """Chi-square of face counts against area times the exact mean weight; the same counts
     must fail against area alone."""
-    from scatter_cli.surface import apply_matrix
-    from scatter_cli.weighting import VertexColorWeight
+    from scatter_cli.surface.model import apply_matrix
+    from scatter_cli.sampling.weighting import VertexColorWeight
 
     surface = load_surface(str(SAMPLES / "boxvertexcolors.glb"))
     src = StableSource(surface, 2, count=20_000, weight=stable_weights.stable_weight(surface, "vertex-color:r"))
@@ -590,8 +591,8 @@ def test_api_output_is_the_same_for_any_chunk_size_and_threads(kw, monkeypatch):
 def _weighted_area(mesh_or_path, spec):
     """Exact area times weight over the surface: vertex colours by the exact per-face mean
     weight; the texture-masked quad by the mean of its weight over u (constant in v)."""
-    from scatter_cli.surface import apply_matrix
-    from scatter_cli.weighting import VertexColorWeight
+    from scatter_cli.surface.model import apply_matrix
+    from scatter_cli.sampling.weighting import VertexColorWeight
 
     from .test_attributes import exact_u_bins
 

@@ -16,10 +16,10 @@ from .conftest import run_scatter, triangles_mesh
 
 pytest.importorskip("embreex")
 import scatter_cli  # noqa: E402
-from scatter_cli import exterior_rays  # noqa: E402
-from scatter_cli.exterior import classify  # noqa: E402
-from scatter_cli.stable import StableSource  # noqa: E402
-from scatter_cli.loaders import load_surface  # noqa: E402
+from scatter_cli.sampling.exterior import rays as exterior_rays  # noqa: E402
+from scatter_cli.sampling.exterior.filter import classify  # noqa: E402
+from scatter_cli.sampling.stable.source import StableSource  # noqa: E402
+from scatter_cli.loading.load import load_surface  # noqa: E402
 
 from .test_exterior import BROKEN, cell_test  # noqa: E402
 

@@ -1,4 +1,4 @@
-"""Tests for the statistics of scatter check: scatter_cli.surface_measures, .chisquare and .uniformity.
+"""Tests for the statistics of scatter check: scatter_cli.stats.measures, .chisquare and .uniformity.
 
 Statistical tests use fixed seeds and the significance level ALPHA; every
 bound below is one that a wrong formula would exceed.
@@ -12,7 +12,7 @@ import pytest
 import trimesh
 from scipy import stats as sps
 
-from scatter_cli import chisquare, surface_measures, uniformity
+from scatter_cli.stats import chisquare, measures as surface_measures, uniformity
 
 from . import exact_reference
 
@@ -326,7 +326,7 @@ def test_exact_slabs_survive_a_wrong_first_guess(monkeypatch):
     Brackets that are not widened (a single try) leave slabs that are not."""
     import functools
 
-    from scatter_cli import slab_heights
+    from scatter_cli.stats import slabs as slab_heights
 
     tri = _slab_mesh("terrain")
     monkeypatch.setattr(slab_heights, "_guess",

@@ -1,4 +1,4 @@
-"""Tests for scatter_cli.thinning: spacing, maximality, exact counts, quality,
+"""Tests for scatter_cli.sampling.poisson.thinning: spacing, maximality, exact counts, quality,
 coarse uniformity and determinism.  All random inputs use fixed seeds."""
 
 import math
@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
-from scatter_cli.chisquare import chi2_gof
-from scatter_cli.spacing import relative_radius, spacing_stats
-from scatter_cli.thinning import thin_by_radius, thin_to_count
+from scatter_cli.stats.chisquare import chi2_gof
+from scatter_cli.sampling.poisson.spacing import relative_radius, spacing_stats
+from scatter_cli.sampling.poisson.thinning import thin_by_radius, thin_to_count
 
 from .conftest import SAMPLES
 

@@ -16,8 +16,8 @@ from scipy import stats
 
 import scatter_cli
 from scatter_cli.errors import ScatterError, ScatterUsageError
-from scatter_cli.info import describe
-from scatter_cli.loaders import load_surface
+from scatter_cli.commands.info import describe
+from scatter_cli.loading.load import load_surface
 
 from .conftest import run_scatter
 from .gltfwrite import glb_bytes
@@ -434,7 +434,7 @@ def test_instancer_plan_bounds_and_normals_as_one_instance_at_a_time(tmp_path):
     at once are those of each instance on its own, bit for bit (an instance of zero area
     and a mirrored one among them)."""
     from scatter_cli.api import prepare, sampled_bounds
-    from scatter_cli.surface import apply_matrix, cofactor, corners, doubled_areas
+    from scatter_cli.surface.model import apply_matrix, cofactor, corners, doubled_areas
 
     path = write_forest(tmp_path / "f.usdc")
     run = prepare(path, 5_000, seed=2, attributes=["normal", "object", "face"], precision="float64")
@@ -474,7 +474,7 @@ def test_instancer_plan_bounds_and_normals_as_one_instance_at_a_time(tmp_path):
 def test_fan_faces_are_the_documented_fans(sizes, block):
     """Uniform polygons (a reshape) and mixed ones (in blocks of polygons) give the fans
     of the documented order, holes dropped, left-handed corners swapped."""
-    from scatter_cli.usdmesh import fan_faces
+    from scatter_cli.loading.usdmesh import fan_faces
 
     rng = np.random.default_rng(len(sizes) + block)
     counts = rng.choice(sizes, 50).astype(np.int32)

@@ -10,9 +10,9 @@ import json
 import numpy as np
 import pytest
 
-from scatter_cli import usdread
-from scatter_cli.info import describe
-from scatter_cli.loaders import load_surface
+from scatter_cli.loading import usd as usdread
+from scatter_cli.commands.info import describe
+from scatter_cli.loading.load import load_surface
 
 from .conftest import run_scatter
 

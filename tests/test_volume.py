@@ -9,9 +9,9 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli.volume import VolumeSource, gaussians, parts_of, sampling_box, volume_uniforms, world_triangles
-from scatter_cli.sampling import SamplePlan
-from scatter_cli.loaders import load_surface
+from scatter_cli.volume.source import VolumeSource, gaussians, parts_of, sampling_box, volume_uniforms, world_triangles
+from scatter_cli.sampling.plan import SamplePlan
+from scatter_cli.loading.load import load_surface
 from tests.conftest import SAMPLES, scaled_scene
 from tests.volume_reference import exact_distance, solid_angle_winding
 

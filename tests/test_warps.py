@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from scatter_cli import warps
+from scatter_cli.sampling import warps
 
 ALPHA = 1e-3
 N = 200_000

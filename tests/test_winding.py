@@ -1,4 +1,4 @@
-"""Winding numbers (scatter_cli/winding.py) against brute force, and the compiled kernel
+"""Winding numbers (scatter_cli/volume/winding.py) against brute force, and the compiled kernel
 against its NumPy twin.
 
 The reference is the exact winding number, the sum of every triangle's solid angle over
@@ -19,8 +19,9 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from scatter_cli import native, winding
-from scatter_cli.winding import WindingTree, winding_numbers
+from scatter_cli.core import native
+from scatter_cli.volume import winding
+from scatter_cli.volume.winding import WindingTree, winding_numbers
 
 from .conftest import SAMPLES
 

@@ -142,6 +142,6 @@ def test_help_and_the_table_import_no_numpy(argv):
     assert proc.returncode == 0
     imported = {line.rsplit("|", 1)[-1].strip() for line in proc.stderr.decode().splitlines()}
     assert "scatter_cli.writers.formats" in imported and "numpy" not in imported
-    code = "import sys, scatter_cli.writers, scatter_cli.merge; print('numpy' in sys.modules)"
+    code = "import sys, scatter_cli.writers, scatter_cli.commands.merge; print('numpy' in sys.modules)"
     proc = run_user([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
     assert proc.stdout.strip() == b"False"

@@ -7,7 +7,7 @@ imported when a file of it is written.
 
 from __future__ import annotations
 
-from ..interrupts import held
+from ..core.interrupts import held
 from .base import Writer, _Writer, check_room, copy_tail, open_output
 from .formats import (ASCII_FORMATS, BY_NAME, FORMATS, MERGEABLE, SUFFIXES, check_extra, check_output, infer_format,
                       load, run_precision)

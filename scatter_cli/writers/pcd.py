@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ScatterError
-from ..columns import Samples
+from ..run.columns import Samples
 from .base import Writer, copy_tail, open_output
 from .parts import Part, check_rows, size
 from .text import TextEncoder

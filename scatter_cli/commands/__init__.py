@@ -1,0 +1,2 @@
+"""The commands besides ``sample`` and ``batch``: ``info``, ``check``, ``bench``, ``merge``
+and ``preview``."""

@@ -1,0 +1,257 @@
+"""The options of a sample run: one frozen :class:`SampleOptions` and its one ``check()``.
+
+``scatter sample``, ``scatter batch`` (and its workers, local or Dask) and the Python API
+all build a :class:`SampleOptions` and call ``check()``, so they accept and refuse the same
+option sets with the same messages. ``check()`` raises every usage error that holds
+whatever the mesh (exit 2); what a mesh causes (an object name it lacks, a radius too
+small for its area) is a failure of that mesh (:class:`~scatter_cli.errors.ScatterError`,
+exit 1).
+
+Standard library only: the command line imports this module for its defaults and
+``--help`` before NumPy.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from dataclasses import dataclass
+
+from ..errors import ScatterUsageError
+from .fields import ATTRIBUTES
+
+METHODS = ("random", "stratified", "sobol")
+PRECISIONS = ("auto", "float32", "float64")
+SIGNS = ("winding", "parity")
+NORMALIZATIONS = ("none", "unit-cube", "unit-sphere")
+DEFAULT_COUNT = 10_000
+# attributes that only a surface point has (usage errors with --volume)
+SURFACE_ONLY = ("normal", "smooth-normal", "bary", "color", "uv", "orient")
+# attributes that only a volume point has (usage errors without --volume)
+VOLUME_ONLY = ("sdf", "inside", "winding", "closest")
+
+
+@dataclass(frozen=True)
+class SampleOptions:
+    """Every option of a sample run, as ``scatter_cli.sample`` takes them (CLI.md).
+
+    Built from keyword arguments, strings or lists as the command line and JSON give
+    them: ``attributes`` ``"normal,face"`` or a sequence, ``objects`` a sequence,
+    ``shard`` ``"K/M"`` or a pair, ``near`` ``"0.1,0.02"`` or a sequence; they are held
+    as tuples. Nothing is checked until :meth:`check`.
+    """
+
+    count: int | None = None
+    density: float | None = None
+    seed: int = 0
+    method: str = "random"
+    attributes: tuple = ()
+    poisson: bool = False
+    radius: float | None = None
+    weight: str | None = None
+    objects: tuple | None = None
+    precision: str = "auto"
+    chunk_size: int | None = None
+    stable: bool = False
+    exterior: bool = False
+    shard: tuple | None = None
+    oversampling: float | None = None
+    input_format: str | None = None
+    volume: bool = False
+    near: tuple | None = None
+    box_share: float | None = None
+    padding: float = 0.1
+    sign: str = "winding"
+    normalize: str = "none"
+
+    def __post_init__(self):
+        def set_(name, value):
+            object.__setattr__(self, name, value)
+
+        set_("attributes", attribute_names(self.attributes))
+        if self.objects is not None:  # one name, or a sequence of them
+            set_("objects", (self.objects,) if isinstance(self.objects, str) else tuple(self.objects) or None)
+        if self.shard is not None:
+            set_("shard", _shard_pair(self.shard))
+        if self.near is not None:
+            set_("near", _numbers(self.near))
+
+    @classmethod
+    def of(cls, values: dict) -> "SampleOptions":
+        """The options among ``values`` (a dict with other keys too: a command's arguments)."""
+        return cls(**{f.name: values[f.name] for f in dataclasses.fields(cls) if f.name in values})
+
+    def as_dict(self) -> dict:
+        """Keyword arguments (JSON-ready) that rebuild these options: ``SampleOptions(**d)``."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+
+    @property
+    def thinned(self) -> bool:
+        return self.poisson or self.radius is not None
+
+    @property
+    def volume_run(self) -> bool:
+        """Points in space (``--volume``, or ``--near`` which implies it)."""
+        return self.volume or self.near is not None
+
+    def check(self) -> "SampleOptions":
+        """Raise ScatterUsageError for any option, or combination, that is wrong whatever
+        the mesh; returns ``self``. (Checked once: a batch worker runs one set of options
+        on every mesh.)"""
+        if self.__dict__.get("_checked"):
+            return self
+        _check_numbers(self)
+        check_attributes(self.attributes, self.volume_run)
+        if self.weight:
+            from ..sampling.weighting import parse_weight
+
+            parse_weight(self.weight)
+        _check_combinations(self)
+        if self.volume_run:
+            _check_volume(self)
+        if self.count is not None:
+            check_sobol_count(self.method, self.count)
+            if self.poisson:
+                from ..sampling.poisson.thinning import poisson_candidates
+
+                poisson_candidates(self.count, self.oversampling, usage=True)
+        object.__setattr__(self, "_checked", True)  # not a field: equality, as_dict and replace ignore it
+        return self
+
+
+def _check_numbers(o: SampleOptions):
+    if o.count is not None and o.density is not None:
+        raise ScatterUsageError("give either a count (-n) or a --density, not both")
+    if o.count is not None and (not _is_int(o.count) or o.count < 0):
+        raise ScatterUsageError(f"the count must be a non-negative integer, not {o.count!r}")
+    if o.density is not None and not (_is_real(o.density) and o.density > 0):
+        raise ScatterUsageError(f"--density must be a positive number, not {o.density!r}")
+    if not _is_int(o.seed) or o.seed < 0:
+        raise ScatterUsageError(f"--seed must be a non-negative integer, not {o.seed!r}")
+    _choice("method", o.method, METHODS)
+    _choice("precision", o.precision, PRECISIONS)
+    if o.chunk_size is not None and (not _is_int(o.chunk_size) or o.chunk_size < 1):
+        raise ScatterUsageError(f"--chunk-size must be a positive integer, not {o.chunk_size!r}")
+    if o.radius is not None and not (_is_real(o.radius) and o.radius > 0):
+        raise ScatterUsageError(f"--radius must be a positive number, not {o.radius!r}")
+    if o.oversampling is not None and not (_is_real(o.oversampling) and o.oversampling > 0):
+        raise ScatterUsageError(f"oversampling must be a positive number, not {o.oversampling!r}")
+    if isinstance(o.shard, str):
+        raise ScatterUsageError(f"--shard must be K/M (shard K of M, 0-based), not {o.shard!r}")
+    if o.shard is not None and not 0 <= o.shard[0] < o.shard[1]:
+        raise ScatterUsageError(f"--shard K/M needs 0 <= K < M, not {o.shard[0]}/{o.shard[1]}")
+    _choice("normalize", o.normalize, NORMALIZATIONS)
+
+
+def _check_combinations(o: SampleOptions):
+    if o.poisson and o.radius is not None:
+        raise ScatterUsageError("give either --poisson (an exact count) or --radius, not both")
+    if o.radius is not None and o.density is not None:
+        raise ScatterUsageError("with --radius the count follows from R: drop --density")
+    if o.method != "random" and (o.thinned or o.weight):
+        raise ScatterUsageError(f"--method {o.method} does not combine with --poisson, --radius or --weight "
+                                "(they work on the random method)")
+    if o.stable and o.method != "random":
+        raise ScatterUsageError(f"--stable does not combine with --method {o.method} (it is a random placement)")
+    if o.stable and o.poisson:
+        raise ScatterUsageError("--stable does not combine with --poisson (--radius gives a Poisson-disk set that "
+                                "stays put)")
+    if o.shard is not None and o.thinned:
+        raise ScatterUsageError("--shard does not combine with --poisson or --radius (thinning is global)")
+
+
+def _check_volume(o: SampleOptions):
+    surface_only = [n for n, on in (("--poisson", o.poisson), ("--radius", o.radius is not None),
+                                    ("--stable", o.stable), ("--exterior", o.exterior),
+                                    (f"--method {o.method}", o.method != "random")) if on]
+    if surface_only:
+        raise ScatterUsageError(f"{', '.join(surface_only)} does not combine with --volume (surface runs only)")
+    if o.near is not None and (isinstance(o.near, str) or not o.near or not all(_is_real(s) and s > 0 for s in o.near)):
+        text = o.near if isinstance(o.near, str) else ",".join(map(str, o.near))
+        raise ScatterUsageError(f"--near must be a comma list of positive standard deviations, not {text!r}")
+    if o.box_share is not None and not (_is_real(o.box_share) and 0 <= o.box_share <= 1):
+        raise ScatterUsageError(f"--box-share must be a number from 0 to 1, not {o.box_share!r}")
+    if not (_is_real(o.padding) and o.padding >= 0):
+        raise ScatterUsageError(f"--padding must be a number >= 0, not {o.padding!r}")
+    _choice("sign", o.sign, SIGNS)
+
+
+def check_attributes(names, volume=False):
+    """Raise ScatterUsageError for unknown names, both normals, or names of the other kind
+    of run (surface-only attributes with ``--volume``, volume-only without)."""
+    unknown = [n for n in names if n not in ATTRIBUTES]
+    if unknown:
+        raise ScatterUsageError(f"unknown attribute {', '.join(map(repr, unknown))} (choose from: {', '.join(ATTRIBUTES)})")
+    if "normal" in names and "smooth-normal" in names:
+        raise ScatterUsageError("'normal' and 'smooth-normal' both write nx ny nz: ask for one of them")
+    wrong = [n for n in names if n in (SURFACE_ONLY if volume else VOLUME_ONLY)]
+    if wrong:
+        kind = "surface" if volume else "volume"
+        raise ScatterUsageError(f"attribute {', '.join(map(repr, wrong))} is for {kind} runs only"
+                                + (" (drop --volume/--near)" if volume else " (add --volume)"))
+
+
+def check_sobol_count(method, count, error=ScatterUsageError):
+    """``--method sobol`` past 2^32 points: a usage error for a count given, ``error``
+    (a failure of the mesh) for a ``--density`` count."""
+    if method != "sobol":
+        return
+    from ..sampling.methods import SOBOL_MAX_COUNT  # (NumPy: only for sobol)
+
+    if count > SOBOL_MAX_COUNT:
+        raise error(f"--method sobol gives at most 2^32 = {SOBOL_MAX_COUNT:,} points per run, not {count:,}")
+
+
+def attribute_names(text_or_list) -> tuple:
+    """``"normal,face"`` or a sequence -> the names, stripped, lower case, first occurrence kept."""
+    if not text_or_list:
+        return ()
+    items = text_or_list.split(",") if isinstance(text_or_list, str) else list(text_or_list)
+    return tuple(dict.fromkeys(str(s).strip().lower() for s in items if str(s).strip()))
+
+
+def whole_number(text: str) -> int:
+    """A count as a user types it: ``1000``, ``1e6``, ``2.5e3``; ValueError for ``1.5``."""
+    if text.strip().isdigit():
+        return int(text)
+    import decimal  # exact: 1e20 is a whole number, 1.0000000000000001e3 is not
+
+    try:
+        value = decimal.Decimal(text.strip().replace("_", ""))
+    except decimal.InvalidOperation:
+        raise ValueError(f"{text!r} is not a number") from None
+    if not value.is_finite() or value != value.to_integral_value():
+        raise ValueError(f"{text!r} is not a whole number")
+    return int(value)
+
+
+def _shard_pair(shard):
+    """``"K/M"`` or a pair -> (K, M) ints; a text that is neither stays as given (check() refuses it)."""
+    try:
+        k, m = (int(x) for x in (shard.split("/") if isinstance(shard, str) else shard))
+    except (TypeError, ValueError):
+        return shard if isinstance(shard, str) else str(shard)
+    return k, m
+
+
+def _numbers(values):
+    """``"0.1,0.02"`` or a sequence -> tuple of floats; a text that is not stays as given."""
+    items = values.split(",") if isinstance(values, str) else values
+    try:
+        return tuple(float(v) for v in items)
+    except (TypeError, ValueError):
+        return values if isinstance(values, str) else str(values)
+
+
+def _choice(name, value, choices):
+    if value not in choices:
+        raise ScatterUsageError(f"unknown {name} '{value}' (choose from: {', '.join(choices)})")
+
+
+def _is_int(x) -> bool:
+    return isinstance(x, numbers.Integral)  # NumPy's integers too
+
+
+def _is_real(x) -> bool:
+    return isinstance(x, numbers.Real) and math.isfinite(x)

@@ -1,0 +1,1 @@
+"""``--stable``: points keyed to the faces themselves, as per-face Poisson arrivals."""

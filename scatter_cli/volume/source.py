@@ -1,0 +1,175 @@
+"""Volume samples: points in and around a surface, labelled for implicit-shape learning.
+
+A volume run draws each point from one of its parts, chosen at random with the shares
+asked for: uniform in the sampling box (the sampled surface's bounding box grown by
+``padding`` times its largest side), or near the surface (a uniform surface point of
+the run's surface source plus an isotropic Gaussian offset of standard deviation sigma).
+Point ``i`` is a pure function of the seed and ``i``: its part, box coordinates and
+Gaussian offset come from draws ``8 i .. 8 i + 7`` of a stream of its own, and its
+surface point is point ``i`` of the surface source. So any prefix of the output is a
+fair subsample and a run of K points is the first K points of a longer run.
+
+:class:`VolumeLabels` then labels each chunk against the sampled surface (world-space
+triangles in float64): the exact closest point and distance (:mod:`scatter_cli.volume.distance`),
+and inside or outside by the generalized winding number (:mod:`scatter_cli.volume.winding`) or
+by a majority of ray parities (:mod:`scatter_cli.volume.parity`). Only what the asked-for attributes need is computed.
+"""
+
+from __future__ import annotations
+
+import math
+import numpy as np
+
+from ..errors import ScatterError
+from ..sampling.plan import RawChunk, SamplePlan, apply_matrix
+
+VOLUME_DRAWS = 8  # part, 3 box coordinates, 4 uniforms for 3 Gaussians (Box-Muller)
+STREAM_KEY = 0x766F6C756D65  # "volume": keys the volume stream apart from the surface one
+LABELS = ("sdf", "inside", "winding", "closest", "face", "object")
+PARITY_RAYS = 5  # rays a point for --sign parity: the majority outvotes two grazing rays
+
+
+def sampling_box(triangles, padding: float):
+    """(2, 3) float64: the bounding box of the triangles (T, 3, 3) grown on every side by
+    ``padding`` times its largest side."""
+    corners = triangles.reshape(-1, 3)
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    grow = padding * float((hi - lo).max())
+    return np.stack([lo - grow, hi + grow])
+
+
+def world_triangles(plan: SamplePlan):
+    """The faces that get points, in world space: (triangles (T, 3, 3) float64,
+    instance (T,) int64, face (T,) int64 the face's index in its geometry)."""
+    tris, owners, faces = [], [], []
+    for part in plan.parts:
+        if not part.count:
+            continue
+        g = part.geometry
+        index = np.arange(len(g.faces), dtype=np.int64) if part.faces is None else part.faces
+        corners = g.vertices[g.faces[index]].reshape(-1, 3)
+        if part.matrix is not None:
+            corners = apply_matrix(part.matrix[:3], corners)
+        tris.append(corners.reshape(-1, 3, 3))
+        owners.append(np.full(len(index), part.instance, dtype=np.int64))
+        faces.append(index)
+    return np.concatenate(tris), np.concatenate(owners), np.concatenate(faces)
+
+
+def volume_uniforms(seed: int, start: int, stop: int):
+    """Draws of points ``start .. stop - 1`` of the volume stream: (n, 8) float64 in [0, 1)."""
+    bits = np.random.PCG64DXSM([STREAM_KEY, int(seed)])
+    bits.advance(VOLUME_DRAWS * int(start))
+    return np.random.Generator(bits).random((stop - start, VOLUME_DRAWS))
+
+
+def gaussians(u):
+    """Three independent N(0, 1) values per row from four uniforms ``u`` (n, 4) in [0, 1)
+    (Box-Muller; 1 - u keeps the logarithm finite): (n, 3) float64."""
+    r1 = np.sqrt(-2.0 * np.log1p(-u[:, 0]))
+    r2 = np.sqrt(-2.0 * np.log1p(-u[:, 2]))
+    t1, t2 = 2.0 * math.pi * u[:, 1], 2.0 * math.pi * u[:, 3]
+    return np.stack([r1 * np.cos(t1), r1 * np.sin(t1), r2 * np.cos(t2)], axis=1)
+
+
+def parts_of(u, box_share: float, sigmas: int):
+    """Each point's part from its draw ``u`` (n,): -1 for the box, else the index of its
+    sigma; the box takes ``box_share`` of the points, the sigmas share the rest equally."""
+    part = np.full(len(u), -1, dtype=np.int64)
+    near = u >= box_share
+    if sigmas and box_share < 1:
+        k = ((u[near] - box_share) / (1.0 - box_share) * sigmas).astype(np.int64)
+        part[near] = np.minimum(k, sigmas - 1)
+    return part
+
+
+class VolumeSource:
+    """Points in the sampling box and near the surface (see the module docstring).
+
+    surface: the run's surface source (its point ``i`` is the surface point of a near
+    point ``i``); box (2, 3) and sigmas in world units."""
+
+    def __init__(self, surface, count: int, seed: int, box, sigmas=(), box_share: float = 1.0):
+        self.surface, self.count, self.seed = surface, int(count), seed
+        self.area = surface.area
+        self.box = np.asarray(box, dtype=np.float64)
+        self.sigmas = np.asarray(sigmas, dtype=np.float64)
+        self.box_share = float(box_share) if len(self.sigmas) else 1.0
+        self.kept = None  # not a thinned source
+        self.stats = None
+
+    def draw(self, start: int, stop: int) -> RawChunk:
+        u = volume_uniforms(self.seed, start, stop)
+        part = parts_of(u[:, 0], self.box_share, len(self.sigmas))
+        lo, hi = self.box
+        points = lo + u[:, 1:4] * (hi - lo)
+        near = np.flatnonzero(part >= 0)
+        if len(near):
+            base = self.surface.draw(start, stop).points[near]
+            points[near] = base + gaussians(u[near, 4:8]) * self.sigmas[part[near]][:, None]
+        n = stop - start
+        return RawChunk(start, points, np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64), None)
+
+
+class VolumeLabels:
+    """Turns chunks of volume points into the asked-for label arrays (``make``)."""
+
+    needs_bary = False
+
+    def __init__(self, triangles, instance, face, names, sign="winding", frame=None):
+        self.triangles, self.instance, self.face = triangles, instance, face
+        self.names = tuple(names)
+        self.sign = sign
+        self.frame = frame  # (offset (3,), scale) of the output's frame, or None
+        wanted = set(self.names)
+        self.needs_distance = bool(wanted & {"sdf", "closest", "face", "object"})
+        self.needs_winding = "winding" in wanted or ("inside" in wanted or "sdf" in wanted) and sign == "winding"
+        self.needs_parity = sign == "parity" and bool(wanted & {"inside", "sdf"})
+        self._distance_tree = self._winding_tree = None
+        if self.needs_distance or self.needs_parity:
+            from .distance import TriangleTree
+
+            self._distance_tree = TriangleTree.from_triangles(triangles)
+        if self.needs_winding:
+            from .winding import WindingTree
+
+            self._winding_tree = WindingTree(triangles)
+
+    def make(self, raw: RawChunk, real_dtype) -> dict:
+        """dict key -> array for the asked-for names; ``raw.points`` are world points."""
+        p = raw.points
+        out = {}
+        distance = closest = face = winding = inside = None
+        if self.needs_distance:
+            from .distance import closest_points
+
+            distance, closest, face = closest_points(self._distance_tree, p)
+        if self.needs_winding:
+            from .winding import winding_numbers
+
+            winding = winding_numbers(self._winding_tree, p)
+        if self.needs_parity:
+            from .parity import parity_inside
+
+            inside = parity_inside(self._distance_tree, p, rays=PARITY_RAYS)
+        elif winding is not None:
+            inside = winding >= 0.5
+        scale = 1.0 if self.frame is None else self.frame[1]
+        for name in self.names:
+            if name == "sdf":
+                sdf = np.where(inside, -distance, distance)
+                out["sdf"] = sdf if self.frame is None else sdf * scale
+            elif name == "inside":
+                out["inside"] = inside.astype(np.uint8)
+            elif name == "winding":
+                out["winding"] = winding
+            elif name == "closest":
+                moved = closest if self.frame is None else (closest - self.frame[0]) * scale
+                out["closest"] = moved.astype(real_dtype, copy=False)
+            elif name == "face":
+                out["face"] = self.face[face].astype(np.int32)
+            elif name == "object":
+                out["object"] = self.instance[face].astype(np.int32)
+            else:
+                raise ScatterError(f"attribute '{name}' is not a volume attribute")
+        return out
