@@ -23,7 +23,7 @@ import numpy as np
 from ..core.interrupts import held
 from ..errors import ScatterError
 from .base import Writer, reading
-from .pointfiles import SPANS, reason
+from .pointfiles import SPANS, body_error, file_bytes, reason
 
 SOFTWARE = "scatter"
 FINEST_STEP = 1e-4  # 0.1 mm in metres: never coarser than this
@@ -411,10 +411,15 @@ def _spans(reader, total, rows):
 
 
 def read(path, fmt):
-    """A LAS or LAZ file (``fmt``: "las" or "laz", what a file joined from it is)."""
+    """A LAS or LAZ file (``fmt``: "las" or "laz", what a file joined from it is); an
+    uncompressed one must hold the points its header says."""
     laspy = _laspy(f"{path}: reading LAS/LAZ")
     with las_errors(path), laspy.open(path) as f:
-        return LasFile(path, f.header, fmt == "laz")
+        header = f.header
+    have, row = file_bytes(path) - header.offset_to_point_data, header.point_format.size
+    if not header.are_points_compressed and have < header.point_count * row:
+        raise body_error(path, have, header.point_count, row)
+    return LasFile(path, header, fmt == "laz")
 
 
 @contextlib.contextmanager
@@ -442,7 +447,13 @@ def write_joined(paths, first, stream, compress, chunk=1 << 20):
     with laspy.open(stream, mode="w", header=header, do_compress=compress, laz_backend=backend,
                     closefd=False) as writer:
         for p in paths:
-            with laspy.open(p) as f:
-                for points in f.chunk_iterator(chunk):
-                    writer.write_points(points)
+            for points in _chunks(p, chunk):
+                writer.write_points(points)
     clear_creation_date(stream)
+
+
+def _chunks(path, chunk):
+    """The points of the file ``path``, ``chunk`` at a time; a bad one (a LAZ part is
+    checked only as it is read) is the reader's one-line error."""
+    with las_errors(path), _laspy().open(path) as f:
+        yield from f.chunk_iterator(chunk)

@@ -68,11 +68,9 @@ class PointFile:
     def checked(cls, path, dtype, count, offset, binary, layout, head, sep=None):
         """The file whose header says ``count`` rows from ``offset``, once its body holds
         them: ``dtype.itemsize`` bytes each when ``binary``, else a line each."""
-        end = file_size(path)
+        end = file_bytes(path)
         if binary and end - offset != count * dtype.itemsize:
-            short = " (truncated?)" if end - offset < count * dtype.itemsize else ""
-            raise ScatterError(f"{path}: {end - offset} bytes of points, the header says {count} of "
-                               f"{dtype.itemsize} bytes{short}")
+            raise body_error(path, end - offset, count, dtype.itemsize)
         if not binary and (lines := count_lines(path, offset, end)) != count:
             raise ScatterError(f"{path}: {lines} rows, the header says {count}")
         return cls(path, dtype, count, offset, end, binary, layout, head, sep)
@@ -92,6 +90,12 @@ class PointFile:
         stream.write(self.head(sum(f.count for f in files)))
         for f in files:
             copy_range(f.path, f.offset, f.end, stream)
+
+
+def body_error(path, have, count, row):
+    """The error for ``have`` bytes of points where the header says ``count`` rows of ``row``."""
+    short = " (truncated?)" if have < count * row else ""
+    return ScatterError(f"{path}: {have} bytes of points, the header says {count} of {row} bytes{short}")
 
 
 def point_format(path):
@@ -116,7 +120,7 @@ def plain_errors(path):
         yield
     except ScatterError:
         raise
-    except (ValueError, IndexError, KeyError, TypeError) as exc:
+    except (ValueError, IndexError, KeyError) as exc:
         raise ScatterError(f"{path}: cannot read the points: {reason(exc)}") from None
 
 
@@ -171,7 +175,7 @@ def stride(total, limit):
 
 # ---- the rows ----
 
-def file_size(path):
+def file_bytes(path):
     with reading(path):
         return os.path.getsize(path)
 

@@ -7,7 +7,7 @@ import numpy as np
 
 from ..errors import ScatterError
 from .base import Writer, reading
-from .pointfiles import PointFile, count_lines, file_size
+from .pointfiles import PointFile, count_lines, file_bytes
 
 
 class TextEncoder:
@@ -79,7 +79,7 @@ def read(path, fmt):
     first, as many columns as its first line has)."""
     with reading(path), open(path, "rb") as f:
         first = f.readline()
-    end = file_size(path)
+    end = file_bytes(path)
     return csv_file(path, first, end) if fmt == "csv" else xyz_file(path, first, end)
 
 
