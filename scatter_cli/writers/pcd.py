@@ -104,6 +104,7 @@ def file_size(fmt, layout, count, **options):
 # -- the reader ---------------------------------------------------------------------------
 
 PCD_KINDS = {"F": "f", "I": "i", "U": "u"}
+CONTRACT_NAMES = {v: k for k, v in PCL_NAMES.items()}
 MAX_HEADER = 1 << 16  # bytes a header may take
 
 
@@ -115,9 +116,6 @@ class PcdFile(PointFile):
         if "rgb" in columns:
             columns.update(zip(("red", "green", "blue", "alpha"), unpack_rgb(columns.pop("rgb"))))
         return columns
-
-
-CONTRACT_NAMES = {v: k for k, v in PCL_NAMES.items()}
 
 
 def unpack_rgb(packed):
@@ -135,7 +133,7 @@ def read(path, fmt="pcd"):
     if keys["DATA"] not in (["ascii"], ["binary"]):
         raise ScatterError(f"{path}: PCD DATA {' '.join(keys['DATA'])} (scatter writes ascii and binary)")
     names = keys["FIELDS"]
-    if keys.get("COUNT", ["1"] * len(names)) != ["1"] * len(names):
+    if any(c != "1" for c in keys.get("COUNT", ())):
         raise ScatterError(f"{path}: PCD fields of more than one value are not point columns")
     try:
         count = int(keys["POINTS"][0])
