@@ -19,7 +19,7 @@ import os
 import numpy as np
 
 from ..errors import ScatterError
-from .base import Writer, open_output
+from .base import Writer
 from .parts import Part
 
 SOFTWARE = "scatter"
@@ -375,21 +375,6 @@ def layout_of(header):
     coordinate system."""
     return (header.point_format.id, tuple(header.point_format.extra_dimension_names),
             tuple(header.scales.tolist()), tuple(header.offsets.tolist()), crs_of(header))
-
-
-def merge_las(paths, out, chunk=1 << 20):
-    """Join LAS or LAZ files of one point layout, scale and offset into ``out``, in order.
-
-    Parts of one run (``--shard``) share the run's scale and offset, so the result is
-    the run's output byte for byte; the compression follows ``out``'s suffix.
-    """
-    heads = [read_header(p) for p in paths]
-    for p, h in zip(paths, heads):
-        if layout_of(h) != layout_of(heads[0]):
-            raise ScatterError(f"{p}: LAS point format, extra bytes, scale, offset or coordinate system differ "
-                               f"from {paths[0]}")
-    with open_output(out) as stream:
-        write_joined(paths, heads[0], stream, str(out).lower().endswith(".laz"), chunk)
 
 
 def write_joined(paths, first, stream, compress, chunk=1 << 20):

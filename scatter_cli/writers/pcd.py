@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import ScatterError
 from ..run.columns import Samples
-from .base import Writer, copy_tail, open_output
+from .base import Writer
 from .parts import Part, check_rows, size
 from .text import TextEncoder
 
@@ -125,20 +125,6 @@ def read_header(path):
         raise ScatterError(f"{path}: bad POINTS line in the PCD header") from None
     layout = [ln for ln in lines if not ln.startswith(("WIDTH", "POINTS", "#"))]
     return layout, count, offset
-
-
-def merge_pcd(paths, out):
-    """Join PCD files of one layout (all binary or all ASCII) into ``out``, in order."""
-    heads = [read_header(p) for p in paths]
-    first = heads[0][0]
-    for p, (layout, _, _) in zip(paths, heads):
-        if layout != first:
-            raise ScatterError(f"{p}: PCD fields or encoding differ from {paths[0]}")
-    total = sum(h[1] for h in heads)
-    with open_output(out) as stream:
-        stream.write(header_from_lines(first, total))
-        for p, (_, _, offset) in zip(paths, heads):
-            copy_tail(p, offset, stream)
 
 
 def header_from_lines(layout, count):

@@ -17,7 +17,6 @@ Layout under the default prim ``/Scatter`` (an Xform):
 
 from __future__ import annotations
 
-import math
 import os
 import tempfile
 
