@@ -59,8 +59,8 @@ def _count(text):
 
 
 # The sample options, declared once: `sample`, `batch` and `preview` each take those it
-# names (sample_options). Each parameter is named as its SampleOptions field, and its
-# default is that field's (D).
+# names (sample_options). Each is named as its SampleOptions field, with that field's
+# default (D), or is an option of the output (fmt, ascii, crs).
 D = SampleOptions()
 
 
