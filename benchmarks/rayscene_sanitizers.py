@@ -23,9 +23,10 @@ from sanitized import ROOT, sanitized_copy  # noqa: E402
 
 BIG = r'''
 import numpy as np, sys, trimesh
+from scatter_cli.sampling import normals
 from scatter_cli.sampling.exterior import rayscene, rays as exterior_rays
 from scatter_cli.surface.model import Geometry, Instance, Surface
-assert sys.argv[1] in rayscene._compiled().__file__ and sys.argv[1] in exterior_rays._kernel.__file__
+assert sys.argv[1] in rayscene._compiled().__file__ and sys.argv[1] in normals._kernel.__file__
 outer, inner = trimesh.creation.icosphere(8), trimesh.creation.icosphere(7, radius=0.5)
 v = np.vstack([outer.vertices, inner.vertices])
 f = np.vstack([outer.faces, inner.faces + len(outer.vertices)]).astype(np.int64)
@@ -45,7 +46,8 @@ def main():
         env["SCATTER_REQUIRE_KERNELS"] = "1"
         os.symlink(ROOT / "samples", Path(tmp) / "samples")
         with open(Path(tmp) / "tests" / "conftest.py", "a") as conf:  # the tests must see the sanitized kernels
-            conf.write(f"\nfrom scatter_cli.sampling.exterior import rayscene as _r, rays as _v\n"
+            conf.write("\nfrom scatter_cli.sampling import normals as _v\n"
+                       "from scatter_cli.sampling.exterior import rayscene as _r\n"
                        f"assert {tmp!r} in _r._compiled().__file__ and {tmp!r} in _v._kernel.__file__\n")
         tests = ["tests/test_rayscene.py", "tests/test_exterior.py"]
         subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *tests], env=env, check=True, cwd=tmp)

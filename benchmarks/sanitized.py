@@ -15,12 +15,12 @@ import numpy
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from scatter_cli.core.native import KERNELS  # noqa: E402 (kernel -> its package)
+from scatter_cli.core.native import KERNELS  # noqa: E402 (kernel -> its package and holders)
 
 
 def folder(kernel):
     """The folder of ``kernel``'s C file, relative to the repository."""
-    return Path(*KERNELS[kernel].split("."))
+    return Path(*KERNELS[kernel].package.split("."))
 
 
 def sanitized_copy(tmp, kernel, also=()):
