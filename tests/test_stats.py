@@ -5,7 +5,9 @@ bound below is one that a wrong formula would exceed.
 """
 
 import math
+import re
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -555,3 +557,25 @@ def test_fourth_moments_rule_agrees_with_the_product_rule():
     want = surface_measures.surface_integral(f, tri, areas, order=3) / areas.sum()
     assert np.allclose(surface_measures.fourth_central_moments(tri, areas), want, rtol=1e-13, atol=0)
     assert not np.allclose(surface_measures.surface_integral(f, tri, areas, order=2) / areas.sum(), want, rtol=1e-6, atol=0)
+
+
+# ---------------------------------------------------------------------------
+# one harness
+
+OWN_CHI_SQUARE = re.compile(r"chisquare\(|chi2_contingency|chi2\.sf|chdtrc|gammaincc")
+
+
+def own_chi_squares(files):
+    """The files (name -> text) that compute a chi-square p-value themselves."""
+    return sorted(name for name, text in files.items() if OWN_CHI_SQUARE.search(text))
+
+
+def test_every_chi_square_goes_through_the_one_harness():
+    """Tests, benchmarks and the package compute chi-squares with scatter_cli.stats.chisquare
+    (this file compares that harness with SciPy's, so it alone may call SciPy's)."""
+    root = Path(__file__).resolve().parents[1]
+    files = {p.relative_to(root).as_posix(): p.read_text()
+             for folder in ("scatter_cli", "tests", "benchmarks") for p in (root / folder).rglob("*.py")}
+    assert own_chi_squares(files) == ["scatter_cli/stats/chisquare.py", "tests/test_stats.py"]
+    files["tests/test_new.py"] = "assert stats.chisquare(counts).pvalue > ALPHA"  # a test with its own
+    assert "tests/test_new.py" in own_chi_squares(files)
