@@ -6,7 +6,6 @@ import sys
 
 import numpy as np
 import pytest
-from PIL import Image
 
 from scatter_cli.commands import preview as PREVIEW  # the module (the package's `preview` is the function)
 from scatter_cli.commands import render
@@ -14,6 +13,8 @@ from scatter_cli.errors import ScatterError
 from scatter_cli.writers.pointfiles import read_points
 
 from .conftest import SAMPLES, run_scatter, run_user, scatter_command
+
+Image = pytest.importorskip("PIL.Image")  # the preview extra
 
 WHITE = render.BACKGROUND
 
