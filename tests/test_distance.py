@@ -304,6 +304,10 @@ def test_threads_and_chunks_change_nothing(monkeypatch):
     one = distance.closest_points(tree, points) + (parity.parity_inside(tree, points),)
     monkeypatch.setenv("SCATTER_THREADS", "3")
     three = distance.closest_points(tree, points) + (parity.parity_inside(tree, points),)
+    for threads in ("2", "7", "20"):  # (20: more than the kernels start)
+        monkeypatch.setenv("SCATTER_THREADS", threads)
+        more = distance.closest_points(tree, points) + (parity.parity_inside(tree, points),)
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(one, more)), threads
     halves = [distance.closest_points(tree, points[s]) + (parity.parity_inside(tree, points[s]),)
               for s in (slice(0, 1234), slice(1234, None))]
     chunked = tuple(np.concatenate([h[k] for h in halves]) for k in range(4))

@@ -136,6 +136,20 @@ def test_no_compiled_file_reads_the_environment_and_all_share_the_checks():
         assert "PyArray_IS_C_CONTIGUOUS" not in text, path.name  # the checks are get() and get_rows()
 
 
+def own_threads(files):
+    """The C files (name -> text) other than _cthreads.h that start threads or cap them
+    themselves (the header's in_parallel and MAX_THREADS are the only ones)."""
+    return sorted(name for name, text in files.items()
+                  if name != "_cthreads.h" and re.search(r"pthread_create|pthread\.h|#\s*define\s+MAX_THREADS", text))
+
+
+def test_every_kernel_starts_its_threads_through_cthreads_h():
+    files = {p.name: p.read_text() for p in (REPO / "scatter_cli").rglob("_c*.[ch]")}
+    assert "_cthreads.h" in files and not own_threads(files)
+    hand_made = "static void *run(void *a) { return a; }\nvoid go(pthread_t *t) { pthread_create(t, 0, run, 0); }"
+    assert own_threads(files | {"_cnew.c": hand_made, "_cold.c": "#define MAX_THREADS 8"}) == ["_cnew.c", "_cold.c"]
+
+
 def test_the_avx512_choice_is_passed_from_python():
     assert pairs._kernel.use_avx512(False) is False  # off when asked, whatever the CPU
     assert pairs._kernel.use_avx512(True) in (True, False)  # on only where the CPU has it
@@ -149,10 +163,11 @@ def test_large_meshes_go_in_face_order_and_larger_chunks():
     assert large.in_face_order and large.default_chunk == sampling.LARGE_MESH_CHUNK
 
 
-@pytest.mark.parametrize("threads", ["1", "2", "5"])
+@pytest.mark.parametrize("threads", ["2", "3", "7", "20"])
 def test_greedy_does_not_depend_on_the_thread_count(threads, monkeypatch):
-    # enough points for the kernel to split the crowding pass (16,384 a thread at least)
-    points = np.random.default_rng(5).normal(size=(90_000, 3))
+    # enough points for the kernel to split the crowding pass on 7 threads (16,384 a thread
+    # at least); 20 is more than the kernels start
+    points = np.random.default_rng(5).normal(size=(120_000, 3))
     points /= np.linalg.norm(points, axis=1, keepdims=True)
     radius = 0.02
     monkeypatch.setenv("SCATTER_THREADS", "1")

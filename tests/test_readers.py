@@ -240,8 +240,8 @@ def test_numbers_convert_as_python_floats_do():
     assert got.view(np.int64).tolist() == want.view(np.int64).tolist()
 
 
-def big_ascii_stl(facets=48000, seed=0):
-    """About 13 MB of ASCII STL: large enough for the reader to split it into parts."""
+def big_ascii_stl(facets=56000, seed=0):
+    """About 13.5 MB of ASCII STL: large enough for the reader to split it into 3 parts."""
     rng = np.random.default_rng(seed)
     x = rng.standard_normal((facets, 3, 3))
     rows = ["facet normal 0 0 1\n outer loop\n" + "".join("  vertex %r %r %r\n" % tuple(v) for v in f.tolist())
@@ -273,7 +273,7 @@ def test_ascii_stl_read_in_parts_is_read_as_in_one(case):
     one = _creaders.read_stl_ascii(data, 1)
     want = {"endsolid early": 3 * k, "plain": 3 * len(rows), "crlf": 3 * len(rows)}.get(case)
     assert (one is None) if want is None else len(one) == want
-    for threads in (2, 3):
+    for threads in (2, 3, 7):  # (7: still 3 parts, of 4 MB at least)
         parts = _creaders.read_stl_ascii(data, threads)
         assert (parts is None) == (one is None)
         assert one is None or parts.tobytes() == one.tobytes()

