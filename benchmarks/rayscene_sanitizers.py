@@ -2,8 +2,8 @@
 UndefinedBehaviorSanitizer.
 
 Builds scatter_cli/sampling/exterior/_cembree.c and scatter_cli/sampling/_csampling.c with
--fsanitize=address,undefined into a copy of the package (and of the tests and benchmarks,
-which they import) in a temporary directory, then, with the sanitizer runtimes preloaded, runs
+-fsanitize=address,undefined into a copy of the package (and of tests, testkit and
+benchmarks) in a temporary directory, then, with the sanitizer runtimes preloaded, runs
 tests/test_rayscene.py (verdicts against embreex, awkward meshes with NaN, inf, huge and
 tiny coordinates and repeated corners, the bad calls the kernels must refuse) and
 tests/test_exterior.py, then builds the benchmark's 1.64M-face hidden20 ray scene and
@@ -42,7 +42,7 @@ print("ray scene kernels: hidden20 under the sanitizers,", int(free.sum()), "of"
 
 def main():
     with tempfile.TemporaryDirectory() as tmp:
-        env = sanitized_copy(tmp, ("_cembree", "_csampling"), also=("tests", "benchmarks"))
+        env = sanitized_copy(tmp, ("_cembree", "_csampling"), also=("tests", "testkit", "benchmarks"))
         env["SCATTER_REQUIRE_KERNELS"] = "1"
         os.symlink(ROOT / "samples", Path(tmp) / "samples")
         with open(Path(tmp) / "tests" / "conftest.py", "a") as conf:  # the tests must see the sanitized kernels

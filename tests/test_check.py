@@ -56,7 +56,7 @@ def three_cubes(tmp_path):
     ulp above the highest vertex."""
     import trimesh
 
-    from .gltfwrite import glb_bytes
+    from testkit.gltfwrite import glb_bytes
 
     box = trimesh.creation.box()
     nodes = [(0, None), (0, _rotation_z(0.3, [2.1, 0.3, 0.7])), (0, _rotation_z(1.1, [-1.7, 0.9, 1.3]))]

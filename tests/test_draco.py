@@ -16,7 +16,7 @@ from scatter_cli.errors import ScatterError
 from scatter_cli.loading.load import load_surface
 
 from .conftest import SAMPLES, run_scatter
-from .gltfwrite import glb_bytes
+from testkit.gltfwrite import glb_bytes
 from .test_scenes import two_sample_p
 
 pytest.importorskip("DracoPy")

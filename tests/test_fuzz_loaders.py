@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from .fuzz_inputs import MUTATIONS, SEEDS, differential, exercise, mutate
+from testkit.fuzz_inputs import MUTATIONS, SEEDS, differential, exercise, mutate
 
 ops = st.lists(st.tuples(st.integers(0, MUTATIONS - 1), st.integers(0, 1 << 16), st.integers(0, 1 << 16)), min_size=1, max_size=5)
 

@@ -2,7 +2,7 @@
 
 Per placed geometry: the same world-space triangles, corners in the same order, the
 instances in the same order, and the same sampled bytes (face, bary, object); or it
-hands the file to trimesh. The files are built field by field (tests/gltfwrite.py), so
+hands the file to trimesh. The files are built field by field (testkit/gltfwrite.py), so
 that the reader is checked on layouts trimesh's exporter never writes.
 """
 
@@ -13,7 +13,7 @@ import scatter_cli
 from scatter_cli.loading.load import load_surface, read_mesh
 
 from .conftest import run_scatter
-from .gltfwrite import GLB
+from testkit.gltfwrite import GLB
 from .test_readers import same_names, world_corners
 
 TETRA_V = [[0, 0, 0], [1, 0, 0], [0, 1.5, 0], [0.2, 0.1, 2]]

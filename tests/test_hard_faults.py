@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from .conftest import SAMPLES, popen_user, run_scatter, run_user, scatter_command
-from .fuzz_inputs import SEEDS
+from testkit.fuzz_inputs import SEEDS
 
 PRECIOUS = b"precious bytes from an earlier run"
 

@@ -18,7 +18,7 @@ from scatter_cli.sampling.sources import RandomSource
 from scatter_cli.loading.load import load_surface
 from scatter_cli.sampling.warps import square_to_triangle
 
-from benchmarks.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_pvalue, recover_bary,
+from testkit.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_pvalue, recover_bary,
                                   spread_triangles, triangles_mesh, two_sum_le_one, uniform_in_triangle_pvalue)
 from .doubles import Float32CdfPlan, UnweightedSource
 

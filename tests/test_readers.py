@@ -18,8 +18,8 @@ import scatter_cli
 from scatter_cli.loading.load import load_surface, read_mesh
 
 from .conftest import SAMPLES, run_scatter, run_user
-from .fuzz_inputs import SEEDS
-from .loadmemory import load_memory
+from testkit.fuzz_inputs import SEEDS
+from testkit.loadmemory import load_memory
 
 SHARED = Path("/work/shared/meshes")
 MESHES = sorted({p.name: p for d in (SHARED, SAMPLES) if d.is_dir() for p in d.iterdir()

@@ -12,7 +12,7 @@ from scatter_cli.sampling.plan import SamplePlan
 from scatter_cli.sampling.sources import RandomSource
 from scatter_cli.loading.load import load_surface
 
-from benchmarks.hardcheck import pooled_pvalue
+from testkit.hardcheck import pooled_pvalue
 from .conftest import spread_triangles, triangles_mesh
 from .doubles import UnweightedSource
 
@@ -123,7 +123,7 @@ def three_cubes(path, instanced=False):
     placed three times)."""
     import trimesh
 
-    from .gltfwrite import glb_bytes
+    from testkit.gltfwrite import glb_bytes
 
     box = trimesh.creation.box()
     meshes = [(box.vertices, box.faces)] * (1 if instanced else 3)

@@ -2,7 +2,7 @@
 (geometry stored once), --object by prim path, primvars for uv / color / smooth-normal.
 
 The stage is written here with usd-core and compared with an equivalent GLB written by
-tests/gltfwrite.py, whose node matrices are worked out by hand from the authored ops:
+testkit/gltfwrite.py, whose node matrices are worked out by hand from the authored ops:
 per-object counts (two-sample chi-square) and each coordinate (two-sample KS), every
 test at significance ALPHA, each paired with wrong-transform GLBs that must fail.
 """
@@ -21,7 +21,7 @@ from scatter_cli.loading.load import load_surface
 from scatter_cli.stats.chisquare import chi2_two_sample
 
 from .conftest import run_scatter
-from .gltfwrite import glb_bytes
+from testkit.gltfwrite import glb_bytes
 
 pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom, Vt  # noqa: E402
