@@ -15,6 +15,8 @@ import pytest
 from .conftest import SAMPLES, popen_user, run_scatter, run_user, scatter_command
 from .batchtools import alive, outputs, parent_of, reader_fd, wait_for_reader, warning_meshes
 
+pytestmark = pytest.mark.slow  # batches of subprocesses
+
 MESHES = ["icosahedron_binary.stl", "moebius-160-10.ply", "hemisphere.off", "narrow_triangles.obj"]
 
 

@@ -130,6 +130,7 @@ def _chunks(data):
     return doc, data[20 + size + 8 :]
 
 
+@pytest.mark.slow
 def test_missing_dracopy_gives_one_line(tmp_path):
     path = _glb(tmp_path, "draco.glb", draco=True)
     fake = tmp_path / "nodraco"

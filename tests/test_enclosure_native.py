@@ -82,6 +82,7 @@ def test_same_faces_on_built_scenes(name, vertices, faces, monkeypatch):
         assert kernel[2].any()  # something to compare
 
 
+@pytest.mark.slow
 def test_same_faces_on_random_nested_boxes_and_a_finer_grid_differs(monkeypatch):
     """24 scenes of boxes in a box: the same parts and faces; a kernel fed a grid one cell
     finer certifies other faces on some of them."""
@@ -96,6 +97,7 @@ def test_same_faces_on_random_nested_boxes_and_a_finer_grid_differs(monkeypatch)
     assert found > 100 and differs > 0
 
 
+@pytest.mark.slow
 def test_same_faces_whatever_the_thread_count(monkeypatch):
     """Shells large enough to be split between threads (a 327,680-face sphere holding a
     sphere and a box): the same faces as NumPy on 1, 2, 3 and 7 threads."""
@@ -145,6 +147,7 @@ def shells_scene(draw):
     return np.concatenate(parts)
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_same_faces_on_random_shells(data, monkeypatch):
@@ -225,6 +228,7 @@ def test_bad_calls_are_refused():
             call()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("others", [8, 16, 32])
 def test_same_faces_with_many_shells(others, monkeypatch):
     """Shell bits past the 8th, 16th and 32nd (the kernel's cells carry 1, 2, 4 or 8 bytes
@@ -255,6 +259,7 @@ def test_same_faces_with_many_shells(others, monkeypatch):
         assert enclosed[centre].all() and wall_side.sum() == 12 and not enclosed[wall_side].any()
 
 
+@pytest.mark.slow
 def test_same_faces_for_many_parts_split_between_threads(monkeypatch):
     """400 small boxes (192 faces each, some turned, some crossing the big box's wall or
     each other) in a big box, as a triangle soup: 77,000 faces, so parts and certificate

@@ -32,6 +32,7 @@ def square_counts(name, n, seed):
     return np.concatenate(counts), hidden
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["box_in_box", "car", "overlapping_boxes"])
 @pytest.mark.parametrize("broken", [False, True])
 def test_stratified_exterior_is_uniform_over_the_exterior(name, broken, monkeypatch):
@@ -59,6 +60,7 @@ def test_all_exterior_gives_the_plain_stratified_run():
     assert np.array_equal(plain.points, ext.points) and np.array_equal(plain.attributes["face"], ext.attributes["face"])
 
 
+@pytest.mark.slow
 def test_same_bytes_whatever_chunk_size_and_threads(tmp_path):
     path = tmp_path / "car.glb"
     es.car()[0].export(path)

@@ -5,6 +5,8 @@ functions and child scripts held in strings included."""
 import ast
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 # folder -> the folders its files may not import
 APART = {"tests": ("benchmarks",), "benchmarks": ("tests",), "testkit": ("tests", "benchmarks")}
@@ -41,6 +43,7 @@ def crossings(root):
     return found
 
 
+@pytest.mark.slow
 def test_tests_and_benchmarks_do_not_import_each_other():
     assert not crossings(ROOT)
 

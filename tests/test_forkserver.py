@@ -39,6 +39,7 @@ def numpy_mapped(pid):
         return "_multiarray_umath" in f.read()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("server", ["1", "0"])
 def test_a_batch_worker_is_the_commands_child(tmp_path, server):
     """The command as a user runs it: its workers come from the fork server (the command
@@ -88,6 +89,7 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_without_the_subreaper_a_worker_is_lost(tmp_path):
     """What claim() is for: the server's worker is this process's child only when this
     process is its subreaper; without it, the worker goes to another parent and this
@@ -121,6 +123,7 @@ FALLBACK = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_a_dead_server_leaves_the_batch_to_started_workers(tmp_path):
     """A fork server that died (killed, out of memory) costs only speed: the worker is
     started as a new process instead, and samples the mesh."""
@@ -131,6 +134,7 @@ def test_a_dead_server_leaves_the_batch_to_started_workers(tmp_path):
     assert (tmp_path / "out.ply").stat().st_size > 100 * 12
 
 
+@pytest.mark.slow
 def test_a_large_environment_reaches_the_worker(tmp_path):
     """The worker's environment travels to the server as one message on a stream socket;
     one of several megabytes, more than the socket takes at once, arrives whole: the

@@ -195,6 +195,7 @@ def test_cut_files_go_to_trimesh(cut):
 
 
 
+@pytest.mark.slow
 def test_a_node_graph_trimesh_cannot_walk_is_a_one_line_error(tmp_path):
     """A fuzz finding: a node among its own children made trimesh's graph walk raise."""
     path = tmp_path / "bad.glb"

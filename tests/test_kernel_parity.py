@@ -332,7 +332,7 @@ CASES = {
     },
     "_cthinning": {
         **{f"thin-{n}": thinning_case(n) for n in point_sets()},
-        "thin-sphere-plain-loops": plain_loops_case("sphere"),
+        "thin-line-plain-loops": plain_loops_case("line"),
         **{f"pairs-{n}": pairs_case(n) for n in ("sphere", "clustered", "far")},
         "sample-poisson": lambda: sample_bytes("koala", seed=3, attributes="face", poisson=True, count=3000),
         "sample-radius": lambda: sample_bytes("koala", seed=3, attributes="face", radius=0.04),
@@ -362,20 +362,21 @@ CASES = {
 }
 
 
-# For every function each kernel exports, a case that must call it.
+# For every function each kernel exports, a case that must call it (small ones: these cases
+# run in the fast loop, pytest -m "not slow", and all the others are marked slow).
 CALLED_BY = {
     "_csampling": {"areas": "sample-skull-plain", "draw": "sample-skull-plain", "guide": "sample-skull-plain",
                    "place": "sample-skull-method=stratified", "select": "sample-skull-method=stratified",
                    "unit_normals": "normals-0-none"},
-    "_cthinning": {"grid": "pairs-sphere", "pairs": "pairs-sphere", "greedy": "thin-sphere",
-                   "use_avx512": "thin-sphere-plain-loops"},
+    "_cthinning": {"grid": "pairs-far", "pairs": "pairs-far", "greedy": "thin-line",
+                   "use_avx512": "thin-line-plain-loops"},
     "_cstable": {"faces": "truck", "arrivals": "truck", "order": "truck", "place": "pediment-radius"},
     "_creaders": {"read_obj": "obj-hemisphere.off", "read_off": "off-hemisphere.off",
                   "read_ply_ascii": "ply-ascii-hemisphere.off", "read_stl_ascii": "stl-ascii-hemisphere.off"},
     "_cenclosure": {"parts": "box_in_box", "enclosed": "box_in_box"},
     "_cembree": {f: "box_in_box" for f in ("load", "new_scene", "add", "buffers", "commit", "occluded")},
-    "_cwinding": {f: "winding-hemisphere.off" for f in ("morton", "order", "subtree_sums", "moments", "radii",
-                                                        "winding")},
+    "_cwinding": {f: "winding-icosahedron_binary.stl" for f in ("morton", "order", "subtree_sums", "moments",
+                                                                "radii", "winding")},
     "_cvolume": {f: "distance-icosahedron_binary.stl" for f in ("wide", "order", "visit", "closest", "crossings")},
 }
 
@@ -446,7 +447,13 @@ def test_a_function_left_out_of_the_table_is_reported():
     assert uncompared("_csampling", table) == {"no-such-case"}
 
 
-@pytest.mark.parametrize("kernel,case", [(k, c) for k in CASES for c in CASES[k]])
+def every_case():
+    """Every (kernel, case), slow but for the cases CALLED_BY names."""
+    named = {(k, c) for k, table in CALLED_BY.items() for c in table.values()}
+    return [pytest.param(k, c, marks=() if (k, c) in named else pytest.mark.slow) for k in CASES for c in CASES[k]]
+
+
+@pytest.mark.parametrize("kernel,case", every_case())
 def test_kernel_gives_its_numpy_twin_s_bytes(kernel, case, tmp_path, monkeypatch):
     called = watch(need_kernel(kernel), monkeypatch)
     run = CASES[kernel][case]
@@ -489,8 +496,9 @@ def test_a_kernel_one_ulp_off_fails_the_comparison(tmp_path, monkeypatch):
         test_kernel_gives_its_numpy_twin_s_bytes("_csampling", "sample-skull-plain", tmp_path, monkeypatch)
 
 
-@pytest.mark.parametrize("kernel,left_out,case", [("_cstable", "faces", "truck"), ("_cvolume", "parity", "distance-scene"),
-                                                  ("_csampling", "normals", "sample-moved-attributes=normal")])
+@pytest.mark.parametrize("kernel,left_out,case", [("_cstable", "faces", "truck"),
+                                                  ("_cvolume", "parity", "distance-icosahedron_binary.stl"),
+                                                  ("_csampling", "normals", "sample-instances-attributes=face,object,normal")])
 def test_a_holder_left_out_of_the_registry_fails_the_comparison(kernel, left_out, case, tmp_path, monkeypatch):
     """The NumPy run of a registry without ``left_out`` still calls the kernel there."""
     need_kernel(kernel)

@@ -59,6 +59,7 @@ print(json.dumps({m: importlib.import_module(m)._kernel is not None for k in nat
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("switch,held", [("1", False), ("", True)])
 def test_scatter_numpy_empties_every_holder_in_the_registry(switch, held):
     """SCATTER_NUMPY=1 leaves every module that native.KERNELS says holds a kernel holding
@@ -104,6 +105,7 @@ def registry_gaps(found, kernels):
     return sorted(listed ^ {(k, m) for k, modules in found.items() for m in modules})
 
 
+@pytest.mark.slow
 def test_the_registry_names_every_module_that_holds_a_kernel():
     """Every module that looks a kernel up is listed under it in native.KERNELS and every
     listed module looks it up, once, at import, through native.kernel()."""
@@ -163,6 +165,7 @@ def test_large_meshes_go_in_face_order_and_larger_chunks():
     assert large.in_face_order and large.default_chunk == sampling.LARGE_MESH_CHUNK
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("threads", ["2", "3", "7", "20"])
 def test_greedy_does_not_depend_on_the_thread_count(threads, monkeypatch):
     # enough points for the kernel to split the crowding pass on 7 threads (16,384 a thread
@@ -193,6 +196,7 @@ np.savez(sys.argv[1], **out)
 """
 
 
+@pytest.mark.slow
 def test_the_avx512_loops_keep_the_same_points(tmp_path):
     """With and without the AVX-512 distance loops (SCATTER_NO_AVX512=1) the kernel finds
     the same pairs and keeps the same points. (On a CPU without AVX-512 both runs take

@@ -62,6 +62,7 @@ def attributed_columns(mesh_path, most_faces=3000, seed=0):
     return columns, faces
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
 @pytest.mark.parametrize("mesh", MESHES, ids=[m.name for m in MESHES])
 def test_resaved_meshes_with_normals_and_colours_sample_as_with_trimesh(mesh, fmt, tmp_path):
@@ -173,6 +174,7 @@ def test_the_comparison_fails_readers_that_drop_normals_or_alpha(tmp_path, monke
         assert sample_bytes(path, attributes) != sample_bytes(slow, attributes)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
 def test_a_load_with_normals_and_colours_takes_at_most_the_file_size_beyond_what_it_returns(fmt, tmp_path):
     """As the plain loads' bound (test_readers.py), the tables counted among the returned
@@ -218,6 +220,7 @@ def assert_obj_as_trimesh(path, attributes=OBJ_ATTRIBUTES):
         assert got[0] == got[1], a
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("form", ["v/vt/vn", "v/vt", "v//vn"])
 @pytest.mark.parametrize("mesh", MESHES, ids=[m.name for m in MESHES])
 def test_resaved_meshes_with_uvs_and_normals_sample_as_with_trimesh(mesh, form, tmp_path):
@@ -322,6 +325,7 @@ def test_the_obj_comparison_fails_a_split_in_file_order(tmp_path, monkeypatch):
         assert_obj_as_trimesh(path)
 
 
+@pytest.mark.slow
 def test_an_obj_load_with_uvs_and_normals_takes_at_most_the_file_size_beyond_what_it_returns(tmp_path):
     """The icosphere(7) with v/vt/vn refs that split its vertices about 3 times: the
     split vertices, UVs, normals and faces counted as returned."""
@@ -342,6 +346,7 @@ def command_case(name, tmp_path):
     return path, "face,bary,uv,smooth-normal,object"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ply", "obj", "obj quads"])
 def test_an_attribute_job_never_imports_trimesh(name, tmp_path):
     path, attributes = command_case(name, tmp_path)
@@ -351,6 +356,7 @@ def test_an_attribute_job_never_imports_trimesh(name, tmp_path):
     assert proc.stdout.strip() == "False", proc.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ply", "obj"])
 def test_the_command_writes_the_same_bytes_either_way(name, tmp_path):
     """The whole command, fast and through trimesh (SCATTER_NUMPY=1: no compiled readers;

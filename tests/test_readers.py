@@ -200,6 +200,7 @@ def test_constructs_outside_the_subset_go_to_trimesh(suffix, text, tmp_path):
     assert read_mesh(path, suffix) is None
 
 
+@pytest.mark.slow
 def test_the_command_writes_the_same_bytes_either_way(tmp_path):
     path = tmp_path / "m.obj"
     path.write_bytes(OBJ_CASES["materials"].encode())
@@ -211,6 +212,7 @@ def test_the_command_writes_the_same_bytes_either_way(tmp_path):
     assert outs[0] == outs[1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("attributes", ["face", "face,smooth-normal"])
 @pytest.mark.parametrize("suffix", ["obj", "off", "stl"])
 def test_a_plain_text_job_never_imports_trimesh(suffix, attributes, tmp_path):
@@ -249,6 +251,7 @@ def big_ascii_stl(facets=56000, seed=0):
     return rows
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["plain", "crlf", "endsolid early", "endsolid early, then other bytes",
                                   "a second solid late", "a bad line late"])
 def test_ascii_stl_read_in_parts_is_read_as_in_one(case):
@@ -289,6 +292,7 @@ def icosphere_files(folder, subdivisions):
     return paths
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", sorted(FORMATS))
 def test_a_load_takes_at_most_the_file_size_beyond_what_it_returns(fmt, tmp_path_factory):
     """Peak resident memory of a load in a fresh process, less the returned arrays and
@@ -299,6 +303,7 @@ def test_a_load_takes_at_most_the_file_size_beyond_what_it_returns(fmt, tmp_path
     assert got["extra"] <= got["file"], got
 
 
+@pytest.mark.slow
 def test_the_memory_check_fails_a_loader_that_makes_objects_per_face(tmp_path_factory):
     """The broken variant: the OFF through trimesh (compiled readers off), which parses
     with Python objects per line, exceeds the same bound."""

@@ -51,6 +51,7 @@ def test_world_area_includes_non_uniform_scale():
     assert s.info["area"] == pytest.approx(scene.to_mesh().area, rel=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["scaled", "cesiummilktruck.glb"])
 def test_scene_and_flattened_mesh_give_the_same_distribution(which):
     scene = scaled_scene() if which == "scaled" else trimesh.load(SAMPLES / which, process=False)
@@ -90,6 +91,7 @@ def test_object_index_counts_follow_world_areas():
     assert chi2_gof(counts, local)[2] < ALPHA  # must-fail
 
 
+@pytest.mark.slow
 def test_object_selection_by_geometry_and_node_name(tmp_path):
     path = SAMPLES / "cesiummilktruck.glb"
     surface = load_surface(path)

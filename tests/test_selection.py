@@ -145,6 +145,7 @@ def info_indices(path):
     return {o["name"]: o["index"] for o in objects}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("instanced", [False, True])
 def test_object_index_under_object_is_the_index_info_lists(tmp_path, instanced):
     import scatter_cli

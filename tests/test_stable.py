@@ -253,6 +253,7 @@ def _points_on(raw, unchanged):
 EDIT_CASES = [(m, e) for m in sorted(EDIT_MESHES) for e in sorted(EDITS) if m != "skull" or e in ("delete", "move")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mesh, edit", EDIT_CASES)
 def test_an_edit_moves_only_the_points_it_should(mesh, edit):
     n = 6000
@@ -531,6 +532,7 @@ def test_vertex_colour_weight_rate_is_area_times_mean_weight():
         assert (p > ALPHA) == passes
 
 
+@pytest.mark.slow
 def test_cli_stable_renumbered_file_gives_the_same_output_bytes(tmp_path):
     from .conftest import run_scatter
 
@@ -546,6 +548,7 @@ def test_cli_stable_renumbered_file_gives_the_same_output_bytes(tmp_path):
     assert len(outs[0].splitlines()) == 2001
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("bad", [["--method", "sobol"], ["--method", "stratified"], ["--poisson"]])
 def test_cli_stable_with_another_method_or_poisson_is_a_usage_error_before_reading(bad, tmp_path):
     from .conftest import run_scatter

@@ -170,6 +170,7 @@ def test_height_cdf_equal_heights_have_no_nan():
     assert exact_reference.height_cdf(tri, areas, d, np.zeros((2, 3))).shape == (2, 3)
 
 
+@pytest.mark.slow
 def test_height_cdf_matches_monte_carlo_dkw():
     """sup |ECDF - F| <= eps with probability 1 - ALPHA (DKW inequality)."""
     tri, areas = arrays(capsule())
@@ -291,6 +292,7 @@ def test_exact_slab_areas_equal_every_faces_sum(name, monkeypatch):
         assert np.abs(prob * 32 - 1).max() <= 2.0**-surface_measures.SLAB_ITERATIONS
 
 
+@pytest.mark.slow
 def test_the_slab_checks_fail_a_wrong_area_and_an_off_by_one_slab(monkeypatch):
     """The checks above fail an area function missing part of one face (2e-13 of the
     area: twice the tolerance), probabilities shifted by one slab, edges shifted by one
@@ -322,6 +324,7 @@ def test_the_slab_checks_fail_a_wrong_area_and_an_off_by_one_slab(monkeypatch):
     assert not equal(_slabs(tri, monkeypatch, early))
 
 
+@pytest.mark.slow
 def test_exact_slabs_survive_a_wrong_first_guess(monkeypatch):
     """Brackets around a wrong first guess (every target guessed at the lowest height)
     widen until they hold their targets: the same equal-area slabs with exact areas.
@@ -388,6 +391,7 @@ def test_surface_covariance_survives_large_offsets():
     assert np.allclose(cov1, cov0, atol=1e-6 * np.abs(cov0).max())
 
 
+@pytest.mark.slow
 def test_surface_moments_against_monte_carlo():
     """10^7 uniform points; all 3 mean and 6 second-moment z-scores within
     the Bonferroni bound for ALPHA."""
@@ -481,6 +485,7 @@ def subdivide(tri, times):
     return tri
 
 
+@pytest.mark.slow
 def test_surface_integral_converges_for_smooth_function():
     mesh = trimesh.creation.icosphere(subdivisions=2)
     mesh.apply_scale([1.0, 0.7, 1.3])

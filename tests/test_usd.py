@@ -199,6 +199,7 @@ def test_object_by_prim_path(files):
     assert np.abs(s.points - box).max() <= 1.0 + 1e-6  # on the unit icosphere at rock_a
 
 
+@pytest.mark.slow
 def test_info_lists_the_stage_objects(files):
     report = describe(files["usd"])
     assert report["instances"] == 6 and report["geometries"] == 3
@@ -330,6 +331,7 @@ def test_chunk_size_and_threads_change_no_byte(files, tmp_path, monkeypatch):
 
 # -- errors -------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_malformed_stage_is_one_line(tmp_path):
     bad = tmp_path / "bad.usda"
     bad.write_text('#usda 1.0\ndef Mesh "m" { int[] faceVertexCounts = [3\n')
@@ -347,6 +349,7 @@ def test_bad_topology_is_an_error(tmp_path):
         load_surface(tmp_path / "t.usda")
 
 
+@pytest.mark.slow
 def test_missing_usd_core_gives_one_line(files, tmp_path):
     fake = tmp_path / "nousd" / "pxr"
     fake.mkdir(parents=True)

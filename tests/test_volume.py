@@ -60,6 +60,7 @@ def _near_distances(points, tris):
     return exact_distance(tris, points)[0]
 
 
+@pytest.mark.slow
 def test_near_points_are_a_surface_point_plus_a_gaussian_of_deviation_sigma():
     """Two-sample test of the distance to the surface: ours against a reference made in
     the test (trimesh's uniform surface points plus NumPy's normals times sigma)."""
@@ -156,6 +157,7 @@ def _check_labels(s, tris, instance, face, flip=False):
     assert np.abs(np.linalg.norm(s.closest - s.points, axis=1) - np.abs(s.sdf)).max() < 1e-9 * diag
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_labels_match_brute_force(case):
     mesh = CASES[case]()
@@ -164,6 +166,7 @@ def test_labels_match_brute_force(case):
     _check_labels(s, tris, instance, face)
 
 
+@pytest.mark.slow
 def test_a_flipped_sign_fails_the_label_check():
     mesh = CASES["closed"]()
     s = scatter_cli.sample(mesh, 500, volume=True, attributes=LABELS, seed=4, precision="float64")
@@ -172,6 +175,7 @@ def test_a_flipped_sign_fails_the_label_check():
         _check_labels(s, tris, instance, face, flip=True)
 
 
+@pytest.mark.slow
 def test_normalized_frames():
     mesh = SAMPLES / "skull.ply"
     tris, _, _ = _triangles(mesh)

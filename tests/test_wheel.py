@@ -4,7 +4,6 @@ its package's folder. Building it takes a minute (pip sets up the build requirem
 the kernels compile): marked slow."""
 
 import shutil
-import subprocess
 import sys
 import zipfile
 from pathlib import Path
@@ -12,6 +11,8 @@ from pathlib import Path
 import pytest
 
 from scatter_cli.core import native
+
+from .conftest import run_user
 
 ROOT = Path(__file__).resolve().parents[1]
 LEFT_BEHIND = (".git", ".venv", "build", "dist", "*.egg-info", "__pycache__", "*.so", ".pytest_cache", ".hypothesis",
@@ -38,8 +39,8 @@ def wheel_gaps(names, folders, kernels):
 def test_the_wheel_holds_every_subpackage_and_every_kernel(tmp_path):
     source = tmp_path / "source"  # a fresh checkout's files: no kernel built in place
     shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns(*LEFT_BEHIND))
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path / "dist"), str(source)],
-                   check=True, capture_output=True, timeout=900)
+    run_user([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path / "dist"), str(source)],
+             check=True, timeout=900)
     (wheel,) = (tmp_path / "dist").glob("*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
     assert not wheel_gaps(names, packages(), native.KERNELS)
