@@ -42,4 +42,6 @@ def kernel(name, package):
 
 # the headers every kernel may include (-I scatter_cli/core)
 HEADERS = ["scatter_cli/core/_ckernel.h", "scatter_cli/core/_cmorton.h", "scatter_cli/core/_cthreads.h"]
-setup(ext_modules=[kernel(name, entry.package) for name, entry in _registry().items()])
+# the kernels compile side by side, one a core
+setup(ext_modules=[kernel(name, entry.package) for name, entry in _registry().items()],
+      options={"build_ext": {"parallel": True}})
