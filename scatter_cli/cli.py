@@ -82,6 +82,9 @@ Volume = Annotated[bool, typer.Option("--volume", help="Points in space around t
 Near = Annotated[Optional[str], typer.Option("--near", metavar="SIGMA[,SIGMA...]", help="Near-surface points: a surface point plus a Gaussian offset of standard deviation SIGMA (implies --volume).")]
 BoxShare = Annotated[Optional[float], typer.Option("--box-share", metavar="F", help="Share of the points uniform in the box, the rest near [default: 1 with --volume, 0 with --near].")]
 Padding = Annotated[float, typer.Option("--padding", metavar="P", help="The box: the surface's bounding box grown by P times its largest side.")]
+Edges = Annotated[Optional[str], typer.Option("--edges", metavar="F", help="Share (0..1) of the surface points drawn on sharp edges instead of faces (with --near: of the near points' surface points).")]
+SharpAngle = Annotated[Optional[float], typer.Option("--sharp-angle", metavar="DEG", help="An edge is sharp when its faces' normals are at least DEG degrees apart [default: 15]; boundary and non-manifold edges always are.")]
+NearEdges = Annotated[Optional[str], typer.Option("--near-edges", metavar="SIGMA[,SIGMA...]", help="With --edges and --near: the sigmas of the near points of edge points [default: the --near sigmas].")]
 Sign = Annotated[str, typer.Option("--sign", metavar="winding|parity", help="Inside when the generalized winding number is >= 0.5 (robust on open meshes), or by a majority of ray parities.")]
 
 
@@ -115,6 +118,9 @@ def sample(
     box_share: BoxShare = D.box_share,
     padding: Padding = D.padding,
     sign: Sign = D.sign,
+    edges: Edges = None,
+    sharp_angle: SharpAngle = D.sharp_angle,
+    near_edges: NearEdges = None,
 ):
     """Sample points on the surface of MESH (or, with --volume or --near, in the space around it).
 
@@ -263,6 +269,9 @@ def batch(
     box_share: BoxShare = D.box_share,
     padding: Padding = D.padding,
     sign: Sign = D.sign,
+    edges: Edges = None,
+    sharp_angle: SharpAngle = D.sharp_angle,
+    near_edges: NearEdges = None,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress, warnings, error lines or summary (the exit status and report still tell).")] = False,
 ):
     """Sample many meshes: for each, what 'scatter sample MESH -o OUTPUT' writes.

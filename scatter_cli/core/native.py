@@ -16,6 +16,7 @@ import os
 # holds it (setup.py builds these).
 KERNELS = {
     "_csampling": "scatter_cli.sampling",
+    "_cedges": "scatter_cli.sampling",
     "_cthinning": "scatter_cli.sampling.poisson",
     "_cstable": "scatter_cli.sampling.stable",
     "_cenclosure": "scatter_cli.sampling.exterior",
