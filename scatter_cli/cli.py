@@ -171,12 +171,15 @@ def info(
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable JSON.")] = False,
     input_format: InputFormat = None,
     exterior: Annotated[bool, typer.Option("--exterior", help="Also the exterior area (estimate and standard error) and faces seen from outside (needs embreex).")] = False,
+    sharp_angle: Annotated[Optional[float], typer.Option("--sharp-angle", metavar="DEG", help="The angle of the sharp edges listed (what --edges samples) [default: 15].")] = None,
 ):
-    """Faces, vertices, area, bounding box, degenerate faces, attributes and objects of MESH."""
+    """Faces, vertices, area, bounding box, degenerate faces, attributes, sharp edges and objects of MESH."""
     lean_trimesh()
     from .commands.info import describe, format_text
 
-    report = describe(mesh, input_format=input_format, exterior=exterior)
+    if sharp_angle is not None and not 0 < sharp_angle <= 180:
+        raise ScatterUsageError(f"--sharp-angle must be a number of degrees in (0, 180], not {sharp_angle:g}")
+    report = describe(mesh, input_format=input_format, exterior=exterior, sharp_angle=sharp_angle)
     process.echo(json.dumps(report, indent=2) if as_json else format_text(report))
 
 
