@@ -18,7 +18,7 @@ from scatter_cli.sampling import edges as edges_module, sharp
 from scatter_cli.sampling.normals import face_normals
 from scatter_cli.stats.chisquare import chi2_gof
 
-from .conftest import run_scatter
+from .conftest import ROOT, run_scatter
 from .test_cli import assert_one_line_error
 
 LEVEL = 1e-3
@@ -402,3 +402,34 @@ def test_usage_errors(tmp_path, args, words):
     proc = run_scatter("sample", box_mesh_file(tmp_path), "-n", "10", *args, "-o", tmp_path / "out.ply")
     assert_one_line_error(proc, 2, words)
     assert not (tmp_path / "out.ply").exists()
+
+
+@pytest.mark.slow
+def test_both_batch_engines_write_what_sample_writes(tmp_path):
+    """scatter batch, locally and on a Dask cluster, writes for each mesh what scatter
+    sample writes (a box, a CAD part, a sphere with no sharp edge), warnings and all."""
+    pytest.importorskip("distributed")
+    from .test_batch_dask import start_cluster, stop
+
+    folder = tmp_path / "in"
+    folder.mkdir()
+    box_mesh().export(folder / "box.ply")
+    trimesh.creation.icosphere(subdivisions=3).export(folder / "ball.ply")
+    (folder / "part.stl").write_bytes((ROOT / "samples" / "pediment_join_plate_12.stl").read_bytes())
+    options = dict(count=2000, edges="0.4", attributes="normal,face,sharp")
+    local = scatter_cli.batch([folder], str(tmp_path / "local" / "{stem}.ply"), jobs=2, **options)
+    client, _, _, procs = start_cluster(1)
+    try:
+        remote = scatter_cli.batch([folder], str(tmp_path / "dask" / "{stem}.ply"), client=client, **options)
+    finally:
+        client.close()
+        stop(procs)
+    assert [r["status"] for r in local] == [r["status"] for r in remote] == ["written"] * 3
+    for name in ("ball", "box", "part"):
+        alone = tmp_path / f"{name}.ply"
+        suffix = ".stl" if name == "part" else ".ply"
+        run_scatter("sample", folder / f"{name}{suffix}", "-n", "2000", "--edges", "0.4", "-a", "normal,face,sharp",
+                    "-o", alone, check=True)
+        want = alone.read_bytes()
+        assert (tmp_path / "local" / f"{name}.ply").read_bytes() == want
+        assert (tmp_path / "dask" / f"{name}.ply").read_bytes() == want
