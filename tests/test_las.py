@@ -105,12 +105,12 @@ def test_same_bytes_for_any_chunk_size(tmp_path, monkeypatch, suffix, block):
 
 @pytest.mark.parametrize("suffix", ["las", "laz"])
 def test_shards_merge_to_the_run(tmp_path, suffix):
-    from scatter_cli.writers.las import merge_las
+    from scatter_cli.commands.merge import merge
 
     write(tmp_path / f"whole.{suffix}")
     write(tmp_path / f"a.{suffix}", span=(0, 1234))
     write(tmp_path / f"b.{suffix}", span=(1234, 3000))
-    merge_las([tmp_path / f"a.{suffix}", tmp_path / f"b.{suffix}"], tmp_path / f"m.{suffix}")
+    merge([tmp_path / f"a.{suffix}", tmp_path / f"b.{suffix}"], tmp_path / f"m.{suffix}")
     assert (tmp_path / f"m.{suffix}").read_bytes() == (tmp_path / f"whole.{suffix}").read_bytes()
 
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 import scatter_cli.api as api
-from scatter_cli.writers.pcd import merge_pcd, pack_rgb
+from scatter_cli.commands.merge import merge
+from scatter_cli.writers.pcd import pack_rgb
 from scatter_cli.writers import write_samples
 
 from .conftest import SAMPLES
@@ -60,7 +61,7 @@ def test_shards_merge_to_the_run(tmp_path, ascii):
         parts.append(tmp_path / f"p{k}.pcd")
         chunks = (c for c in _range(run, a, b))
         write_samples(chunks, parts[-1], "pcd", run.layout, b - a, ascii)
-    merge_pcd(parts, tmp_path / "m.pcd")
+    merge(parts, tmp_path / "m.pcd")
     assert (tmp_path / "m.pcd").read_bytes() == whole.read_bytes()
 
 
@@ -77,5 +78,5 @@ def test_merge_refuses_a_different_layout(tmp_path):
     a, _ = write(tmp_path, False, n=50, name="a.pcd")
     b, _ = write(tmp_path, False, n=50, attributes="normal", name="b.pcd")
     with pytest.raises(ScatterError, match="b.pcd"):
-        merge_pcd([a, b], tmp_path / "m.pcd")
+        merge([a, b], tmp_path / "m.pcd")
     assert not (tmp_path / "m.pcd").exists()

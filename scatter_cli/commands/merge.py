@@ -3,8 +3,8 @@
 The shards of a run (``--shard K/M``), joined in order, give that run's bytes: every
 mergeable format is a header that carries the count, then the points as rows, so the
 joined file is the header written for the total count followed by each part's rows.
-Which formats merge is the format table's ``mergeable``; each one's module reads its
-parts (``read_part``, see :mod:`scatter_cli.writers.parts`).
+Which formats merge is the format table's ``mergeable``; each part is read by its
+format's reader (:mod:`scatter_cli.writers.pointfiles`), the one ``preview`` reads it with.
 """
 
 from __future__ import annotations
@@ -12,9 +12,7 @@ from __future__ import annotations
 import os
 
 from ..errors import ScatterError, ScatterUsageError
-from ..core.interrupts import held
-from ..writers import MERGEABLE, check_extra, infer_format, load, open_output
-from ..writers.parts import copy_body
+from ..writers import MERGEABLE, check_extra, infer_format, open_output
 
 
 def merge(parts, output, fmt=None):
@@ -37,24 +35,18 @@ def merge(parts, output, fmt=None):
     if output is not None and str(output) != "-" and _format(output, fmt) != kind:
         raise ScatterUsageError(f"{output}: the parts are {kind.upper()}, the output must be too")
     check_extra(kind)
-    module = load(kind)
-    loaded = []
+    from ..writers.pointfiles import read_file  # NumPy: imported once there is work
+
+    files = []
     for p in paths:
-        part = module.read_part(p, kind)
-        if loaded and part.layout != loaded[0].layout:
-            raise ScatterError(f"{p}: columns or types differ from {paths[0]} ({_describe(part.layout)} "
-                               f"against {_describe(loaded[0].layout)})")
-        loaded.append(part)
+        file = read_file(p, kind)
+        if files and file.layout != files[0].layout:
+            raise ScatterError(f"{p}: columns or types differ from {paths[0]} ({_describe(file.layout)} "
+                               f"against {_describe(files[0].layout)})")
+        files.append(file)
     with open_output(output) as stream:
-        first = loaded[0]
-        if first.join is not None:
-            with held():  # laspy and lazrs write: a signal is raised once they are done
-                first.join(loaded, stream)
-        else:
-            stream.write(first.header(loaded))
-            for part in loaded:
-                copy_body(part, stream)
-    return sum(p.count for p in loaded)
+        files[0].join(files, stream)
+    return sum(f.count for f in files)
 
 
 def _format(path, fmt):

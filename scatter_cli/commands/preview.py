@@ -1,8 +1,9 @@
 """``scatter preview``: contact sheets of point sets, one captioned thumbnail per input.
 
 Inputs are listed first (folders searched recursively, sorted, as ``batch`` lists
-them), then read one at a time: a point file through :mod:`scatter_cli.writers.pointfiles`
-(evenly decimated to at most ``MAX_DRAWN`` points), a mesh sampled through
+them), then read one at a time: a point file through its format's reader, the one
+``merge`` reads it with (:mod:`scatter_cli.writers.pointfiles`; evenly decimated to at
+most ``MAX_DRAWN`` points), a mesh sampled through
 :func:`scatter_cli.api.prepare`. Each is drawn by :mod:`scatter_cli.commands.render` into the
 page, and a page is encoded (Pillow: PNG and captions) and written as soon as it is
 full, so memory does not grow with the number of inputs.
@@ -179,17 +180,20 @@ def image_module():
 def load(path, sample_options):
     """(points (m, 3) float64, attributes, up axis, caption) of a point file or a mesh
     (sampled with ``sample_options``, a :class:`~scatter_cli.run.options.SampleOptions`)."""
-    from ..writers.pointfiles import is_point_file, read_points
+    from ..writers.pointfiles import IsMesh, point_format, read_points
 
     if os.path.isdir(path):
         raise ScatterError(f"{path}: is a directory")
     if not os.path.exists(path):
         raise ScatterError(f"{path}: no such file")
-    if is_point_file(path):
+    if point_format(path) is None:
+        return sample_mesh(path, sample_options)
+    try:
         pts = read_points(path, MAX_DRAWN)
-        note = f"{pts.total:,} points" + (f", {len(pts.points):,} drawn" if len(pts.points) < pts.total else "")
-        return pts.points, pts.attributes, pts.up_axis, note
-    return sample_mesh(path, sample_options)
+    except IsMesh:  # a PLY with faces, a USD stage without points
+        return sample_mesh(path, sample_options)
+    note = f"{pts.total:,} points" + (f", {len(pts.points):,} drawn" if len(pts.points) < pts.total else "")
+    return pts.points, pts.attributes, pts.up_axis, note
 
 
 def sample_mesh(path, options):
@@ -211,6 +215,7 @@ def draw_input(path, views, size, sample_options):
     """((size, size * len(views), 3) uint8 picture, [caption line]) of one input."""
     import numpy as np
 
+    from ..writers.pointfiles import reason
     from .render import point_colors, thumbnail
 
     try:
@@ -220,8 +225,7 @@ def draw_input(path, views, size, sample_options):
     except MemoryError:
         raise ScatterError(f"{path}: out of memory") from None
     except Exception as exc:  # a reader's or loader's own error type: one line, this input only
-        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ScatterError(f"{path}: {reason}") from None
+        raise ScatterError(f"{path}: {reason(exc)}") from None
     finite = np.isfinite(points).all(axis=1)
     if not finite.all():  # said in the caption, not dropped silently
         note += f", {int((~finite).sum()):,} not finite (not drawn)"

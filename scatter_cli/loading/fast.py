@@ -4,7 +4,7 @@ Each reader gives the triangles trimesh gives with ``process=False`` (same corne
 order, same split into geometries), or None when the file holds anything it is not sure
 of; the caller then loads the file with trimesh, which also words the error for a
 malformed file. The text formats are parsed by the compiled ``_creaders`` (without it,
-or with SCATTER_NUMPY=1, they go to trimesh); binary STL and GLB (gltfread.py) are
+or with SCATTER_NUMPY=1, they go to trimesh); binary STL and GLB (gltf.py) are
 read with NumPy. The rules and the measurements behind the choice are in docs/loading.md.
 """
 
@@ -16,42 +16,31 @@ import numpy as np
 
 from ..core import native
 from ..core.native import worker_count
-from .ply import _TYPES, _contents
+from .ply import INDEX_NAMES, PLY_TYPES, HeaderError, contents, parse_header
 
 _STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
-_MAX_HEADER = 1 << 16
+MAX_COUNT = 10**18  # a count of 19 digits or more: no file holds it, nor the compiled reader's int64
 _kernel = native.kernel("_creaders")  # the text parsers; None: trimesh reads those files
 
 
 def read_file(path, read, smooth=False, color=False, uv=False):
-    """``read`` (one of the ``read_*`` functions below, as loaders.LOADERS names them) of
+    """``read`` (one of the ``read_*`` functions below, as load.LOADERS names them) of
     the bytes of the file at ``path``: a list of (vertices (V, 3) float64, faces (F, 3)
     int64), one per geometry in trimesh's order; for a GLB, a scene: (geometries [(name,
     vertices, faces)], instances [(name, geometry index, (4, 4) matrix or None)])
-    (gltfread.py); or None (hand the file to trimesh).
+    (gltf.py); or None (hand the file to trimesh).
 
     ``smooth``: smooth normals are wanted: a PLY's own normals come as a third item of its
-    geometry, a dict (plyread.vertex_tables); other files with normals or UVs of their
+    geometry, a dict (ply.vertex_tables); other files with normals or UVs of their
     own are handed over (the caller computes smooth normals from the faces, as trimesh
     does for the others). ``color``: vertex colours are wanted: only PLY is read (its
     colours in that dict), every other format handed over. ``uv``: texture coordinates
     are wanted: only OBJ is read. An OBJ read for ``smooth`` or ``uv`` has the geometries
-    trimesh makes of groups with ``vt`` or ``vn`` refs (its vertex split, objsplit.py)
+    trimesh makes of groups with ``vt`` or ``vn`` refs (its vertex split, obj.py)
     and their UVs and normals in that dict.
     """
-    try:
-        with open(path, "rb") as f:
-            data = _contents(f)
-    except OSError:
-        return None
-    try:
-        return read(data, path, smooth, color, uv)
-    finally:
-        if hasattr(data, "close"):
-            try:
-                data.close()
-            except BufferError:  # an array still views the mapping: it closes with it
-                pass
+    with contents(path) as data:
+        return None if data is None else read(data, path, smooth, color, uv)
 
 
 def read_ply(data, path, smooth, color, uv):
@@ -89,16 +78,8 @@ def _materials_resolve(data, path):
 def missing_material_library(path):
     """The material library the OBJ at ``path`` names (its first ``mtllib``) when trimesh
     would not find it beside the file; None when it names none or it is there."""
-    try:
-        with open(path, "rb") as f:
-            data = _contents(f)
-    except OSError:
-        return None
-    try:
-        name = _material_library(data)
-    finally:
-        if hasattr(data, "close"):
-            data.close()
+    with contents(path) as data:
+        name = None if data is None else _material_library(data)
     return name if name is not None and not _resolves(name, path) else None
 
 
@@ -172,7 +153,7 @@ def _ply(data, smooth=False, color=False):
     got = read_triangles_from(data, smooth, color)
     if got is not None:
         return [got]
-    layout = _ascii_layout(bytes(data[:_MAX_HEADER]))
+    layout = _ascii_layout(data)
     c = _kernel
     if layout is None or not c:
         return None
@@ -215,46 +196,29 @@ def _declared(column, kind):
     return column.astype(kind)
 
 
-def _ascii_layout(head):
+def _ascii_layout(data):
     """((body offset, vertex count, face count, vertex properties, x, y, z columns, and
     whether each of x, y, z is float32), [(name, NumPy type) of each vertex property])
     for an ASCII PLY of ``vertex`` (scalar properties) then ``face`` (one list of int
     indices), or None."""
-    end = head.find(b"end_header\n")
-    if not head.startswith(b"ply\n") or end < 0 or b"\r" in head[:end]:
-        return None
     try:
-        lines = head[:end].decode("ascii").split("\n")
-    except UnicodeDecodeError:
+        header = parse_header(data)
+    except HeaderError:
         return None
-    elements = []
-    for words in (line.split(" ") for line in lines[1:-1]):  # the last: the text before end_header
-        if words[0] in ("comment", "obj_info"):
-            continue
-        if words == ["format", "ascii", "1.0"]:
-            continue
-        if words[0] == "element" and len(words) == 3 and words[2].isdigit() and len(words[2]) < 19:
-            elements.append((words[1], int(words[2]), []))  # (a count past int64 cannot fit the file)
-        elif words[0] == "property" and elements:
-            elements[-1][2].append(words[1:])
-        else:
-            return None
-    if lines[-1] or "format ascii 1.0" not in lines or [e[0] for e in elements] != ["vertex", "face"]:
+    if header.encoding != "ascii" or header.names() != ["vertex", "face"] or any("\r" in s for s in header.lines):
         return None
-    (_, n_vertex, vprops), (_, n_face, fprops) = elements
-    names = [p[1] if len(p) == 2 else None for p in vprops]
-    if None in names or len(set(names)) != len(names) or any(p[0] not in _TYPES for p in vprops):
+    vertex, face = header.elements
+    names = [name for _, name in vertex.properties]
+    if not vertex.scalar or len(set(names)) != len(names) or {"x", "y", "z"} - set(names):
         return None
-    if {"x", "y", "z"} - set(names) or len(fprops) != 1 or len(fprops[0]) != 4:
+    if max(vertex.count, face.count) >= MAX_COUNT or len(face.properties) != 1 or face.properties[0][0] != "list":
         return None
-    kind, count_type, index_type, name = fprops[0]
-    if kind != "list" or name not in ("vertex_indices", "vertex_index") or count_type not in _TYPES:
-        return None
-    if _TYPES.get(index_type) not in ("i4", "u4"):
+    _, _, index_type, name = face.properties[0]
+    if name not in INDEX_NAMES or PLY_TYPES[index_type] not in ("i4", "u4"):
         return None
     columns = [names.index(a) for a in "xyz"]
-    kinds = [_TYPES[vprops[k][0]] for k in columns]
+    kinds = [PLY_TYPES[vertex.properties[k][0]] for k in columns]
     if any(t not in ("f4", "f8") for t in kinds):
         return None
-    args = (end + len(b"end_header\n"), n_vertex, n_face, len(vprops), *columns, *(int(t == "f4") for t in kinds))
-    return args, [(name, _TYPES[p[0]]) for name, p in zip(names, vprops)]
+    args = (header.body, vertex.count, face.count, len(names), *columns, *(int(t == "f4") for t in kinds))
+    return args, [(name, PLY_TYPES[kind]) for kind, name in vertex.properties]

@@ -1,9 +1,10 @@
 """Loading a surface: a mesh file, standard input, a trimesh object or scene -> a Surface.
 
-One table, :data:`LOADERS`, says per input format how it is read: the fast reader for
-plain jobs (readers.py: vertices and faces without trimesh), the loader that reads it
-whole (trimesh, or usdread for USD stages), and what the format fixes of the scene's
-units. A format trimesh knows but the table does not name is read by trimesh. What a
+One table, :data:`LOADERS` (the rows of :mod:`.formats` with the functions they name),
+says per input format how it is read: the fast reader for plain jobs (fast.py: vertices
+and faces without trimesh), the loader that reads it whole (trimesh, or usd.py for USD
+stages), and what the format fixes of the scene's units. A format trimesh knows but the
+table does not name is read by trimesh. What a
 loader has to say about a file (USD's diagnostics, geometry it did not keep) comes back
 on the surface it returns: ``surface.warnings`` and ``surface.unsampled``.
 """
@@ -21,7 +22,8 @@ import numpy as np
 
 from . import fast as readers
 from ..errors import ScatterError, ScatterUsageError
-from .formats import INPUT_FORMATS, STDIN_FORMATS
+from . import ply
+from .formats import INPUT_FORMATS, STDIN_FORMATS, TABLE
 from .sourcefile import check_readable, stream_bytes
 from ..surface.model import Geometry, Instance, Surface, Unsampled, select_objects
 
@@ -72,7 +74,7 @@ class Job:
 class Loader:
     """How one input format is read.
 
-    ``fast``: a readers.py function for plain jobs on files (None: none), given the bytes;
+    ``fast``: a fast.py function for plain jobs on files (None: none), given the bytes;
     ``full``: reads any job of the format -> Surface; ``units``: the (up axis, metres per
     unit) the format fixes by its specification, None where it says nothing.
     """
@@ -88,7 +90,7 @@ def load_surface(source, *, input_format: str | None = None, objects=None, plain
     a Surface is taken as it is).
 
     ``plain``: only vertices and faces are wanted (no colours, UVs or normals from the
-    file), so the fast readers (readers.py) may read it without importing trimesh.
+    file), so the fast readers (fast.py) may read it without importing trimesh.
     ``smooth``: smooth vertex normals are wanted too; the fast readers then read a
     PLY's own normals and otherwise only files without normals or UVs of their own (the
     normals are computed from the faces, as for trimesh's mesh of such a file).
@@ -238,18 +240,24 @@ def _trimesh_file(job):
     except MemoryError:
         raise ScatterError(f"{path}: out of memory while reading the mesh") from None
     except Exception as exc:  # trimesh raises many kinds on malformed input
+        # A PLY header that is not one: said as merge and preview say it (one parser).
+        malformed = file_type == "ply" and ply.header_error(_head(file_obj, ply.MAX_HEADER))
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ScatterError(f"{path}: not a readable {file_type.upper()} mesh ({reason[:200]})") from None
+        raise ScatterError(f"{path}: {malformed or f'not a readable {file_type.upper()} mesh ({reason[:200]})'}") from None
+
+
+def _head(file_obj, size):
+    """The first ``size`` bytes of ``file_obj``, a path or a BytesIO."""
+    if isinstance(file_obj, io.BytesIO):
+        return file_obj.getbuffer()[:size].tobytes()
+    with open(file_obj, "rb") as f:
+        return f.read(size)
 
 
 def _gltf_kind(file_obj, file_type):
     """What the bytes are, whatever the suffix or --input-format said: "glb" when they
     start with the binary glTF magic, "gltf" when with a JSON object; else ``file_type``."""
-    if isinstance(file_obj, io.BytesIO):
-        head = file_obj.getbuffer()[:64].tobytes()
-    else:
-        with open(file_obj, "rb") as f:
-            head = f.read(64)
+    head = _head(file_obj, 64)
     if head[:4] == b"glTF":
         return "glb"
     return "gltf" if head.lstrip(b" \t\r\n\xef\xbb\xbf").startswith(b"{") else file_type
@@ -341,18 +349,8 @@ def _usd_surface(job):
 # -- the table -----------------------------------------------------------------------------
 
 TRIMESH = Loader(_trimesh_surface)
-_GLTF_UNITS = ("Y", 1.0)  # glTF is Y up in metres by its specification
-_USD = Loader(_usd_surface)
+FULL = {"trimesh": _trimesh_surface, "obj": _obj_surface, "usd": _usd_surface}  # the table's `full` names
 
 LOADERS: dict[str, Loader] = {
-    "ply": Loader(_trimesh_surface, readers.read_ply),
-    "obj": Loader(_obj_surface, readers.read_obj),
-    "stl": Loader(_trimesh_surface, readers.read_stl),
-    "off": Loader(_trimesh_surface, readers.read_off),
-    "glb": Loader(_trimesh_surface, readers.read_glb, _GLTF_UNITS),
-    "gltf": Loader(_trimesh_surface, None, _GLTF_UNITS),
-    "usd": _USD,
-    "usda": _USD,
-    "usdc": _USD,
-    "usdz": _USD,
+    f.name: Loader(FULL[f.full], getattr(readers, f.fast) if f.fast else None, f.units) for f in TABLE
 }

@@ -1,38 +1,154 @@
-"""A NumPy reader for binary PLY triangle meshes, so a plain job need not import trimesh.
+"""PLY files: the one header parser (mesh files and point files alike), and a NumPy reader
+for binary PLY triangle meshes, so a plain job need not import trimesh.
 
-Importing trimesh costs about 0.12 s, more than a whole small job. This reader handles
+:func:`parse_header` reads a header as the PLY specification writes it and names, in one
+line, what is wrong with one that is not: :mod:`scatter_cli.loading.fast` (ASCII meshes),
+the mesh loader's error for a file trimesh cannot read, and the point files of
+:mod:`scatter_cli.writers.ply` (``merge`` and ``preview``) all read headers through it.
+
+Importing trimesh costs about 0.12 s, more than a whole small job. The mesh reader handles
 the common case only: a binary PLY (either byte order) whose elements are ``vertex``
 (scalar properties including x, y, z) and then ``face`` (one list property of three
 indices per face, and scalar properties beside it, such as an STL attribute or face
 colours, which trimesh keeps apart from the triangles: skipped, and read only for jobs
 not asking for colours). For anything else it returns None and the caller loads
-the file with trimesh, which also reports what is wrong with a malformed file. When it
-answers, it gives the arrays trimesh gives with ``process=False``.
+the file with trimesh. When it answers, it gives the arrays trimesh gives with
+``process=False``.
 """
 
+import contextlib
 import mmap
 import os
+from typing import NamedTuple
 
 import numpy as np
 
-_TYPES = {
+PLY_TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
     "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
     "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }
-_MAX_HEADER = 1 << 16
-_INDEX_NAMES = {"vertex_indices", "vertex_index"}
+BYTE_ORDERS = {"ascii": "<", "binary_little_endian": "<", "binary_big_endian": ">"}  # ASCII: as it is read
+MAX_HEADER = 1 << 16  # bytes a header may take
+SKIPPED = ("comment", "obj_info")  # header lines that say nothing of the body
+INDEX_NAMES = {"vertex_indices", "vertex_index"}  # the face list trimesh reads as triangles
+
+
+class HeaderError(ValueError):
+    """A PLY header that is not one; the message says what is wrong, in one line."""
+
+
+class Element(NamedTuple):
+    """One element of a header: its ``name``, ``count`` and ``properties``, each
+    ``(type, name)`` or ``("list", count type, item type, name)``, as the header words them."""
+
+    name: str
+    count: int
+    properties: tuple
+
+    @property
+    def scalar(self) -> bool:
+        """Whether every property is a scalar (no list)."""
+        return all(len(p) == 2 for p in self.properties)
+
+    def dtype(self, order="<") -> np.dtype:
+        """The record of one row of scalar properties, in the byte ``order`` ("<" or ">")."""
+        return np.dtype([(name, order + PLY_TYPES[kind]) for kind, name in self.properties])
+
+
+class Header(NamedTuple):
+    """A parsed PLY header: ``encoding`` (ascii, binary_little_endian or
+    binary_big_endian), its ``elements`` in file order, its ``lines`` (from ``ply`` to
+    ``end_header``, as in the file, without their newline) and ``body``, the offset of
+    the first byte after it."""
+
+    encoding: str
+    elements: tuple
+    lines: tuple
+    body: int
+
+    @property
+    def order(self) -> str:
+        return BYTE_ORDERS[self.encoding]
+
+    def names(self):
+        return [e.name for e in self.elements]
+
+
+def parse_header(head) -> Header:
+    """The Header at the start of ``head`` (the file's first bytes, up to MAX_HEADER);
+    HeaderError saying what is wrong with a header that is not one.
+
+    The header is the lines from ``ply`` to the first ``end_header``: a ``format`` line
+    (ascii, binary_little_endian or binary_big_endian, version 1.0), ``element NAME
+    COUNT`` lines each followed by its ``property`` lines, and ``comment`` or
+    ``obj_info`` lines anywhere. Blank space is any run of spaces or tabs; a line may end
+    in CR LF."""
+    lines, body = _header_lines(head)
+    encoding, elements = None, []
+    for number, line in enumerate(lines[1:-1], 2):
+        words = line.split()
+        if words[:1] == ["format"] and len(words) == 3 and words[1] in BYTE_ORDERS and words[2] == "1.0":
+            if encoding is None:
+                encoding = words[1]
+                continue
+        elif words[:1] == ["element"] and len(words) == 3 and words[2].isdigit():
+            elements.append((words[1], int(words[2]), []))
+            continue
+        elif words[:1] == ["property"] and elements and _is_property(words[1:]):
+            elements[-1][2].append(tuple(words[1:]))
+            continue
+        elif words[:1] and words[0] in SKIPPED:
+            continue
+        raise _malformed(number, line)
+    if encoding is None:
+        raise HeaderError("malformed PLY header: no format line")
+    return Header(encoding, tuple(Element(n, c, tuple(p)) for n, c, p in elements), lines, body)
+
+
+def _header_lines(head):
+    """(the header's lines, from ``ply`` to the first line with the word ``end_header``,
+    which must be that word alone; the offset of the byte after it)."""
+    raw = bytes(head[:MAX_HEADER]).split(b"\n")
+    if raw[0].strip() != b"ply":
+        raise HeaderError("not a PLY file (its first line is not 'ply')")
+    last = next((k for k, line in enumerate(raw) if b"end_header" in line.split()), len(raw) - 1)
+    if last == len(raw) - 1:  # none, or in the last line read, which may go on
+        raise HeaderError(f"malformed PLY header: no end_header line (within its first {MAX_HEADER >> 10} KiB)")
+    try:
+        lines = tuple(line.decode("ascii") for line in raw[: last + 1])
+    except UnicodeDecodeError:
+        raise HeaderError("malformed PLY header: it is not ASCII text") from None
+    if lines[-1].split() != ["end_header"]:
+        raise _malformed(len(lines), lines[-1])
+    return lines, sum(len(line) + 1 for line in raw[: last + 1])
+
+
+def _malformed(number, line):
+    return HeaderError(f"malformed PLY header at line {number}: {line.strip()[:80]!r}")
+
+
+def _is_property(words):
+    """Whether ``words`` (after ``property``) declare a scalar or a list of known types."""
+    if len(words) == 2:
+        return words[0] in PLY_TYPES
+    return len(words) == 4 and words[0] == "list" and words[1] in PLY_TYPES and words[2] in PLY_TYPES
+
+
+def header_error(head):
+    """What is wrong with the PLY header at the start of ``head``, or None."""
+    try:
+        parse_header(head)
+    except HeaderError as exc:
+        return str(exc)
+    return None
 
 
 def read_triangles(path):
     """(vertices (V, 3) float64, faces (F, 3) int64) of a binary PLY, or None."""
-    try:
-        with open(path, "rb") as f:
-            data = _contents(f)
-    except OSError:
-        return None
-    return read_triangles_from(data)
+    with contents(path) as data:
+        return None if data is None else read_triangles_from(data)
 
 
 def read_triangles_from(data, smooth=False, color=False):
@@ -40,25 +156,20 @@ def read_triangles_from(data, smooth=False, color=False):
     the vertex normals, colours trimesh would give (:func:`vertex_tables`), as a third
     item, a dict; None when the file has what the tables do not cover."""
     try:
-        head = bytes(data[:_MAX_HEADER])
-        end = head.find(b"end_header")
-        if not head.startswith(b"ply") or end < 0:
-            return None
-        body_at = head.index(b"\n", end) + 1
-        layout = _layout(head[:end].decode("ascii").split("\n"))
+        header = parse_header(data)
+        layout = _layout(header)
         if layout is None:
             return None
-        order, vertex, n_vertex, face, n_face = layout
+        vertex, n_vertex, face, n_face = layout
         if color and len(face.names) > 2:
             return None  # face colours: trimesh's visuals decide which colours count
-        vertex, face = vertex.newbyteorder(order), face.newbyteorder(order)
         sizes = (vertex.itemsize * n_vertex, face.itemsize * n_face)
-        if body_at + sum(sizes) != len(data):
+        if header.body + sum(sizes) != len(data):
             return None  # truncated, trailing bytes or counts that do not fit: trimesh says which
-    except (ValueError, UnicodeDecodeError, TypeError):
+    except (ValueError, TypeError):  # a header that is not one, a property named twice
         return None
-    v = np.frombuffer(data, dtype=vertex, count=n_vertex, offset=body_at)
-    t = np.frombuffer(data, dtype=face, count=n_face, offset=body_at + sizes[0])
+    v = np.frombuffer(data, dtype=vertex, count=n_vertex, offset=header.body)
+    t = np.frombuffer(data, dtype=face, count=n_face, offset=header.body + sizes[0])
     if n_face and not (t["n"] == 3).all():
         return None  # polygons: trimesh triangulates them
     vertices = np.empty((n_vertex, 3))
@@ -110,6 +221,26 @@ def _rgba(c):
 MAP_FROM = 1 << 20  # bytes: a smaller file is read (mapping it costs more system calls than it saves)
 
 
+@contextlib.contextmanager
+def contents(path):
+    """The bytes of the file at ``path`` (:func:`_contents`), None when it cannot be read.
+    A mapping is closed on leaving, unless an array still views it: it then closes with
+    the last such array."""
+    try:
+        with open(path, "rb") as f:
+            data = _contents(f)
+    except OSError:
+        data = None
+    try:
+        yield data
+    finally:
+        if hasattr(data, "close"):
+            try:
+                data.close()
+            except BufferError:
+                pass
+
+
 def _contents(f):
     """The bytes of file ``f``: a large file mapped read-only where possible (reading it
     into fresh memory costs more than converting it), else read. A mapping stays open
@@ -123,34 +254,18 @@ def _contents(f):
         return f.read()
 
 
-def _layout(lines):
-    """(byte order, vertex dtype, vertex count, face dtype, face count), or None."""
-    fmt = [line.split() for line in lines if line.startswith("format")]
-    if len(fmt) != 1 or len(fmt[0]) != 3:
+def _layout(header):
+    """(vertex dtype, vertex count, face dtype, face count) of a binary mesh of ``vertex``
+    (scalar properties including x, y, z) then ``face`` elements, or None."""
+    if header.encoding == "ascii" or header.names() != ["vertex", "face"]:
         return None
-    order = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(fmt[0][1])
-    elements = []
-    for k, words in enumerate(line.split() for line in lines):
-        if not words and k < len(lines) - 1:
-            return None  # a blank header line: trimesh's header parser fails on it
-        if not words or words[0] in ("ply", "format", "comment", "obj_info"):
-            continue
-        if words[0] == "element" and len(words) == 3:
-            elements.append((words[1], int(words[2]), []))
-        elif words[0] == "property" and elements:
-            elements[-1][2].append(words[1:])
-        else:
-            return None
-    if order is None or [e[0] for e in elements] != ["vertex", "face"]:
+    vertex, face = header.elements
+    if not vertex.scalar or {"x", "y", "z"} - {name for _, name in vertex.properties}:
         return None
-    (_, n_vertex, vprops), (_, n_face, fprops) = elements
-    if any(len(p) != 2 or p[0] not in _TYPES for p in vprops) or {"x", "y", "z"} - {p[1] for p in vprops}:
+    face_dtype = _face_dtype(face.properties)
+    if face_dtype is None:
         return None
-    face = _face_dtype(fprops)
-    if face is None or n_vertex < 0 or n_face < 0:
-        return None
-    vertex = np.dtype([(p[1], _TYPES[p[0]]) for p in vprops])
-    return order, vertex, n_vertex, face, n_face
+    return vertex.dtype(header.order), vertex.count, face_dtype.newbyteorder(header.order), face.count
 
 
 def _face_dtype(fprops):
@@ -158,23 +273,20 @@ def _face_dtype(fprops):
     properties beside the list (``e0``, ``e1``... in file order), or None. One list only
     (a second, such as ``texcoord``, trimesh reads), named as trimesh looks for it, and no
     other property with that name or a name given twice (trimesh keeps one of each name)."""
-    lists = [k for k, p in enumerate(fprops) if p[:1] == ["list"]]
-    if len(lists) != 1 or len(fprops[lists[0]]) != 4:
+    lists = [k for k, p in enumerate(fprops) if p[0] == "list"]
+    if len(lists) != 1:
         return None
     _, count_type, index_type, name = fprops[lists[0]]
-    if name not in _INDEX_NAMES or count_type not in _TYPES or index_type not in _TYPES:
-        return None
-    if _TYPES[index_type][0] == "f":
+    if name not in INDEX_NAMES or PLY_TYPES[index_type][0] == "f":
         return None
     names = [p[-1] for p in fprops]
-    if len(set(names)) != len(names) or len(_INDEX_NAMES & set(names)) != 1:
+    if len(set(names)) != len(names) or len(INDEX_NAMES & set(names)) != 1:
         return None
     fields = []
     for k, p in enumerate(fprops):
         if k == lists[0]:
-            fields += [("n", _TYPES[count_type]), ("i", _TYPES[index_type], 3)]
-        elif len(p) == 2 and p[0] in _TYPES:
-            fields.append((f"e{k}", _TYPES[p[0]]))
+            fields += [("n", PLY_TYPES[count_type]), ("i", PLY_TYPES[index_type], 3)]
         else:
-            return None
+            fields.append((f"e{k}", PLY_TYPES[p[0]]))
     return np.dtype(fields)
+

@@ -28,7 +28,7 @@ import tempfile
 
 import numpy as np
 
-from ..errors import ScatterError, ScatterUsageError
+from ..errors import ScatterError
 from .sourcefile import check_readable, stream_bytes
 from ..surface.model import Geometry, Instance, Surface, Unsampled, corners, doubled_areas
 from .usdmesh import Topology, fan_faces, with_primvars

@@ -8,11 +8,11 @@ imported when a file of it is written.
 from __future__ import annotations
 
 from ..core.interrupts import held
-from .base import Writer, _Writer, check_room, copy_tail, open_output
+from .base import Writer, _Writer, check_room, copy_range, open_output
 from .formats import (ASCII_FORMATS, BY_NAME, FORMATS, MERGEABLE, SUFFIXES, check_extra, check_output, infer_format,
                       load, run_precision)
 
-__all__ = ["ASCII_FORMATS", "FORMATS", "MERGEABLE", "PLY_TYPES", "SUFFIXES", "Writer", "check_output", "copy_tail",
+__all__ = ["ASCII_FORMATS", "FORMATS", "MERGEABLE", "PLY_TYPES", "SUFFIXES", "Writer", "check_output", "copy_range",
            "file_size", "infer_format", "make_writer", "open_output", "run_precision", "write_samples", "write_stream"]
 
 

@@ -44,12 +44,18 @@ class Writer:
 _Writer = Writer  # the name the format modules of other branches import
 
 
-def copy_tail(path, offset, stream, block=1 << 22):
-    """Copy the bytes of file ``path`` from ``offset`` to its end into ``stream`` (for merging)."""
+def copy_range(path, start, end, stream, block=1 << 22):
+    """Copy bytes ``start`` to ``end`` of the file ``path`` into ``stream`` (for merging);
+    a file that ends before ``end`` is an error naming it."""
     with reading(path), open(path, "rb") as f:
-        f.seek(offset)
-        for data in iter(lambda: f.read(block), b""):
+        f.seek(start)
+        left = end - start
+        while left > 0:
+            data = f.read(min(block, left))
+            if not data:
+                raise ScatterError(f"{path}: the file ended early (truncated?)")
             stream.write(data)
+            left -= len(data)
 
 
 @contextlib.contextmanager

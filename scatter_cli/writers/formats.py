@@ -7,8 +7,9 @@ and usage errors read it at no start-up cost. The writer of a format is the clas
 A format module provides ``Writer(stream, layout, count, **options)`` (see
 :mod:`scatter_cli.writers.base`); a format with ``sized`` set also provides
 ``file_size(layout, count, **options) -> int`` (its header plus ``count`` rows, known
-before any point is drawn), and a ``mergeable`` one ``read_part(path) -> Part``
-(:mod:`scatter_cli.writers.parts`) for ``scatter merge``.
+before any point is drawn); and every one its reader, ``read(path, fmt)``
+(:mod:`scatter_cli.writers.pointfiles`), which ``merge`` (a ``mergeable`` format's
+parts) and ``preview`` both read its files with.
 """
 
 from __future__ import annotations

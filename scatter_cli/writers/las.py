@@ -13,14 +13,17 @@ WKT record (LASF_Projection 2112), and there are no GeoTIFF keys.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import math
 import os
 
 import numpy as np
 
+from ..core.interrupts import held
 from ..errors import ScatterError
-from .base import Writer, open_output
-from .parts import Part
+from .base import Writer, reading
+from .pointfiles import SPANS, body_error, file_bytes, reason
 
 SOFTWARE = "scatter"
 FINEST_STEP = 1e-4  # 0.1 mm in metres: never coarser than this
@@ -29,11 +32,11 @@ INT32_LIMIT = 2**31 - 2
 RETURN_1_OF_1 = 0x11  # point formats 6-10: return number (bits 0-3) 1 of 1 (bits 4-7)
 
 
-def _laspy():
+def _laspy(doing="LAS/LAZ output"):
     try:
         import laspy
     except ImportError:
-        raise ScatterError("LAS/LAZ output needs laspy and lazrs: pip install laspy lazrs pyproj") from None
+        raise ScatterError(f"{doing} needs laspy and lazrs: pip install laspy lazrs pyproj") from None
     return laspy
 
 
@@ -349,47 +352,86 @@ def clear_creation_date(stream):
     stream.seek(0, 2)
 
 
-# -- merge ------------------------------------------------------------------------------
+# -- the reader ---------------------------------------------------------------------------
 
-def read_part(path, fmt):
-    """A LAS or LAZ part: re-written through laspy (LAZ points are compressed chunks)."""
-    head = read_header(path)
-    return Part(path, ("las",) + layout_of(head), head.point_count, (0, 0), None,
-                lambda parts, stream: write_joined([p.path for p in parts], head, stream, fmt == "laz"))
+@dataclasses.dataclass(frozen=True)
+class LasFile:
+    """A LAS or LAZ file as its laspy ``header`` describes it (see :mod:`.pointfiles`);
+    ``compress``: a file joined from it is LAZ."""
+
+    path: str
+    header: object
+    compress: bool
+    up_axis: str = "Z"
+
+    @property
+    def count(self):
+        return self.header.point_count
+
+    @property
+    def layout(self):
+        """What files must share to be joined: point format, extra bytes, scale, offset
+        and coordinate system."""
+        h = self.header
+        return ("las", h.point_format.id, tuple(h.point_format.extra_dimension_names), tuple(h.scales.tolist()),
+                tuple(h.offsets.tolist()), crs_of(h))
+
+    def columns(self, limit=None):
+        """x, y, z (float64), the colour in 8 bits (``red``, ``green``, ``blue``) and every
+        Extra Bytes column: of every point, or of SPANS runs of about ``limit`` in all."""
+        if not self.count:
+            return {c: np.empty(0) for c in "xyz"}
+        with las_errors(self.path), _laspy().open(self.path) as reader:
+            if limit is None or self.count <= limit:
+                parts = [reader.read_points(self.count)]
+            else:
+                parts = list(_spans(reader, self.count, math.ceil(limit / SPANS)))
+        columns = {c: np.concatenate([np.asarray(p[c], dtype=np.float64) for p in parts]) for c in "xyz"}
+        names = self.header.point_format.dimension_names
+        for name in [c for c in ("red", "green", "blue") if c in names]:  # scatter writes 8-bit colour times 257
+            columns[name] = np.concatenate([np.asarray(p[name]) >> 8 for p in parts])
+        for name in self.header.point_format.extra_dimension_names:
+            columns[name] = np.concatenate([np.asarray(p[name]) for p in parts])
+        return columns
+
+    def join(self, files, stream):
+        """Write ``files`` (this one first, all of its layout) to ``stream`` as one file:
+        their points re-written through laspy (LAZ points are compressed chunks) under a
+        header like this one's."""
+        with held():  # laspy and lazrs write: a signal is raised once they are done
+            write_joined([f.path for f in files], self.header, stream, self.compress)
 
 
-def read_header(path):
-    """The laspy header of the LAS/LAZ file ``path``; a one-line error when it is not one."""
-    laspy = _laspy()
+def _spans(reader, total, rows):
+    """Runs of ``rows`` points read at SPANS evenly spaced points of the file."""
+    for j in range(SPANS):
+        start = total * j // SPANS
+        reader.seek(start)
+        yield reader.read_points(min(rows, total - start))
+
+
+def read(path, fmt):
+    """A LAS or LAZ file (``fmt``: "las" or "laz", what a file joined from it is); an
+    uncompressed one must hold the points its header says."""
+    laspy = _laspy(f"{path}: reading LAS/LAZ")
+    with las_errors(path), laspy.open(path) as f:
+        header = f.header
+    have, row = file_bytes(path) - header.offset_to_point_data, header.point_format.size
+    if not header.are_points_compressed and have < header.point_count * row:
+        raise body_error(path, have, header.point_count, row)
+    return LasFile(path, header, fmt == "laz")
+
+
+@contextlib.contextmanager
+def las_errors(path):
+    """laspy's errors on a file that is not LAS/LAZ as one line naming it."""
     try:
-        with laspy.open(path) as f:
-            return f.header
-    except FileNotFoundError:
-        raise ScatterError(f"{path}: no such file") from None
+        with reading(path):
+            yield
+    except ScatterError:
+        raise
     except Exception as exc:  # laspy raises its own error types for bad files
-        raise ScatterError(f"{path}: not a LAS/LAZ file ({exc})") from None
-
-
-def layout_of(header):
-    """What parts must share to be joined: point format, extra bytes, scale, offset and
-    coordinate system."""
-    return (header.point_format.id, tuple(header.point_format.extra_dimension_names),
-            tuple(header.scales.tolist()), tuple(header.offsets.tolist()), crs_of(header))
-
-
-def merge_las(paths, out, chunk=1 << 20):
-    """Join LAS or LAZ files of one point layout, scale and offset into ``out``, in order.
-
-    Parts of one run (``--shard``) share the run's scale and offset, so the result is
-    the run's output byte for byte; the compression follows ``out``'s suffix.
-    """
-    heads = [read_header(p) for p in paths]
-    for p, h in zip(paths, heads):
-        if layout_of(h) != layout_of(heads[0]):
-            raise ScatterError(f"{p}: LAS point format, extra bytes, scale, offset or coordinate system differ "
-                               f"from {paths[0]}")
-    with open_output(out) as stream:
-        write_joined(paths, heads[0], stream, str(out).lower().endswith(".laz"), chunk)
+        raise ScatterError(f"{path}: not a LAS/LAZ file ({reason(exc)})") from None
 
 
 def write_joined(paths, first, stream, compress, chunk=1 << 20):
@@ -405,7 +447,13 @@ def write_joined(paths, first, stream, compress, chunk=1 << 20):
     with laspy.open(stream, mode="w", header=header, do_compress=compress, laz_backend=backend,
                     closefd=False) as writer:
         for p in paths:
-            with laspy.open(p) as f:
-                for points in f.chunk_iterator(chunk):
-                    writer.write_points(points)
+            for points in _chunks(p, chunk):
+                writer.write_points(points)
     clear_creation_date(stream)
+
+
+def _chunks(path, chunk):
+    """The points of the file ``path``, ``chunk`` at a time; a bad one (a LAZ part is
+    checked only as it is read) is the reader's one-line error."""
+    with las_errors(path), _laspy().open(path) as f:
+        yield from f.chunk_iterator(chunk)

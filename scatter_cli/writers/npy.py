@@ -1,4 +1,4 @@
-"""NPY output: one structured array, its fields named as the columns."""
+"""NPY output: one structured array, its fields named as the columns; and its reader."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import numpy as np
 
 from ..errors import ScatterError
 from .binary import BinaryWriter, row_size, structured_dtype
-from .parts import Part, open_part, size
+from .base import reading
+from .pointfiles import PointFile, reason
 
 
 def header(descr, count) -> bytes:
@@ -32,22 +33,20 @@ def file_size(fmt, layout, count, **options):
     return len(header(np.lib.format.dtype_to_descr(structured_dtype(layout)), count)) + count * row_size(layout)
 
 
-# -- merge ------------------------------------------------------------------------------
+# -- the reader ---------------------------------------------------------------------------
 
-def read_part(path, fmt="npy"):
-    fmt_ = np.lib.format
-    with open_part(path) as f:
+def read(path, fmt="npy"):
+    """An NPY file of one structured array, a row a point."""
+    npy = np.lib.format
+    with reading(path), open(path, "rb") as f:
         try:
-            version = fmt_.read_magic(f)
-            read = fmt_.read_array_header_1_0 if version == (1, 0) else fmt_.read_array_header_2_0
-            shape, fortran, dtype = read(f)
+            version = npy.read_magic(f)
+            read_header = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
+            shape, fortran, dtype = read_header(f)
         except ValueError as exc:
-            raise ScatterError(f"{path}: not an NPY file ({exc})") from None
+            raise ScatterError(f"{path}: not an NPY file ({reason(exc)})") from None
         offset = f.tell()
     if len(shape) != 1 or fortran or dtype.names is None:
         raise ScatterError(f"{path}: not an NPY array of points (one structured row a point)")
-    if size(path) - offset != shape[0] * dtype.itemsize:
-        raise ScatterError(f"{path}: the file size does not match its header (truncated?)")
-    descr = fmt_.dtype_to_descr(dtype)
-    return Part(path, ("npy", str(descr)), shape[0], (offset, size(path)),
-                lambda parts: header(descr, sum(p.count for p in parts)))
+    descr = npy.dtype_to_descr(dtype)
+    return PointFile.checked(path, dtype, shape[0], offset, True, ("npy", str(descr)), lambda count: header(descr, count))

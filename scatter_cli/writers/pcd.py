@@ -5,7 +5,7 @@ columns under their own names, in the contract's column order. Colour is one 4-b
 ``rgb`` field holding bytes b, g, r, a, as PCL's PointXYZRGB(A) keeps it in memory:
 TYPE F in binary files (PCL's own type), TYPE U in ASCII ones, where the float reading
 of an opaque colour is a NaN that text cannot carry (PCL's ASCII writer prints the
-integer too).
+integer too). The reader (:func:`read`) reads both back.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import numpy as np
 
 from ..errors import ScatterError
 from ..run.columns import Samples
-from .base import Writer, copy_tail, open_output
-from .parts import Part, check_rows, size
+from .base import Writer, reading
+from .pointfiles import PointFile
 from .text import TextEncoder
 
 PCL_NAMES = {"nx": "normal_x", "ny": "normal_y", "nz": "normal_z"}
@@ -101,44 +101,60 @@ def file_size(fmt, layout, count, **options):
     return len(header(fields, count, False)) + count * sum(dt.itemsize * len(cols) for _, cols, dt in fields)
 
 
-# -- merge ------------------------------------------------------------------------------
+# -- the reader ---------------------------------------------------------------------------
 
-def read_header(path):
-    """(header lines without WIDTH/POINTS, point count, data offset) of a PCD file we wrote."""
+PCD_KINDS = {"F": "f", "I": "i", "U": "u"}
+CONTRACT_NAMES = {v: k for k, v in PCL_NAMES.items()}
+MAX_HEADER = 1 << 16  # bytes a header may take
+
+
+class PcdFile(PointFile):
+    def columns(self, limit=None):
+        """The columns as the contract names them: ``normal_x`` as ``nx``..., the packed
+        ``rgb`` as ``red``, ``green``, ``blue`` and ``alpha``."""
+        columns = {CONTRACT_NAMES.get(k, k): v for k, v in super().columns(limit).items()}
+        if "rgb" in columns:
+            columns.update(zip(("red", "green", "blue", "alpha"), unpack_rgb(columns.pop("rgb"))))
+        return columns
+
+
+def unpack_rgb(packed):
+    """(r, g, b, a), each (n,) uint8, of the packed colours ``packed`` (n,) (4-byte float or uint32)."""
+    word = np.ascontiguousarray(packed).view(np.uint32)
+    return tuple(((word >> shift) & 255).astype(np.uint8) for shift in (16, 8, 0, 24))
+
+
+def read(path, fmt="pcd"):
+    """A binary or ASCII PCD file of one value a field."""
+    lines, offset = header_lines(path)
+    keys = {words[0]: words[1:] for words in (ln.split() for ln in lines if not ln.startswith("#")) if words}
+    if not {"FIELDS", "SIZE", "TYPE", "POINTS", "DATA"} <= set(keys):
+        raise ScatterError(f"{path}: not a PCD file")
+    if keys["DATA"] not in (["ascii"], ["binary"]):
+        raise ScatterError(f"{path}: PCD DATA {' '.join(keys['DATA'])} (scatter writes ascii and binary)")
+    names = keys["FIELDS"]
+    if any(c != "1" for c in keys.get("COUNT", ())):
+        raise ScatterError(f"{path}: PCD fields of more than one value are not point columns")
+    try:
+        count = int(keys["POINTS"][0])
+        dtype = np.dtype([(n, f"<{PCD_KINDS[t]}{s}") for n, s, t in zip(names, keys["SIZE"], keys["TYPE"], strict=True)])
+    except (IndexError, KeyError, TypeError, ValueError):
+        raise ScatterError(f"{path}: malformed PCD header (its FIELDS, SIZE, TYPE or POINTS)") from None
+    layout = tuple(ln for ln in lines if not ln.startswith(("WIDTH", "POINTS", "#")))
+    return PcdFile.checked(path, dtype, count, offset, keys["DATA"] == ["binary"], ("pcd", layout),
+                           lambda total: header_from_lines(layout, total))
+
+
+def header_lines(path):
+    """(the header's lines, stripped, up to its DATA line; the offset of the byte after it)."""
     lines, offset = [], 0
-    try:
-        with open(path, "rb") as f:
-            for raw in iter(lambda: f.readline(4096), b""):
-                offset += len(raw)
-                line = raw.decode("ascii", "replace").strip()
-                lines.append(line)
-                if line.startswith("DATA"):
-                    break
-    except OSError as exc:
-        raise ScatterError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    keys = {ln.split(" ", 1)[0]: ln for ln in lines if ln and not ln.startswith("#")}
-    if "DATA" not in keys or "POINTS" not in keys or keys["DATA"] not in ("DATA ascii", "DATA binary"):
-        raise ScatterError(f"{path}: not an uncompressed PCD file")
-    try:
-        count = int(keys["POINTS"].split()[1])
-    except (IndexError, ValueError):
-        raise ScatterError(f"{path}: bad POINTS line in the PCD header") from None
-    layout = [ln for ln in lines if not ln.startswith(("WIDTH", "POINTS", "#"))]
-    return layout, count, offset
-
-
-def merge_pcd(paths, out):
-    """Join PCD files of one layout (all binary or all ASCII) into ``out``, in order."""
-    heads = [read_header(p) for p in paths]
-    first = heads[0][0]
-    for p, (layout, _, _) in zip(paths, heads):
-        if layout != first:
-            raise ScatterError(f"{p}: PCD fields or encoding differ from {paths[0]}")
-    total = sum(h[1] for h in heads)
-    with open_output(out) as stream:
-        stream.write(header_from_lines(first, total))
-        for p, (_, _, offset) in zip(paths, heads):
-            copy_tail(p, offset, stream)
+    with reading(path), open(path, "rb") as f:
+        for raw in iter(lambda: f.readline(4096), b""):
+            offset += len(raw)
+            lines.append(raw.decode("ascii", "replace").strip())
+            if lines[-1].split()[:1] == ["DATA"] or offset > MAX_HEADER:
+                break
+    return lines, offset
 
 
 def header_from_lines(layout, count):
@@ -151,12 +167,3 @@ def header_from_lines(layout, count):
             lines.append(f"POINTS {count}")
         lines.append(ln)
     return ("\n".join(lines) + "\n").encode("ascii")
-
-
-def read_part(path, fmt="pcd"):
-    """A binary or ASCII PCD part."""
-    layout, count, offset = read_header(path)
-    sizes = next((ln.split()[1:] for ln in layout if ln.startswith("SIZE ")), [])
-    check_rows(path, "DATA binary" in layout, offset, count, sum(int(x) for x in sizes))
-    return Part(path, ("pcd", tuple(layout)), count, (offset, size(path)),
-                lambda parts: header_from_lines(layout, sum(p.count for p in parts)))

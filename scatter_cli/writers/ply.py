@@ -1,12 +1,12 @@
-"""PLY output: one ``vertex`` element, binary little-endian or ASCII."""
+"""PLY output: one ``vertex`` element, binary little-endian or ASCII; and its reader."""
 
 from __future__ import annotations
 
-import numpy as np
-
 from ..errors import ScatterError
+from ..loading.ply import MAX_HEADER, HeaderError, parse_header
+from .base import reading
 from .binary import BinaryWriter, row_size
-from .parts import Part, check_rows, open_part, size
+from .pointfiles import IsMesh, PointFile
 from .text import TextEncoder
 
 PLY_TYPES = {"f4": "float", "f8": "double", "i4": "int", "u1": "uchar"}
@@ -42,33 +42,32 @@ def file_size(fmt, layout, count, **options):
     return len(header(layout, count)) + count * row_size(layout)
 
 
-# -- merge ------------------------------------------------------------------------------
+# -- the reader ---------------------------------------------------------------------------
 
-def read_part(path, fmt="ply"):
-    """A binary little-endian or ASCII PLY of one vertex element."""
-    with open_part(path) as f:
-        head = f.read(65536)
-    end = head.find(b"end_header\n")
-    if not head.startswith(b"ply\n") or end < 0:
-        raise ScatterError(f"{path}: not a PLY file")
-    lines = head[:end].decode("ascii", "replace").splitlines()
-    encoding = lines[1].split()[1] if len(lines) > 1 and len(lines[1].split()) > 1 else ""
-    elements = [ln.split() for ln in lines if ln.startswith("element ")]
-    if len(elements) != 1 or elements[0][1] != "vertex" or encoding not in ("ascii", "binary_little_endian"):
-        raise ScatterError(f"{path}: not a point PLY of one vertex element (ascii or binary little-endian)")
-    count = int(elements[0][2])
-    props = tuple(tuple(ln.split()[1:]) for ln in lines if ln.startswith("property "))
-    offset = end + len(b"end_header\n")
-    sizes = {v: np.dtype(k).itemsize for k, v in PLY_TYPES.items()}
-    row = sum(sizes.get(p[0], 0) for p in props)
-    check_rows(path, encoding == "binary_little_endian", offset, count, row)
-    return Part(path, (encoding, props), count, (offset, size(path)), _merged_header(lines))
+def read(path, fmt="ply"):
+    """A point PLY: a ``vertex`` element of scalar properties first, any other element
+    empty; binary (either byte order) or ASCII. Its header is read by the one PLY header
+    parser, the mesh readers' (:func:`scatter_cli.loading.ply.parse_header`)."""
+    with reading(path), open(path, "rb") as f:
+        head = f.read(MAX_HEADER)
+    try:
+        header = parse_header(head)
+    except HeaderError as exc:
+        raise ScatterError(f"{path}: {exc}") from None
+    if any(e.name == "face" and e.count for e in header.elements):
+        raise IsMesh(f"{path}: a PLY with faces is a mesh, not a point file")
+    if header.names()[:1] != ["vertex"] or any(e.count for e in header.elements[1:]):
+        raise ScatterError(f"{path}: not a point PLY (a vertex element first, any other empty)")
+    vertex = header.elements[0]
+    if not vertex.scalar:
+        raise ScatterError(f"{path}: vertex list properties are not point columns")
+    layout = ("ply", header.encoding, tuple((e.name, e.properties) for e in header.elements))
+    return PointFile.checked(path, vertex.dtype(header.order), vertex.count, header.body, header.encoding != "ascii",
+                             layout, lambda count: with_vertex_count(header, count))
 
 
-def _merged_header(lines):
-    def merged(parts):
-        total = sum(p.count for p in parts)
-        out = [f"element vertex {total}" if ln.startswith("element vertex ") else ln for ln in lines]
-        return ("\n".join(out) + "\nend_header\n").encode("ascii")
-
-    return merged
+def with_vertex_count(header, count) -> bytes:
+    """The bytes of ``header`` (a parsed Header) with its vertex count set to ``count``."""
+    at = next(k for k, line in enumerate(header.lines) if line.split()[:2] == ["element", "vertex"])
+    lines = [*header.lines[:at], f"element vertex {count}", *header.lines[at + 1 :]]
+    return ("\n".join(lines) + "\n").encode("ascii")

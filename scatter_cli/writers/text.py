@@ -1,13 +1,13 @@
 """Text rows: CSV (a header line, comma separated) and XYZ (space separated, no header),
-and the encoder ASCII PLY and PCD use too."""
+and the encoder ASCII PLY and PCD use too; and their reader."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..errors import ScatterError
-from .base import Writer
-from .parts import Part, count_lines, open_part, size
+from .base import Writer, reading
+from .pointfiles import PointFile, count_lines, file_bytes
 
 
 class TextEncoder:
@@ -59,26 +59,47 @@ def make(fmt, stream, layout, count, **options):
     return TextWriter(stream, layout, count, "," if fmt == "csv" else " ", fmt == "csv")
 
 
-# -- merge ------------------------------------------------------------------------------
+# -- the reader ---------------------------------------------------------------------------
 
-def read_part(path, fmt):
-    """A CSV part (its first line is the header) or an XYZ part."""
-    if fmt == "csv":
-        return csv_part(path)
-    return xyz_part(path)
+class XyzFile(PointFile):
+    def columns(self, limit=None):
+        """x, y, z, then nx, ny, nz when the next three columns are unit vectors (the
+        columns scatter writes come in the order normal, orient, face, ...)."""
+        columns = super().columns(limit)
+        if len(columns) >= 6:
+            names = self.dtype.names[3:6]
+            lengths = np.linalg.norm(np.stack([columns[n] for n in names], axis=1), axis=1)
+            if len(lengths) and np.all(np.abs(lengths - 1.0) < 1e-3):
+                columns.update((normal, columns.pop(n)) for normal, n in zip(("nx", "ny", "nz"), names))
+        return columns
 
 
-def csv_part(path):
-    with open_part(path) as f:
+def read(path, fmt):
+    """A CSV file (its first line names the columns) or an XYZ file (no header: x y z
+    first, as many columns as its first line has)."""
+    with reading(path), open(path, "rb") as f:
         first = f.readline()
+    end = file_bytes(path)
+    return csv_file(path, first, end) if fmt == "csv" else xyz_file(path, first, end)
+
+
+def csv_file(path, first, end):
     if not first.endswith(b"\n"):
         raise ScatterError(f"{path}: not a CSV file with a header line")
     header = first.decode("ascii", "replace").strip()
-    return Part(path, ("csv", header), count_lines(path, len(first)), (len(first), size(path)), lambda parts: first)
+    dtype = real_columns(n.strip() for n in header.split(","))
+    return PointFile(path, dtype, count_lines(path, len(first), end), len(first), end, False, ("csv", header),
+                     lambda count: first, ",")
 
 
-def xyz_part(path):
-    with open_part(path) as f:
-        first = f.readline()
-    columns = len(first.split())
-    return Part(path, ("xyz", columns), count_lines(path, 0), (0, size(path)), lambda parts: b"")
+def xyz_file(path, first, end):
+    width = len(first.split())
+    if 0 < width < 3:
+        raise ScatterError(f"{path}: fewer than three columns")
+    dtype = real_columns(["x", "y", "z", *(f"column {j}" for j in range(3, width))])
+    return XyzFile(path, dtype, count_lines(path, 0, end), 0, end, False, ("xyz", width), lambda count: b"")
+
+
+def real_columns(names):
+    """The row of text columns ``names``, each read as float64."""
+    return np.dtype([(n, "<f8") for n in names])

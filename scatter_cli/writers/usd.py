@@ -17,7 +17,7 @@ Layout under the default prim ``/Scatter`` (an Xform):
 
 from __future__ import annotations
 
-import math
+import dataclasses
 import os
 import tempfile
 
@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import ScatterError
 from .base import Writer
+from .pointfiles import COLOR_NAMES, NORMAL_NAMES, IsMesh, reason, stride
 
 # Bytes per point of each value as the stage holds it (float32 values, colour as rgb and
 # opacity, orient as quatf, quath and a protoIndices int), once as a Vt array and once
@@ -40,11 +41,11 @@ PRIMVARS = {  # key -> (primvar name, Sdf value type name, columns taken)
 }
 
 
-def _pxr():
+def _pxr(doing="USD output"):
     try:
         from pxr import Gf, Sdf, Usd, UsdGeom, Vt
     except ImportError:
-        raise ScatterError("USD output needs usd-core: pip install usd-core") from None
+        raise ScatterError(f"{doing} needs usd-core: pip install usd-core") from None
     return Gf, Sdf, Usd, UsdGeom, Vt
 
 
@@ -193,3 +194,77 @@ def export_crate(stage):
             return f.read()
     finally:
         os.unlink(tmp)
+
+
+# -- the reader ---------------------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class UsdFile:
+    """The points of a USD stage, read whole (a stage cannot be streamed; see
+    :mod:`.pointfiles`): ``data``, name -> (count,) array of each column; ``up_axis``, the
+    stage's. Not joined: USD is not mergeable."""
+
+    path: str
+    data: dict
+    count: int
+    up_axis: str
+
+    def columns(self, limit=None):
+        """Every column, of every point or of every k-th when there are more than ``limit``."""
+        every = stride(self.count, limit)
+        return {name: column[::every] for name, column in self.data.items()}
+
+
+def read(path, fmt="usd"):
+    """The points of every UsdGeom.Points (``points``) and PointInstancer (``positions``)
+    prim of the stage at ``path``, in world space (x, y, z), with their ``normals`` (nx,
+    ny, nz) and ``displayColor`` (red, green, blue) primvars where every prim has them."""
+    Gf, Sdf, Usd, UsdGeom, Vt = _pxr(f"{path}: reading USD")
+    stage = _open_stage(path, Usd)
+    prims = [p for p in stage.Traverse() if p.IsA(UsdGeom.Points) or p.IsA(UsdGeom.PointInstancer)]
+    if not prims:
+        raise IsMesh(f"{path}: a USD stage without points is a mesh, not a point file")
+    points, normals, colours = zip(*(_prim_points(prim, Usd, UsdGeom) for prim in prims))
+    data = dict(zip("xyz", np.concatenate(points).T))
+    if all(n is not None for n in normals):
+        data.update(zip(NORMAL_NAMES, np.concatenate(normals).T))
+    if all(c is not None for c in colours):
+        data.update(zip(COLOR_NAMES, np.clip(np.rint(np.concatenate(colours) * 255), 0, 255).T))
+    up = "Y" if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y else "Z"
+    return UsdFile(path, data, sum(len(p) for p in points), up)
+
+
+def _prim_points(prim, Usd, UsdGeom):
+    """(points (n, 3) in world space, normals (n, 3) or None, colours (n, 3) or None) of
+    a Points or PointInstancer prim."""
+    if prim.IsA(UsdGeom.Points):
+        value = UsdGeom.Points(prim).GetPointsAttr().Get()
+    else:
+        value = UsdGeom.PointInstancer(prim).GetPositionsAttr().Get()
+    local = np.array(value if value is not None else [], dtype=np.float64).reshape(-1, 3)
+    matrix = np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()))
+    api = UsdGeom.PrimvarsAPI(prim)
+    return (local @ matrix[:3, :3] + matrix[3, :3],  # USD: row vectors
+            _primvar(api, "normals", len(local)), _primvar(api, "displayColor", len(local)))
+
+
+def _open_stage(path, Usd):
+    if not os.path.isfile(path):
+        raise ScatterError(f"{path}: no such file")
+    try:
+        stage = Usd.Stage.Open(path)
+    except Exception as exc:  # pxr raises Tf errors
+        raise ScatterError(f"{path}: not a USD stage ({reason(exc)})") from None
+    if stage is None:
+        raise ScatterError(f"{path}: not a USD stage")
+    return stage
+
+
+def _primvar(api, name, n):
+    """(n, 3) float64 of the primvar ``name``, or None when it is missing or not one a point."""
+    primvar = api.GetPrimvar(name)
+    value = primvar.Get() if primvar and primvar.HasValue() else None
+    if value is None:
+        return None
+    values = np.array(value, dtype=np.float64).reshape(-1, 3)
+    return values if len(values) == n else None
