@@ -433,3 +433,24 @@ def test_both_batch_engines_write_what_sample_writes(tmp_path):
         want = alone.read_bytes()
         assert (tmp_path / "local" / f"{name}.ply").read_bytes() == want
         assert (tmp_path / "dask" / f"{name}.ply").read_bytes() == want
+
+
+def test_preview_colours_edge_points_apart(tmp_path):
+    """A point file with a sharp column is drawn with its edge points in SHARP_RGB over the
+    normal colours; inside/outside colours come first (the rule's order)."""
+    from scatter_cli.commands import render
+    from scatter_cli.writers.pointfiles import read_points
+
+    out = tmp_path / "box.ply"
+    run_scatter("sample", box_mesh_file(tmp_path), "-n", "400", "--edges", "0.5", "-a", "normal,sharp", "-o", out,
+                check=True)
+    points = read_points(out)
+    sharp_rows = points.attributes["sharp"] > 0
+    assert sharp_rows.sum() == 200
+    colors = render.point_colors(points.points, points.attributes)
+    plain = render.point_colors(points.points, {"normal": points.attributes["normal"]})
+    assert (colors[sharp_rows] == render.SHARP_RGB).all()
+    assert np.array_equal(colors[~sharp_rows], plain[~sharp_rows])
+    assert not (plain[sharp_rows] == render.SHARP_RGB).all()  # the broken variant: the column ignored
+    inside = render.point_colors(points.points, {**points.attributes, "inside": np.ones(400)})
+    assert (inside == render.INSIDE_RGB).all()
