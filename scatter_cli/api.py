@@ -181,30 +181,21 @@ def sample(mesh, count=None, **options) -> Samples:
     return samples
 
 
-def output_format(path, format=None, ascii=False, crs=None) -> str:
-    """The format of the output ``path`` (``format`` if given, else its suffix; CSV on
-    standard output), with ``--ascii`` and ``--crs`` checked against it: usage errors."""
-    from .writers import check_output, infer_format
-
-    fmt = infer_format(path, format)
-    check_output(fmt, ascii, crs)
-    return fmt
-
-
 def sample_to(mesh, options: SampleOptions, path, format=None, ascii=False, *, crs=None, warn=None,
               progress=False) -> Run:
     """Sample ``mesh`` with ``options`` and write the run to ``path`` (``None`` or ``-``:
     standard output): what ``scatter sample MESH -o PATH`` does, and a batch worker for
-    each mesh. Returns the run (its ``info`` holds the writer's report)."""
-    from .writers import run_precision
+    each mesh. The output options are checked before the mesh is read. Returns the run
+    (its ``info`` holds the writer's report)."""
+    from .writers import output, run_precision
 
-    fmt = output_format(path, format, ascii, crs)
-    precision = run_precision(fmt, options.precision)
+    out = output(path, format, ascii, crs)
+    precision = run_precision(out.format, options.precision)
     if precision != options.precision:
         options = dataclasses.replace(options, precision=precision)
     run = prepare(mesh, options=options, warn=warn)
     t = time.perf_counter()
-    _write(run, path, fmt, ascii, crs, progress)
+    _write(run, out, progress)
     run.info["timings"]["sample_and_write"] = time.perf_counter() - t
     return run
 
@@ -214,30 +205,42 @@ def write(run: Run, path, format=None, ascii=False, *, crs=None, progress=False)
     ``format`` (default: from the suffix of ``path``), streamed chunk by chunk;
     ``crs``: LAS/LAZ's coordinate system; ``progress``: a progress line on standard
     error. Returns the writer's report (also in ``run.info["output"]`` when not empty)."""
-    return _write(run, path, output_format(path, format, ascii, crs), ascii, crs, progress)
+    from .writers import output
+
+    return _write(run, output(path, format, ascii, crs), progress)
 
 
-def _write(run, path, fmt, ascii, crs, progress):
-    """:func:`write` with the format ``fmt`` already known and checked."""
+def _write(run, out, progress):
+    """:func:`write` to the output ``out``, already checked (:func:`~scatter_cli.writers.output`)."""
     from .core.progress import with_progress
-    from .writers import write_samples
+    from .writers import write_output
 
-    report = write_samples(with_progress(run.chunks(), run.size, progress), path, fmt, run.layout, run.size,
-                           ascii, crs=crs, **output_options(run, fmt))
+    report = write_output(with_progress(run.chunks(), run.size, progress), out, run.layout, run.size,
+                          **output_options(run, out.format))
     if report:
         run.info["output"] = report
     return report
 
 
 def output_options(run: Run, fmt: str) -> dict:
-    """What the writer of ``fmt`` needs from the run besides its points (keywords of
-    :func:`~scatter_cli.writers.write_samples`): LAS the sampled bounding box, USD the
-    input's up axis and units (when the surface carries them) and the point spacing."""
-    if fmt in ("las", "laz"):
-        return {"bounds": run.bounds}
-    if fmt == "usd":
-        area = run.info["area"]
-        return {"up_axis": getattr(run.surface, "up_axis", None),
-                "meters_per_unit": getattr(run.surface, "meters_per_unit", None),
-                "spacing": math.sqrt(area / run.count) if run.count and area > 0 else None}
-    return {}
+    """What the writer of ``fmt`` takes from the run besides its points (keywords of
+    :func:`~scatter_cli.writers.write_samples`), as the format table's row says."""
+    from .writers.formats import BY_NAME
+
+    return {name: RUN_FACTS[name](run) for name in BY_NAME[fmt].takes}
+
+
+def _spacing(run):
+    area = run.info["area"]
+    return math.sqrt(area / run.count) if run.count and area > 0 else None
+
+
+# What a writer may take from a run (a format's ``takes``): the sampled bounding box (LAS
+# scale and offset), the input's up axis and units (when the surface carries them) and
+# the point spacing (USD).
+RUN_FACTS = {
+    "bounds": lambda run: run.bounds,
+    "up_axis": lambda run: getattr(run.surface, "up_axis", None),
+    "meters_per_unit": lambda run: getattr(run.surface, "meters_per_unit", None),
+    "spacing": _spacing,
+}

@@ -3,6 +3,7 @@
 How the process runs (signals, exit codes, standard output) is :mod:`scatter_cli.core.process`.
 """
 
+import inspect
 import json
 import sys
 import time
@@ -57,70 +58,71 @@ def _count(text):
         raise typer.BadParameter(f"{exc} (a count is a whole number, such as 1000 or 1e6)") from None
 
 
-# The sample options, declared once for `sample` and `batch`; each parameter is named as
-# its SampleOptions field, and its default is that field's (D).
+# The sample options, declared once: `sample`, `batch` and `preview` each take those it
+# names (sample_options). Each is named as its SampleOptions field, with that field's
+# default (D), or is an option of the output (fmt, ascii, crs).
 D = SampleOptions()
-Count = Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", parser=_count, help=f"Number of points (per mesh) [default: {DEFAULT_COUNT}]; 1e6 is a count too.")]
-Density = Annotated[Optional[float], typer.Option("--density", metavar="D", help="Points per unit of surface area, instead of -n.")]
-Format = Annotated[Optional[str], typer.Option("-f", "--format", metavar="FORMAT", help=f"{'|'.join(FORMATS)} [default: from the suffix of the output; CSV on standard output].")]
-Ascii = Annotated[bool, typer.Option("--ascii", help=f"ASCII instead of binary ({' or '.join(f.upper() for f in ASCII_FORMATS)}).")]
-Seed = Annotated[int, typer.Option("--seed", metavar="S", help="Random seed: same input, options and seed give the same bytes.")]
-Attributes = Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help=f"Comma list of extra columns: {', '.join(ATTRIBUTES)}.")]
-Weight = Annotated[Optional[str], typer.Option("--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a.")]
-Objects = Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable); for a USD stage, a prim path: the meshes at or below it.")]
-Poisson = Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached.")]
-Radius = Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance.")]
-Exterior = Annotated[bool, typer.Option("--exterior", help="Only the exterior surface: what can be seen from outside the mesh (needs embreex).")]
-Method = Annotated[str, typer.Option("--method", metavar="METHOD", help="random (i.i.d., square-root warp) | stratified | sobol.")]
-Precision = Annotated[str, typer.Option("--precision", metavar="PRECISION", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal.")]
-ChunkSize = Annotated[Optional[int], typer.Option("--chunk-size", metavar="K", help="Points generated per chunk (memory/speed knob; never changes the output).")]
-Stable = Annotated[bool, typer.Option("--stable", help="Placement keyed to the faces themselves: points stay put when the mesh is edited elsewhere, renumbered or re-exported.")]
-Shard = Annotated[Optional[str], typer.Option("--shard", metavar="K/M", help="Write only shard K (0-based) of M of the run's points; join shards with 'scatter merge'.")]
-Normalize = Annotated[str, typer.Option("--normalize", metavar="MODE", help="none | unit-cube | unit-sphere: points centred on the surface's box, scaled to fit [-1, 1] or the unit sphere.")]
-Crs = Annotated[Optional[str], typer.Option("--crs", metavar="EPSG:N|WKT", help="LAS/LAZ only: the coordinate system to record (an EPSG code needs pyproj).")]
-Volume = Annotated[bool, typer.Option("--volume", help="Points in space around the mesh, not on it: uniform in the padded box (labels: -a sdf,inside,winding,closest).")]
-Near = Annotated[Optional[str], typer.Option("--near", metavar="SIGMA[,SIGMA...]", help="Near-surface points: a surface point plus a Gaussian offset of standard deviation SIGMA (implies --volume).")]
-BoxShare = Annotated[Optional[float], typer.Option("--box-share", metavar="F", help="Share of the points uniform in the box, the rest near [default: 1 with --volume, 0 with --near].")]
-Padding = Annotated[float, typer.Option("--padding", metavar="P", help="The box: the surface's bounding box grown by P times its largest side.")]
-Edges = Annotated[Optional[str], typer.Option("--edges", metavar="F", help="Share (0..1) of the surface points drawn on sharp edges instead of faces (with --near: of the near points' surface points).")]
-SharpAngle = Annotated[Optional[float], typer.Option("--sharp-angle", metavar="DEG", help="An edge is sharp when its faces' normals are at least DEG degrees apart [default: 15]; boundary and non-manifold edges always are.")]
-NearEdges = Annotated[Optional[str], typer.Option("--near-edges", metavar="SIGMA[,SIGMA...]", help="With --edges and --near: the sigmas of the near points of edge points [default: the --near sigmas].")]
-Sign = Annotated[str, typer.Option("--sign", metavar="winding|parity", help="Inside when the generalized winding number is >= 0.5 (robust on open meshes), or by a majority of ray parities.")]
+
+
+def _declared(
+    *,
+    count: Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", parser=_count, help=f"Number of points (per mesh) [default: {DEFAULT_COUNT}]; 1e6 is a count too.")] = D.count,
+    density: Annotated[Optional[float], typer.Option("--density", metavar="D", help="Points per unit of surface area, instead of -n.")] = D.density,
+    fmt: Annotated[Optional[str], typer.Option("-f", "--format", metavar="FORMAT", help=f"{'|'.join(FORMATS)} [default: from the suffix of the output; CSV on standard output].")] = None,
+    ascii: Annotated[bool, typer.Option("--ascii", help=f"ASCII instead of binary ({' or '.join(f.upper() for f in ASCII_FORMATS)}).")] = False,
+    seed: Annotated[int, typer.Option("--seed", metavar="S", help="Random seed: same input, options and seed give the same bytes.")] = D.seed,
+    attributes: Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help=f"Comma list of extra columns: {', '.join(ATTRIBUTES)}.")] = None,
+    weight: Annotated[Optional[str], typer.Option("--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a.")] = D.weight,
+    objects: Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable); for a USD stage, a prim path: the meshes at or below it.")] = D.objects,
+    poisson: Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached.")] = D.poisson,
+    radius: Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Thin to a maximal Poisson-disk set with this minimum distance.")] = D.radius,
+    exterior: Annotated[bool, typer.Option("--exterior", help="Only the exterior surface: what can be seen from outside the mesh (needs embreex).")] = D.exterior,
+    method: Annotated[str, typer.Option("--method", metavar="METHOD", help="random (i.i.d., square-root warp) | stratified | sobol.")] = D.method,
+    precision: Annotated[str, typer.Option("--precision", metavar="PRECISION", help="auto|float32|float64; auto keeps float32 unless it moves points by more than 1e-6 of the bounding-box diagonal.")] = D.precision,
+    chunk_size: Annotated[Optional[int], typer.Option("--chunk-size", metavar="K", help="Points generated per chunk (memory/speed knob; never changes the output).")] = D.chunk_size,
+    input_format: InputFormat = D.input_format,
+    stable: Annotated[bool, typer.Option("--stable", help="Placement keyed to the faces themselves: points stay put when the mesh is edited elsewhere, renumbered or re-exported.")] = D.stable,
+    shard: Annotated[Optional[str], typer.Option("--shard", metavar="K/M", help="Write only shard K (0-based) of M of the run's points; join shards with 'scatter merge'.")] = None,
+    normalize: Annotated[str, typer.Option("--normalize", metavar="MODE", help="none | unit-cube | unit-sphere: points centred on the surface's box, scaled to fit [-1, 1] or the unit sphere.")] = D.normalize,
+    crs: Annotated[Optional[str], typer.Option("--crs", metavar="EPSG:N|WKT", help="LAS/LAZ only: the coordinate system to record (an EPSG code needs pyproj).")] = None,
+    volume: Annotated[bool, typer.Option("--volume", help="Points in space around the mesh, not on it: uniform in the padded box (labels: -a sdf,inside,winding,closest).")] = D.volume,
+    near: Annotated[Optional[str], typer.Option("--near", metavar="SIGMA[,SIGMA...]", help="Near-surface points: a surface point plus a Gaussian offset of standard deviation SIGMA (implies --volume).")] = None,
+    box_share: Annotated[Optional[float], typer.Option("--box-share", metavar="F", help="Share of the points uniform in the box, the rest near [default: 1 with --volume, 0 with --near].")] = D.box_share,
+    padding: Annotated[float, typer.Option("--padding", metavar="P", help="The box: the surface's bounding box grown by P times its largest side.")] = D.padding,
+    sign: Annotated[str, typer.Option("--sign", metavar="winding|parity", help="Inside when the generalized winding number is >= 0.5 (robust on open meshes), or by a majority of ray parities.")] = D.sign,
+    edges: Annotated[Optional[str], typer.Option("--edges", metavar="F", help="Share (0..1) of the surface points drawn on sharp edges instead of faces (with --near: of the near points' surface points).")] = None,
+    sharp_angle: Annotated[Optional[float], typer.Option("--sharp-angle", metavar="DEG", help="With --edges: an edge is sharp when its faces' normals are at least DEG degrees apart [default: 15]; boundary and non-manifold edges always are.")] = D.sharp_angle,
+    near_edges: Annotated[Optional[str], typer.Option("--near-edges", metavar="SIGMA[,SIGMA...]", help="With --edges and --near: the sigmas of the near points of edge points [default: the --near sigmas].")] = None,
+):
+    """Never called: its signature is the declaration, as typer reads a command's."""
+
+
+SAMPLE_OPTIONS = dict(inspect.signature(_declared).parameters)
+
+
+def sample_options(*names, **redeclared):
+    """A command's decorator: typer sees the sample options ``names`` after the command's
+    own parameters, each as SAMPLE_OPTIONS declares it or with the annotation
+    ``redeclared`` gives it (another help text); the command receives them as keyword
+    arguments (``**given``)."""
+    def declare(command):
+        own = [p for p in inspect.signature(command).parameters.values() if p.kind != p.VAR_KEYWORD]
+        taken = [SAMPLE_OPTIONS[n].replace(annotation=redeclared.get(n, SAMPLE_OPTIONS[n].annotation)) for n in names]
+        command.__signature__ = inspect.Signature(own + taken)
+        command.sample_options = names
+        return command
+
+    return declare
 
 
 @app.command()
+@sample_options(*SAMPLE_OPTIONS)
 def sample(
     mesh: MeshArg,
-    count: Count = D.count,
-    density: Density = D.density,
     output: Annotated[Optional[str], typer.Option("-o", "--output", metavar="PATH", help="Output file; '-' or absent: standard output.")] = None,
-    fmt: Format = None,
-    ascii: Ascii = False,
-    seed: Seed = D.seed,
-    attributes: Attributes = None,
-    weight: Weight = D.weight,
-    objects: Objects = D.objects,
-    poisson: Poisson = D.poisson,
-    radius: Radius = D.radius,
-    exterior: Exterior = D.exterior,
-    method: Method = D.method,
-    precision: Precision = D.precision,
     stats: Annotated[Optional[str], typer.Option("--stats", metavar="PATH", help="Write a JSON summary to this file ('-': standard error).")] = None,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress and no warnings.")] = False,
-    chunk_size: ChunkSize = D.chunk_size,
-    input_format: InputFormat = D.input_format,
-    stable: Stable = D.stable,
-    shard: Shard = None,
-    normalize: Normalize = D.normalize,
-    crs: Crs = None,
-    volume: Volume = D.volume,
-    near: Near = None,
-    box_share: BoxShare = D.box_share,
-    padding: Padding = D.padding,
-    sign: Sign = D.sign,
-    edges: Edges = None,
-    sharp_angle: SharpAngle = D.sharp_angle,
-    near_edges: NearEdges = None,
+    **given,
 ):
     """Sample points on the surface of MESH (or, with --volume or --near, in the space around it).
 
@@ -145,8 +147,9 @@ def sample(
     from . import api
 
     started = time.perf_counter()
-    options = SampleOptions.of(locals())
-    run = api.sample_to(mesh, options, output, fmt, ascii, crs=crs, warn=_warner(quiet), progress=not quiet and sys.stderr.isatty())
+    options = SampleOptions.of(given)
+    run = api.sample_to(mesh, options, output, given["fmt"], given["ascii"], crs=given["crs"], warn=_warner(quiet),
+                        progress=not quiet and sys.stderr.isatty())
     run.info["timings"]["total"] = time.perf_counter() - started
     if stats and run.kept is not None:
         run.info.update(run.spacing())
@@ -238,6 +241,7 @@ def bench(
 
 
 @app.command()
+@sample_options(*(n for n in SAMPLE_OPTIONS if n != "input_format"))  # a batch finds its meshes by their suffixes
 def batch(
     inputs: Annotated[Optional[List[str]], typer.Argument(metavar="INPUT...", help="Mesh files and folders (searched recursively for mesh suffixes).", show_default=False)] = None,
     output: Annotated[str, typer.Option("-o", "--output", metavar="TEMPLATE", help="Output path per mesh, with {stem} {name} {rel} {index}.")] = ...,
@@ -249,33 +253,8 @@ def batch(
     report: Annotated[Optional[str], typer.Option("--report", metavar="PATH", help="JSON Lines report, one object per mesh, in input order.")] = None,
     engine: Annotated[str, typer.Option("--engine", metavar="ENGINE", help="local | dask.")] = "local",
     scheduler: Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRESS", help="Dask scheduler (tcp://host:8786) [default: DASK_SCHEDULER_ADDRESS].")] = None,
-    count: Count = D.count,
-    density: Density = D.density,
-    fmt: Format = None,
-    ascii: Ascii = False,
-    seed: Seed = D.seed,
-    attributes: Attributes = None,
-    weight: Weight = D.weight,
-    objects: Objects = D.objects,
-    poisson: Poisson = D.poisson,
-    radius: Radius = D.radius,
-    method: Method = D.method,
-    precision: Precision = D.precision,
-    chunk_size: ChunkSize = D.chunk_size,
-    exterior: Exterior = D.exterior,
-    stable: Stable = D.stable,
-    shard: Shard = None,
-    normalize: Normalize = D.normalize,
-    crs: Crs = None,
-    volume: Volume = D.volume,
-    near: Near = None,
-    box_share: BoxShare = D.box_share,
-    padding: Padding = D.padding,
-    sign: Sign = D.sign,
-    edges: Edges = None,
-    sharp_angle: SharpAngle = D.sharp_angle,
-    near_edges: NearEdges = None,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No progress, warnings, error lines or summary (the exit status and report still tell).")] = False,
+    **given,
 ):
     """Sample many meshes: for each, what 'scatter sample MESH -o OUTPUT' writes.
 
@@ -294,7 +273,7 @@ def batch(
 
     result = run_batch(inputs or [], output, from_list=from_list, jobs=jobs, skip_existing=skip_existing,
                        timeout=timeout, max_memory=max_memory, report=report, engine=engine, scheduler=scheduler,
-                       fmt=fmt, ascii=ascii, crs=crs, options=SampleOptions.of(locals()), quiet=quiet,
+                       fmt=given["fmt"], ascii=given["ascii"], crs=given["crs"], options=SampleOptions.of(given), quiet=quiet,
                        progress=sys.stderr.isatty())
     if result["failed"]:
         raise typer.Exit(1)
@@ -320,6 +299,12 @@ def merge(
 
 
 @app.command(no_args_is_help=True)
+@sample_options(
+    "count", "density", "seed", "attributes", "weight", "objects", "poisson", "radius", "method", "exterior", "stable",
+    "normalize", "edges", "sharp_angle",
+    count=Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", parser=_count, help="Points sampled per mesh [default: 20000].")],
+    attributes=Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help="Attributes sampled on meshes, which colour them [default: normal, and sharp with --edges].")],
+)
 def preview(
     inputs: Annotated[Optional[List[str]], typer.Argument(metavar="INPUT...", help="Point files, meshes and folders (searched recursively).", show_default=False)] = None,
     output: Annotated[str, typer.Option("-o", "--output", metavar="SHEET.png", help="The contact sheet; with {page} in the name, one sheet per --per-page inputs.")] = ...,
@@ -328,19 +313,8 @@ def preview(
     columns: Annotated[Optional[int], typer.Option("--columns", metavar="C", help="Cells per row [default: a square sheet].")] = None,
     views: Annotated[Optional[List[str]], typer.Option("--view", metavar="VIEW", help="iso | front | side | top (repeatable: views side by side) [default: iso].")] = None,
     per_page: Annotated[int, typer.Option("--per-page", metavar="K", help="Inputs per sheet.")] = 100,
-    count: Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", parser=_count, help="Points sampled per mesh [default: 20000].")] = None,
-    density: Density = D.density,
-    seed: Seed = D.seed,
-    attributes: Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help="Attributes sampled on meshes, which colour them [default: normal; inside with --volume].")] = None,
-    weight: Weight = D.weight,
-    objects: Objects = D.objects,
-    poisson: Poisson = D.poisson,
-    radius: Radius = D.radius,
-    method: Method = D.method,
-    exterior: Exterior = D.exterior,
-    stable: Stable = D.stable,
-    normalize: Normalize = D.normalize,
     quiet: Annotated[bool, typer.Option("-q", "--quiet", help="No error line per failed input (the exit status and the sheet still tell).")] = False,
+    **given,
 ):
     """Contact sheets: one captioned thumbnail per point file or mesh, drawn on the CPU.
 
@@ -356,7 +330,7 @@ def preview(
     from .commands.preview import preview as draw_sheets
     from .commands.preview import summary
 
-    options = SampleOptions.of(locals()).as_dict()
+    options = SampleOptions.of(given).as_dict()
     def error_line(message):
         print(f"error: {message}", file=sys.stderr, flush=True)
 

@@ -236,6 +236,15 @@ def random_ops(rng: np.random.Generator, max_ops=4):
 MUTATIONS = 13  # kinds of op in mutate()
 
 
+def fast_read(path, suffix, smooth=False, color=False, uv=False):
+    """What the fast reader of ``suffix`` (the loader table's) makes of the file at ``path``
+    (loading.fast.read_file), or None when it hands the file to trimesh."""
+    from scatter_cli.loading import fast
+    from scatter_cli.loading.load import LOADERS
+
+    return fast.read_file(path, LOADERS[suffix].fast, smooth, color, uv)
+
+
 def differential(data: bytes, suffix: str, workdir) -> str:
     """Where the fast reader answers for ``data``, check it against trimesh.
 
@@ -246,13 +255,12 @@ def differential(data: bytes, suffix: str, workdir) -> str:
     import os
 
     from scatter_cli.errors import ScatterError
-    from scatter_cli.loading.load import read_mesh
     from scatter_cli.loading.load import load_surface
 
     path = os.path.join(workdir, f"diff.{suffix}")
     with open(path, "wb") as f:
         f.write(data)
-    if read_mesh(path, suffix) is None:
+    if fast_read(path, suffix) is None:
         return "handed"
     try:
         fast = load_surface(path, plain=True)
@@ -281,10 +289,9 @@ def _same_attributes(path, suffix, slow):
     alike)."""
     import scatter_cli
     from scatter_cli.errors import ScatterError
-    from scatter_cli.loading.load import read_mesh
 
     other = "color" if suffix == "ply" else "uv"
-    if read_mesh(path, suffix, smooth=True, **{other: True}) is None:
+    if fast_read(path, suffix, smooth=True, **{other: True}) is None:
         return
     for attributes in ("smooth-normal", other, f"face,bary,{other},smooth-normal"):
         got = []

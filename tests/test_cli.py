@@ -301,6 +301,65 @@ def test_help_lists_every_format_and_attribute():
     assert ", ".join(ATTRIBUTES) in text
 
 
+def option_flags(parameter):
+    """The flags (``-n``, ``--count``) of an option as the command line declares it."""
+    info = parameter.annotation.__metadata__[0]
+    return [d for d in (info.default, *info.param_decls) if isinstance(d, str) and d.startswith("-")]
+
+
+def sample_options_not_listed(command, help_text):
+    """The sample options ``command`` takes (cli.SAMPLE_OPTIONS, declared once) whose flags
+    its ``--help`` does not list."""
+    import re
+
+    from scatter_cli import cli
+
+    entries = [re.match(r"  (-[^\s,]+(?:, -[^\s,]+)*)", line) for line in help_text.splitlines()]
+    listed = {flag for entry in entries if entry for flag in entry.group(1).split(", ")}
+    return [name for name in getattr(cli, command).sample_options
+            if not set(option_flags(cli.SAMPLE_OPTIONS[name])) <= listed]
+
+
+@pytest.mark.parametrize("command", ["sample", "batch", "preview"])
+def test_help_lists_every_sample_option_a_command_takes(command):
+    from scatter_cli import cli
+
+    assert getattr(cli, command).sample_options
+    assert sample_options_not_listed(command, run_scatter(command, "--help", check=True).stdout.decode()) == []
+
+
+def test_a_sample_option_dropped_from_a_command_is_missed_in_its_help(monkeypatch):
+    import inspect
+
+    from click.testing import CliRunner
+
+    from scatter_cli import cli
+
+    signature = inspect.signature(cli.batch)
+    monkeypatch.setattr(cli.batch, "__signature__",
+                        signature.replace(parameters=[p for p in signature.parameters.values() if p.name != "seed"]))
+    text = CliRunner().invoke(cli.command(), ["batch", "--help"]).output
+    assert "--skip-existing" in text and sample_options_not_listed("batch", text) == ["seed"]
+
+
+def test_the_sample_options_are_the_fields_of_a_run_and_the_output_options():
+    """Each declared option reaches SampleOptions.of under its field's name, or is an
+    option of the output (format, ASCII, coordinate system); only the Python API sets
+    the oversampling of Poisson thinning."""
+    import dataclasses
+
+    from scatter_cli import cli
+    from scatter_cli.run.options import SampleOptions
+
+    def unmatched(declared):
+        fields = {f.name for f in dataclasses.fields(SampleOptions)}
+        return set(declared) ^ fields
+
+    assert unmatched(cli.SAMPLE_OPTIONS) == {"fmt", "ascii", "crs", "oversampling"}
+    assert set(cli.sample.sample_options) == set(cli.SAMPLE_OPTIONS)
+    assert unmatched([*cli.SAMPLE_OPTIONS, "chunksize"]) == {"fmt", "ascii", "crs", "oversampling", "chunksize"}
+
+
 def test_debug_shows_the_traceback_of_an_internal_error(sample_mesh):
     import sys
 

@@ -110,17 +110,21 @@ def test_text_compressed_and_in_memory_sizes_are_not_known(fmt, ascii):
 def test_room_is_checked_to_the_byte(tmp_path, monkeypatch):
     import os
 
-    from scatter_cli.writers import check_room
+    from scatter_cli.writers import open_output
 
     class Fs:
         f_bavail, f_frsize = 1000, 4096
 
     monkeypatch.setattr(os, "statvfs", lambda path: Fs)
-    check_room(tmp_path / "fits.ply", 4_096_000)  # exactly the room left
+    with open_output(tmp_path / "fits.ply", 4_096_000):  # exactly the room left
+        pass
     with pytest.raises(ScatterError, match=r"needs 4.1 MB \(4,096,001 bytes\), its file system has 4.1 MB "
                                            r"\(4,096,000 bytes\) free"):
-        check_room(tmp_path / "over.ply", 4_096_001)
-    check_room("-", 10**20)  # standard output: not a file, not checked
+        with open_output(tmp_path / "over.ply", 4_096_001):
+            pass
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fits.ply"]
+    with open_output(os.devnull, 10**20):  # a device: not checked
+        pass
 
 
 @pytest.mark.parametrize("fmt", ["ply", "npy", "pcd", "las"])

@@ -18,10 +18,11 @@ import trimesh
 
 import scatter_cli
 from scatter_cli.loading import ply as plyread
-from scatter_cli.loading.load import load_surface, read_mesh
+from scatter_cli.loading.load import load_surface
 from scatter_cli.surface.data import VertexTables, uv_table, vertex_normal_table, weighted_vertex_normals
 
 from .conftest import run_scatter, run_user
+from .fuzz_inputs import fast_read
 from .loadmemory import load_memory
 from .test_readers import MESHES, assert_same_load, positions_and_faces, run_user_text
 
@@ -65,7 +66,7 @@ def sample_bytes(source, attributes):
 def assert_fast_and_same(path, attributes=ATTRIBUTES):
     """The fast readers answer with their tables, and every job gives trimesh's bytes."""
     color = any("color" in a for a in attributes)
-    assert read_mesh(path, "ply", smooth=True, color=color) is not None
+    assert fast_read(path, "ply", smooth=True, color=color) is not None
     fast = load_surface(path, plain=True, smooth=True, color=color)
     assert all(isinstance(g.mesh, VertexTables) for g in fast.geometries)
     assert_same_load(path)
@@ -140,7 +141,7 @@ def test_colour_and_normal_rules_match_trimesh(case, fmt, tmp_path):
     file without colours fails ``-a color`` with the same error either way."""
     path = write_ply(tmp_path / "m.ply", case_columns(case), TRI, fmt)
     if not {"red", "green", "blue"} <= {name for name, _, _ in CASES[case]}:
-        assert read_mesh(path, "ply", smooth=True, color=True) is not None
+        assert fast_read(path, "ply", smooth=True, color=True) is not None
         for source in (path, load_surface(path)):
             with pytest.raises(scatter_cli.ScatterError, match="no vertex colours"):
                 scatter_cli.sample(source, count=10, attributes="color")
@@ -161,8 +162,8 @@ def test_texture_coordinates_go_to_trimesh(names, fmt, tmp_path):
     colours: the fast readers hand such a job over (a plain job they still read)."""
     uv = [(n, "f4", np.linspace(0, 1, 6) ** (k + 1)) for k, n in enumerate(names)]
     path = write_ply(tmp_path / "t.ply", POS + CASES["uchar rgb"] + CASES["double normals"] + uv, TRI, fmt)
-    assert read_mesh(path, "ply") is not None
-    assert read_mesh(path, "ply", smooth=True) is None and read_mesh(path, "ply", color=True) is None
+    assert fast_read(path, "ply") is not None
+    assert fast_read(path, "ply", smooth=True) is None and fast_read(path, "ply", color=True) is None
 
 
 @pytest.mark.parametrize("value", ["256", "-1", "300.5"])
@@ -173,8 +174,8 @@ def test_ascii_values_outside_the_declared_type_go_to_trimesh(value, tmp_path):
     text = path.read_text().replace(" 255 0 9\n", f" {value} 0 9\n", 1)
     assert f" {value} 0 9\n" in text
     path.write_text(text)
-    assert read_mesh(path, "ply", color=True) is None
-    assert read_mesh(path, "ply", smooth=True) is not None  # the colours are not cast for normals
+    assert fast_read(path, "ply", color=True) is None
+    assert fast_read(path, "ply", smooth=True) is not None  # the colours are not cast for normals
     assert_fast_and_same(path, ATTRIBUTES[1:2])
 
 
@@ -222,7 +223,7 @@ def assert_obj_as_trimesh(path, attributes=OBJ_ATTRIBUTES):
     """The fast reader answers; each geometry's vertices, faces, UVs and normals are
     trimesh's, bit for bit (so the split and its vertex order are); and every job gives
     trimesh's bytes."""
-    assert read_mesh(path, "obj", smooth=True, uv=True) is not None
+    assert fast_read(path, "obj", smooth=True, uv=True) is not None
     fast = load_surface(path, plain=True, smooth=True, uv=True)
     slow = load_surface(path)
     assert [g.name for g in fast.geometries] == [g.name for g in slow.geometries]
@@ -326,8 +327,8 @@ OBJ_HANDED = {
 def test_obj_refs_the_split_does_not_cover_go_to_trimesh(case, tmp_path):
     path = tmp_path / "m.obj"
     path.write_bytes(OBJ_HANDED[case].encode())
-    assert read_mesh(path, "obj") is not None or case == "mixed forms in a group"
-    assert read_mesh(path, "obj", smooth=True, uv=True) is None
+    assert fast_read(path, "obj") is not None or case == "mixed forms in a group"
+    assert fast_read(path, "obj", smooth=True, uv=True) is None
 
 
 @pytest.mark.parametrize("name", ["m.mtl", "/m.mtl", "lib/m.mtl"])
@@ -337,10 +338,10 @@ def test_an_obj_whose_material_library_resolves_goes_to_trimesh(name, tmp_path):
     (tmp_path / "m.mtl").write_text("newmtl red\nKd 1 0 0\nnewmtl blue\nKd 0 0 1\nnewmtl green\nKd 0 1 0\n")
     path = tmp_path / "m.obj"
     path.write_text(OBJ_CASES["materials"].replace("mtllib none.mtl", f"mtllib {name}"))
-    assert read_mesh(path, "obj") is None and read_mesh(path, "obj", smooth=True, uv=True) is None
+    assert fast_read(path, "obj") is None and fast_read(path, "obj", smooth=True, uv=True) is None
     assert [g.name for g in load_surface(path).geometries] == ["green", "blue", "red"]
     (tmp_path / "m.mtl").unlink()
-    assert read_mesh(path, "obj") is not None
+    assert fast_read(path, "obj") is not None
     assert_obj_as_trimesh(path)
 
 

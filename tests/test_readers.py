@@ -15,10 +15,10 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli.loading.load import load_surface, read_mesh
+from scatter_cli.loading.load import load_surface
 
 from .conftest import SAMPLES, run_scatter, run_user
-from .fuzz_inputs import SEEDS
+from .fuzz_inputs import SEEDS, fast_read
 from .loadmemory import load_memory
 
 SHARED = Path("/work/shared/meshes")
@@ -84,7 +84,7 @@ def resave(mesh_path, fmt, tmp_path, most_faces=3000):
 @pytest.mark.parametrize("mesh", MESHES, ids=[m.name for m in MESHES])
 def test_resaved_meshes_load_and_sample_as_with_trimesh(mesh, fmt, tmp_path):
     path = resave(mesh, fmt, tmp_path)
-    assert read_mesh(path, path.suffix[1:]) is not None
+    assert fast_read(path, path.suffix[1:]) is not None
     assert_same_load(path)
     assert_same_samples(path)
 
@@ -94,7 +94,7 @@ def test_fuzz_seeds_read_as_with_trimesh(name, tmp_path):
     suffix, data = SEEDS[name]
     path = tmp_path / f"seed.{suffix}"
     path.write_bytes(data)
-    assert read_mesh(path, suffix) is not None
+    assert fast_read(path, suffix) is not None
     assert_same_load(path)
     assert_same_samples(path)
 
@@ -158,7 +158,7 @@ CASES = ([("obj", k, v) for k, v in OBJ_CASES.items()] + [("off", k, v) for k, v
 def test_format_rules_match_trimesh(suffix, case, text, tmp_path):
     path = tmp_path / f"m.{suffix}"
     path.write_bytes(text.encode())
-    assert read_mesh(path, suffix) is not None
+    assert fast_read(path, suffix) is not None
     assert_same_load(path)
     assert_same_samples(path)
 
@@ -197,7 +197,7 @@ HANDED = [(s, t) for s, ts in HANDED_OFF.items() for t in ts]
 def test_constructs_outside_the_subset_go_to_trimesh(suffix, text, tmp_path):
     path = tmp_path / f"m.{suffix}"
     path.write_bytes(text.encode())
-    assert read_mesh(path, suffix) is None
+    assert fast_read(path, suffix) is None
 
 
 def test_the_command_writes_the_same_bytes_either_way(tmp_path):
@@ -339,7 +339,7 @@ def test_smooth_normals_from_the_fast_path_are_trimesh_s(mesh, fmt, tmp_path):
     the fast readers (the normals are computed from the faces, as for trimesh's mesh), and
     hands the others to trimesh."""
     path = resave(mesh, fmt, tmp_path)
-    assert (read_mesh(path, path.suffix[1:], smooth=True) is None) == carries_normals_or_uv(path)
+    assert (fast_read(path, path.suffix[1:], smooth=True) is None) == carries_normals_or_uv(path)
     assert_same_smooth_normals(path)
 
 
@@ -347,5 +347,5 @@ def test_smooth_normals_from_the_fast_path_are_trimesh_s(mesh, fmt, tmp_path):
 def test_format_rules_hold_for_smooth_normals(suffix, case, text, tmp_path):
     path = tmp_path / f"m.{suffix}"
     path.write_bytes(text.encode())
-    assert (read_mesh(path, suffix, smooth=True) is None) == carries_normals_or_uv(path)
+    assert (fast_read(path, suffix, smooth=True) is None) == carries_normals_or_uv(path)
     assert_same_smooth_normals(path)

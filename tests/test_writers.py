@@ -131,6 +131,115 @@ def test_precision_ascii_and_crs_rules_come_from_the_table():
     assert formats.ASCII_FORMATS == ("ply", "pcd") and formats.CRS_FORMATS == ("las", "laz")
 
 
+def make_keywords_the_row_does_not_say(spec, module):
+    """The keywords of a format module's ``make`` beyond every writer's, against what its
+    row says the writer takes: the run's facts (``takes``), the output's name (``named``)
+    and the WKT of --crs (``crs``). Empty when they agree."""
+    import inspect
+
+    from scatter_cli import api
+
+    common = {"fmt", "stream", "layout", "count", "ascii", "options"}
+    made = set(inspect.signature(module.make).parameters) - common
+    said = set(spec.takes) | {name for name, on in [("path", spec.named), ("wkt", spec.crs)] if on}
+    return made ^ said | (set(spec.takes) - set(api.RUN_FACTS))
+
+
+def test_each_row_says_what_its_writer_takes_from_the_run():
+    from scatter_cli.writers import formats
+
+    for spec in formats.TABLE:
+        assert make_keywords_the_row_does_not_say(spec, formats.load(spec.name)) == set(), spec.name
+    las, usd = formats.BY_NAME["las"], formats.BY_NAME["usd"]
+    for broken in [las._replace(takes=()), las._replace(crs=False), usd._replace(named=False),
+                   usd._replace(takes=usd.takes + ("colour",))]:
+        assert make_keywords_the_row_does_not_say(broken, formats.load(broken.name)), broken
+
+
+def checks_per_write(fmt, tmp_path, broken=None):
+    """(checks of the output options, loads of the writer's module, conversions of --crs)
+    in one ``api.sample_to`` writing ``fmt``; ``broken(monkeypatch)`` breaks the writing."""
+    from scatter_cli import api, writers
+    from scatter_cli.run.options import SampleOptions
+    from scatter_cli.writers import crs, formats
+
+    from .conftest import SAMPLES
+
+    calls = {"check_output": [], "load": [], "crs_wkt": []}
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        for module, name in [(writers, "check_output"), (formats, "check_output"), (writers, "load"),
+                             (formats, "load"), (crs, "crs_wkt")]:
+            real = getattr(module, name)
+            monkeypatch.setattr(module, name, lambda *a, real=real, seen=calls[name], **k: seen.append(a) or real(*a, **k))
+        if broken:
+            broken(monkeypatch)
+        spec = formats.BY_NAME[fmt]
+        api.sample_to(str(SAMPLES / "icosahedron_binary.stl"), SampleOptions(count=10), tmp_path / f"p.{fmt}", fmt,
+                      crs="EPSG:2056" if spec.crs else None)
+    return tuple(len(calls[name]) for name in calls)
+
+
+def test_the_output_options_are_checked_once_per_write(tmp_path):
+    import importlib.util
+
+    from scatter_cli import writers
+    from scatter_cli.writers import formats
+
+    for spec in formats.TABLE:
+        if all(importlib.util.find_spec(m) for m in spec.extra + ("pyproj",) * spec.crs):
+            assert checks_per_write(spec.name, tmp_path) == (1, 1, int(spec.crs)), spec.name
+    write_output, file_size = writers.write_output, writers._file_size
+
+    def checked_again(monkeypatch):
+        monkeypatch.setattr(writers, "write_output", lambda chunks, out, *a, **k: write_output(
+            chunks, writers.output(out.path, out.format, out.ascii), *a, **k))
+
+    def loaded_again(monkeypatch):
+        monkeypatch.setattr(writers, "_file_size", lambda module, fmt, *a, **k: file_size(
+            writers.load(fmt), fmt, *a, **k))
+
+    assert checks_per_write("ply", tmp_path, checked_again) == (2, 1, 0)
+    assert checks_per_write("ply", tmp_path, loaded_again) == (1, 2, 0)
+
+
+def format_literals(root, skip=("writers", "loading")):
+    """[(file, line, text)] of the string literals (docstrings left out) that name an output
+    format or one of its suffixes, in the modules under ``root`` outside the folders
+    ``skip``: the writers, and the loaders, whose own table names the input formats (PLY
+    and USD are both)."""
+    import ast
+    from pathlib import Path
+
+    from scatter_cli.writers.formats import FORMATS, SUFFIXES
+
+    names = set(FORMATS) | set(SUFFIXES)
+    found = []
+    for path in sorted(Path(root).rglob("*.py")):
+        if path.relative_to(root).parts[0] in skip:
+            continue
+        tree = ast.parse(path.read_text())
+        docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                      if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                      and ast.get_docstring(node, clean=False) is not None}
+        found += [(path.relative_to(root).as_posix(), node.lineno, node.value) for node in ast.walk(tree)
+                  if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings
+                  and node.value.lower().lstrip("*.") in names]
+    return sorted(found)
+
+
+def test_no_module_outside_the_writers_names_an_output_format(tmp_path):
+    from pathlib import Path
+
+    package = Path(scatter_cli.__file__).parent
+    assert format_literals(package) == []
+    assert (package / "api.py").exists() and (package / "cli.py").exists()
+    (tmp_path / "writers").mkdir()
+    (tmp_path / "writers" / "las.py").write_text('FORMAT = "las"\n')
+    (tmp_path / "api.py").write_text('"""Writes to out.ply, or "npy"."""\n\ndef options(fmt):\n'
+                                     '    """LAS the bounds."""\n    return fmt in ("las", "LAZ") or fmt == f"x.{fmt}.usd"\n')
+    assert format_literals(tmp_path) == [("api.py", 5, ".usd"), ("api.py", 5, "LAZ"), ("api.py", 5, "las")]
+
+
 @pytest.mark.parametrize("argv", [["--help"], ["sample", "--help"], ["merge", "--help"]])
 def test_help_and_the_table_import_no_numpy(argv):
     import subprocess

@@ -21,16 +21,16 @@ from concurrent.futures import ThreadPoolExecutor
 from ..engines.batch import Inputs
 from ..errors import ScatterError, ScatterUsageError
 from ..loading.formats import MESH_SUFFIXES
-from ..writers.formats import SUFFIXES
+from ..writers.formats import SEARCHED_SUFFIXES
 
 # This module imports only the standard library at the top (NumPy and Pillow inside the
 # functions): ``scatter_cli.preview`` is the function, imported with the package.
 
 MAX_DRAWN = 200_000  # points drawn per input at most: a 256 px thumbnail shows no more
 DEFAULT_COUNT = 20_000  # points sampled on a mesh
-# What a folder is searched for: meshes and point files (not .txt: too many other files
-# are text; a .txt XYZ file given by name is read).
-FOLDER_SUFFIXES = tuple(sorted(set(MESH_SUFFIXES) | {"." + s for s in SUFFIXES} - {".txt"}))
+# What a folder is searched for: meshes and point files (a point file of a suffix the
+# search leaves out, such as .txt, is read when given by name).
+FOLDER_SUFFIXES = tuple(sorted(set(MESH_SUFFIXES) | {"." + s for s in SEARCHED_SUFFIXES}))
 VIEWS = ("iso", "front", "side", "top")  # as render.VIEWS
 GAP = 8  # pixels between cells and around the sheet
 LINE = 12  # caption line height (Pillow's default bitmap font is 11 px high)

@@ -129,15 +129,6 @@ def _finished(surface, name, objects):
 # -- the fast readers ----------------------------------------------------------------------
 
 
-def read_mesh(path, file_type, smooth=False, color=False, uv=False):
-    """What the fast reader of ``file_type`` makes of the file at ``path``
-    (readers.read_file), or None when there is none or it hands the file over."""
-    loader = LOADERS.get(file_type)
-    if loader is None or loader.fast is None:
-        return None
-    return readers.read_file(path, loader.fast, smooth, color, uv)
-
-
 def _read_fast(job, read):
     """The Surface of a mesh file read by a fast reader, or None (read it whole).
 

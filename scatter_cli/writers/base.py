@@ -41,9 +41,6 @@ class Writer:
         """Release what the writer holds before its stream is closed, finished or not."""
 
 
-_Writer = Writer  # the name the format modules of other branches import
-
-
 def copy_range(path, start, end, stream, block=1 << 22):
     """Copy bytes ``start`` to ``end`` of the file ``path`` into ``stream`` (for merging);
     a file that ends before ``end`` is an error naming it."""
@@ -75,19 +72,10 @@ def is_stdout(path) -> bool:
     return path is None or str(path) == "-"
 
 
-def check_room(path, size):
-    """Refuse, before any work, a file of ``size`` bytes that the file system of ``path``
-    cannot take (its temporary copy is written beside it). Standard output, devices and
-    pipes are not checked; nor is a file system that does not say."""
-    if size is None or is_stdout(path):
-        return
-    path = os.fspath(path)
-    existing = _stat(path)
-    if existing is None or stat.S_ISREG(existing.st_mode):
-        _check_room(path, os.path.dirname(os.path.abspath(path)), size)
-
-
 def _check_room(path, folder, size):
+    """Refuse, before any work, a file of ``size`` bytes that the file system of ``folder``
+    cannot take (its temporary copy is written there); a file system that does not say
+    is not checked."""
     try:
         fs = os.statvfs(folder)
     except OSError:
@@ -124,7 +112,7 @@ def open_output(path, size=None):
     (``.NAME.XXXXXXXX.part``), which gets the mode an ordinary ``open(path, 'w')`` would
     give: the existing file's, or 0666 less the umask. Devices and pipes (``/dev/null``,
     a FIFO) are written in place. ``size``: the bytes the file will have, when known: a
-    file system without that room is refused first (:func:`check_room`).
+    file system without that room is refused first (devices and pipes are not checked).
     """
     if is_stdout(path):
         with writing(STDOUT):

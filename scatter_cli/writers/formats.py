@@ -34,32 +34,30 @@ class Format(NamedTuple):
     extra: tuple = ()  # modules of an optional extra it needs
     needs: str = ""  # what to tell a user who lacks them
     hint: str = ""  # how to install them (the packages themselves)
-
-    def file_size(self, layout, count, ascii=False, **options):
-        """Bytes of the file for ``count`` points of ``layout``; None when not known beforehand
-        (text, ASCII variants, compressed or in-memory formats)."""
-        if not self.sized or ascii:
-            return None
-        return load(self.name).file_size(self.name, layout, count, **options)
+    takes: tuple = ()  # what its writer takes from the run besides the points (keywords of make)
+    named: bool = False  # its writer reads the output's file name (USD: .usda text, .usdc crate)
+    skipped: tuple = ()  # suffixes a folder search leaves out (too many other files have them)
 
 
 LAS_EXTRA = dict(float64=True, crs=True, extra=("laspy", "lazrs"), needs="laspy and lazrs",
-                 hint="pip install laspy lazrs pyproj")
+                 hint="pip install laspy lazrs pyproj", takes=("bounds",))
 
 TABLE = (
     Format("ply", ("ply",), "ply", ascii=True),
     Format("csv", ("csv",), "text", sized=False),
-    Format("xyz", ("xyz", "txt"), "text", sized=False),
+    Format("xyz", ("xyz", "txt"), "text", sized=False, skipped=("txt",)),
     Format("npy", ("npy",), "npy"),
     Format("pcd", ("pcd",), "pcd", ascii=True),
     Format("las", ("las",), "las", **LAS_EXTRA),
     Format("laz", ("laz",), "las", sized=False, **LAS_EXTRA),
     Format("usd", ("usd", "usda", "usdc"), "usd", mergeable=False, sized=False, extra=("pxr",),
-           needs="usd-core", hint="pip install usd-core"),
+           needs="usd-core", hint="pip install usd-core", takes=("up_axis", "meters_per_unit", "spacing"),
+           named=True),
 )
 BY_NAME = {f.name: f for f in TABLE}
 FORMATS = tuple(BY_NAME)
 SUFFIXES = {suffix: f.name for f in TABLE for suffix in f.suffixes}
+SEARCHED_SUFFIXES = tuple(suffix for f in TABLE for suffix in f.suffixes if suffix not in f.skipped)
 ASCII_FORMATS = tuple(f.name for f in TABLE if f.ascii)
 MERGEABLE = tuple(f.name for f in TABLE if f.mergeable)
 CRS_FORMATS = tuple(f.name for f in TABLE if f.crs)
@@ -89,16 +87,18 @@ def run_precision(fmt, precision):
 
 def check_output(fmt, ascii=False, crs=None):
     """Usage errors of the output options for ``fmt``: ``--ascii`` and ``--crs`` where the
-    format has no such thing, and a ``--crs`` that is neither ``EPSG:N`` nor WKT."""
+    format has no such thing, and a ``--crs`` that is neither ``EPSG:N`` nor WKT.
+    Returns the WKT of ``crs`` (None without one)."""
     if ascii and not BY_NAME[fmt].ascii:
         raise ScatterUsageError(f"--ascii applies to {' and '.join(f.upper() for f in ASCII_FORMATS)} output only")
     if crs is not None and not BY_NAME[fmt].crs:
         raise ScatterUsageError(f"--crs applies to {'/'.join(f.upper() for f in CRS_FORMATS)} output only, "
                                 f"not {fmt.upper()}")
-    if crs is not None:
-        from .crs import crs_wkt
+    if crs is None:
+        return None
+    from .crs import crs_wkt
 
-        crs_wkt(crs)
+    return crs_wkt(crs)
 
 
 def check_extra(fmt):
