@@ -5,8 +5,8 @@
 BEFORE and AFTER are folders holding a built `scatter_cli` (their kernels built in
 place). The collection is benchmarks/batch.py's (small meshes in five formats); each
 round runs, one after the other: `scatter batch -j 2` of BEFORE, a batch of its first
-mesh, the same two of AFTER, then batch.py's trimesh script; every command writes into
-a new, empty folder. A warm-up round comes first. Rounds interleave so that a change in
+mesh, `scatter sample` of that mesh, the same three of AFTER, then batch.py's trimesh
+script; every command writes into a new, empty folder. A warm-up round comes first. Rounds interleave so that a change in
 the machine's speed (a shared host's is large) moves all of them alike: the ratios of
 each round's medians are what to compare, not the seconds of different runs.
 """
@@ -25,7 +25,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import batch as bench  # noqa: E402
 
-COMMON = ["-n", str(bench.COUNT), "-a", "normal", "-q", "-j", "2"]
+SAMPLE = ["-n", str(bench.COUNT), "-a", "normal", "-q"]
+COMMON = [*SAMPLE, "-j", "2"]
 
 
 def run(cmd, env, cwd):
@@ -65,7 +66,8 @@ def main():
         one.write_text(f"{paths[0]}\n")
         script = work / "tm_pool.py"
         script.write_text(bench.TRIMESH_SCRIPT)
-        runs = {k: [] for k in ("before", "before_one", "after", "after_one", "trimesh")}
+        runs = {k: [] for k in ("before", "before_one", "before_sample", "after", "after_one", "after_sample",
+                                "trimesh")}
         time.sleep(args.settle)
         print(f"load before: {os.getloadavg()[0]:.2f}; {len(paths)} meshes")
         folders = iter(range(1 << 30))
@@ -77,6 +79,9 @@ def main():
                     out = fresh(work / f"out-{next(folders)}")
                     got[kind] = run([sys.executable, "-m", "scatter_cli", "batch", "--from-list", str(lst), "-o",
                                      f"{out}/{{stem}}.ply", *COMMON], tree_env, work)
+                out = fresh(work / f"out-{next(folders)}")
+                got[name + "_sample"] = run([sys.executable, "-m", "scatter_cli", "sample", str(paths[0]), "-o",
+                                             f"{out}/one.ply", *SAMPLE], tree_env, work)
             out = fresh(work / f"out-{next(folders)}")
             got["trimesh"] = run([sys.executable, str(script), str(listing), str(out)], env, work)
             if r >= 0:
@@ -90,6 +95,13 @@ def main():
     print("\n| command | wall s (median) | CPU s (median) | trimesh script / this, wall | CPU |\n|---|---|---|---|---|")
     for k, (w, c) in med.items():
         print(f"| {k} | {w:.2f} | {c:.2f} | {med['trimesh'][0] / w:.2f}x | {med['trimesh'][1] / c:.2f}x |")
+    ratios = [a / b for (a, _), (b, _) in zip(runs["after"], runs["before"])]
+    print(f"\nEach round's after/before, the collection (wall): median {statistics.median(ratios):.3f}, "
+          f"all {', '.join(f'{r:.2f}' for r in ratios)}")
+    for name in trees:
+        extra = [a - b for (a, _), (b, _) in zip(runs[name + "_one"], runs[name + "_sample"])]
+        print(f"{name}: a batch of one mesh against one `scatter sample` of it, each round (wall): "
+              f"median {statistics.median(extra):+.3f} s")
 
 
 if __name__ == "__main__":

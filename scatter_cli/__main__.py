@@ -1,19 +1,6 @@
-"""``python -m scatter_cli`` and the ``scatter`` command."""
+"""``python -m scatter_cli`` and the ``scatter`` command (``main``)."""
 
-import sys
-
-
-def main():
-    """Start a batch's fork server first (it imports what the workers need while the
-    command reads its arguments: :mod:`scatter_cli.engines.forkserver`), then run the command."""
-    from .engines import forkserver
-
-    if forkserver.wanted(sys.argv[1:]):
-        forkserver.start()
-    from .cli import run
-
-    run()
-
+from .cli import run as main
 
 if __name__ == "__main__":
     main()

@@ -7,13 +7,15 @@ import re
 import shutil
 import signal
 import subprocess
+import sys
 import threading
 import time
 
 import pytest
 
 from .conftest import SAMPLES, popen_user, run_scatter, run_user, scatter_command
-from .batchtools import alive, outputs, parent_of, reader_fd, wait_for_reader, warning_meshes
+from .batchtools import (alive, collection, outputs, parent_of, reader_fd, reference, wait_for_reader,
+                         warning_meshes)
 
 MESHES = ["icosahedron_binary.stl", "moebius-160-10.ply", "hemisphere.off", "narrow_triangles.obj"]
 
@@ -250,6 +252,51 @@ def test_a_rerun_clears_what_a_batch_killed_with_sigkill_left(tmp_path):
 def children(pid):
     """The pids of the processes whose parent is ``pid``."""
     return [int(p) for p in filter(str.isdigit, os.listdir("/proc")) if alive(int(p)) and parent_of(int(p)) == pid]
+
+
+# the command with forking turned off, as where it may not fork: its workers are started
+NEVER_FORKS = ("import sys; from scatter_cli.engines import worker; worker.can_fork = lambda: False; "
+               "from scatter_cli.cli import run; sys.argv[0] = 'scatter'; run()")
+
+
+def numpy_mapped(pid):
+    with open(f"/proc/{pid}/maps") as f:
+        return "_multiarray_umath" in f.read()
+
+
+@pytest.mark.parametrize("command", ["scatter", "never forks"])
+def test_the_command_forks_its_workers_warm(tmp_path, command):
+    """The command as a user runs it, in a large environment (1 MB in 16 variables): it
+    imports NumPy and the sampler, then forks its workers (not started as `python -m
+    scatter_cli.engines.worker`), each its own child. A SIGKILL'd worker's mesh fails
+    alone (the command reads the signal from the worker's exit status) and the other
+    meshes are written byte for byte as `scatter sample` writes them. The broken variant,
+    a command that starts its workers instead, is told apart by the same checks."""
+    paths = collection(tmp_path / "in")
+    ref = reference(tmp_path, paths)
+    fifo = tmp_path / "in" / "fifo.csv.ply"
+    os.mkfifo(fifo)
+    args = ["batch", tmp_path / "in", "-o", tmp_path / "out" / "{stem}", "-n", 300, "-a", "normal,face", "-j", 2,
+            "--report", tmp_path / "report.jsonl"]
+    argv = scatter_command(*args) if command == "scatter" else [sys.executable, "-c", NEVER_FORKS, *map(str, args)]
+    env = {f"SCATTER_TEST_FILL_{i}": "x" * 65536 for i in range(16)}
+    proc = popen_user(argv, stderr=subprocess.PIPE, cwd=tmp_path, env=env)
+    try:
+        reader = wait_for_reader(fifo, over=lambda: proc.poll() is not None)
+        assert parent_of(reader) == proc.pid
+        with open(f"/proc/{reader}/cmdline") as f:
+            forked = "scatter_cli.engines.worker" not in f.read()
+        assert (forked, numpy_mapped(proc.pid)) == ((True, True) if command == "scatter" else (False, False))
+        os.kill(reader, signal.SIGKILL)
+        os.close(reader_fd.pop())
+        err = proc.communicate(timeout=120)[1].decode()
+    finally:
+        proc.kill()
+    assert proc.returncode == 1, err
+    records = {os.path.basename(r["input"]): r for r in map(json.loads, (tmp_path / "report.jsonl").read_text().splitlines())}
+    assert "killed by SIGKILL" in records["fifo.csv.ply"]["error"]
+    assert [r["status"] for name, r in records.items() if name != "fifo.csv.ply"] == ["written"] * len(paths)
+    assert outputs(tmp_path / "out") == ref
 
 
 def test_a_folder_that_does_not_exist_is_named(tmp_path):

@@ -232,14 +232,12 @@ def available_cpus() -> int:
 def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing, done):
     """``jobs`` lanes (threads, each driving one worker process) take meshes one at a time.
 
-    The workers come warm, none importing NumPy again: from the fork server the command
-    started (:mod:`scatter_cli.engines.forkserver`), else forked from this process after it has
-    imported what they need, when it may fork (:func:`scatter_cli.engines.worker.can_fork`).
+    The workers are forked from this process, after it has imported what they need, when
+    it may fork (:func:`scatter_cli.engines.worker.can_fork`): none imports NumPy again.
     """
     import queue
     import threading
 
-    from . import forkserver
     from .worker import Lane, StaleTemps, WorkerProcess, can_fork, preload
     from ..writers import infer_format
 
@@ -248,17 +246,11 @@ def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing
     stale = StaleTemps()
     lock = threading.Lock()
     results = queue.Queue()
-    server = forkserver.claim()
-    fork = server is None and can_fork()
+    fork = can_fork()
     if fork:
         preload()
-    try:
-        lanes = [Lane(setup, env, timeout, max_memory, skip_existing, stale,
-                      WorkerProcess(setup, env, fork=fork, server=server) if fork or server else None)
-                 for _ in range(jobs)]
-    finally:
-        if server is not None:
-            server.close()
+    lanes = [Lane(setup, env, timeout, max_memory, skip_existing, stale,
+                  WorkerProcess(setup, env, fork=True) if fork else None) for _ in range(jobs)]
 
     def take():
         while True:

@@ -1,13 +1,15 @@
 """One mesh at a time in a long-lived child process, with its failures kept to that mesh.
 
-The child (``python -m scatter_cli.engines.worker``) imports NumPy and trimesh once, then reads
-jobs, one JSON line each, from standard input, samples each mesh to its output itself
-(``api.prepare`` and the writers, exactly as ``scatter sample`` does) and answers one JSON
-line. The parent side, :class:`Lane`, hands it its jobs (the next one queued behind a
-short one) and watches it: a job past its timeout or its memory limit is killed with its
-process, a crash (segfault, OOM kill) is seen as the pipe closing; either way that job
-fails, its temporary output is removed and the jobs after it go to a fresh child. Both
-engines use it: the local one runs ``-j`` lanes, the Dask one a lane per Dask worker thread.
+The child is forked from the command once it has imported NumPy and the sampler
+(:class:`Forked`), or started as ``python -m scatter_cli.engines.worker`` and imports them
+itself. It reads jobs, one JSON line each, from standard input, samples each mesh to its
+output itself (``api.prepare`` and the writers, exactly as ``scatter sample`` does) and
+answers one JSON line. The parent side, :class:`Lane`, hands it its jobs (the next one
+queued behind a short one) and watches it: a job past its timeout or its memory limit is
+killed with its process, a crash (segfault, OOM kill) is seen as the pipe closing; either
+way that job fails, its temporary output is removed and the jobs after it go to a fresh
+child. Both engines use it: the local one runs ``-j`` lanes, the Dask one a lane per Dask
+worker thread.
 
 The memory limit is checked by polling the child's resident set size (``/proc/PID/statm``)
 every ``POLL`` seconds rather than with ``RLIMIT_AS``: an address-space limit counts
@@ -52,7 +54,7 @@ def serve():
     answer = os.fdopen(os.dup(1), "w", buffering=1)
     os.dup2(2, 1)  # stray prints go to standard error, not into the answers
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the parent decides
-    die_with_parent()
+    _die_with_parent()
     setup = json.loads(sys.stdin.readline() or "null")
     if setup is None:
         return
@@ -118,7 +120,7 @@ def _warm_up():
     lean_trimesh()  # trimesh as the command line imports it (SciPy hidden), when a mesh needs it
 
 
-def die_with_parent():
+def _die_with_parent():
     """Ask Linux to kill this child when its parent dies, so none is left working for nobody."""
     try:
         import ctypes
@@ -146,16 +148,15 @@ class WorkerProcess:
     """One child; ``send(...)`` hands it a job, ``receive(...)`` waits for the answer to
     the oldest job it has not answered.
 
-    ``fork``: fork it (:class:`Forked`: by ``server``, a
-    :class:`~scatter_cli.engines.forkserver.Server`, or else from this process, see
-    :func:`can_fork`) instead of starting ``python -m scatter_cli.engines.worker``.
+    ``fork``: fork it from this process (:class:`Forked`; see :func:`can_fork`) instead of
+    starting ``python -m scatter_cli.engines.worker``.
     """
 
-    def __init__(self, setup, env=None, fork=False, server=None):
+    def __init__(self, setup, env=None, fork=False):
         self.proc = None
-        if fork or server is not None:
+        if fork:
             try:
-                self.proc = Forked(env, server)
+                self.proc = Forked(env)
             except OSError:  # no room for another process now: try the ordinary way
                 pass
         if self.proc is None:
@@ -260,30 +261,26 @@ def preload():
 
 
 class Forked:
-    """A worker forked from this process (which has imported what it needs: :func:`preload`)
-    or by ``server`` (:mod:`scatter_cli.engines.forkserver`; a child of this process all the same),
+    """A worker forked from this process (which has imported what it needs: :func:`preload`),
     in place of ``subprocess.Popen``: ``pid``, ``stdin``, ``stdout``, ``wait``, ``kill``.
 
-    Fork here only where :func:`can_fork` says so. The child keeps standard error; its
-    standard input and output are pipes to this process, every other file of this process
-    is closed in it (another worker's pipe held open would hide that worker's death), and
-    it leaves with ``os._exit``, so buffers and handlers of this process never run there.
+    Fork only where :func:`can_fork` says so. The child keeps standard error; its standard
+    input and output are pipes to this process, every other file of this process is closed
+    in it (another worker's pipe held open would hide that worker's death), and it leaves
+    with ``os._exit``, so buffers and handlers of this process never run there.
     """
 
-    def __init__(self, env=None, server=None):
+    def __init__(self, env=None):
         job_r, job_w = os.pipe()
         answer_r, answer_w = os.pipe()
         try:
-            if server is not None:
-                self.pid = server.fork(env, job_r, answer_w)
-            else:
-                self.pid = os.fork()
-                if self.pid == 0:
-                    forked_child(job_r, answer_w, env)
+            self.pid = os.fork()
         except OSError:
             for fd in (job_r, job_w, answer_r, answer_w):
                 os.close(fd)
             raise
+        if self.pid == 0:
+            _forked_child(job_r, answer_w, env)
         os.close(job_r)
         os.close(answer_w)
         self.stdin = os.fdopen(job_w, "wb", buffering=0)
@@ -303,10 +300,12 @@ class Forked:
                 self.returncode = os.waitstatus_to_exitcode(os.waitpid(self.pid, 0)[1])
             return self.returncode
         deadline = time.monotonic() + timeout
+        nap = 0.0005  # doubled up to 50 ms, as subprocess waits: a worker told to stop is gone in a moment
         while self.poll() is None:
             if time.monotonic() > deadline:
                 raise subprocess.TimeoutExpired(f"worker {self.pid}", timeout)
-            time.sleep(0.005)
+            time.sleep(nap)
+            nap = min(2 * nap, 0.05)
         return self.returncode
 
     def kill(self):
@@ -317,7 +316,7 @@ class Forked:
                 pass
 
 
-def forked_child(job_r, answer_w, env):
+def _forked_child(job_r, answer_w, env):
     """The forked worker: standard input and output on the pipes, then :func:`serve`."""
     code = 1
     try:
