@@ -43,9 +43,9 @@ def hunyuan_edges(mesh, position):
     return set(zip(np.minimum(a, b).tolist(), np.maximum(a, b).tolist()))
 
 
-def dihedral_edges(mesh, angle, links, normals, position):
+def dihedral_edges(mesh, angle, normals, position):
     """{(i, j)} undirected sharp edges at ``angle`` degrees (scatter's rule), by position numbers."""
-    found = sharp.sharp_edges(links, normals, angle)
+    found = sharp.sharp_edges(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64), normals, angle)
     f, k = mesh.faces[found.face], found.corner
     a, b = position[f[np.arange(len(f)), k]], position[f[np.arange(len(f)), (k + 1) % 3]]
     return set(zip(np.minimum(a, b).tolist(), np.maximum(a, b).tolist()))
@@ -57,16 +57,15 @@ def compare(path):
     mesh = trimesh.load(path, force="mesh")
     v, f = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
     normals = np.asarray(mesh.face_normals, float)
-    links = sharp.edge_links(v, f, np.any(normals != 0, axis=1))
     position = welded(v, np.arange(len(v))[:, None])[:, 0]  # one number per distinct position
     theirs = hunyuan_edges(mesh, position)
     best = None
     for angle in range(1, 91):
-        ours = dihedral_edges(mesh, angle, links, normals, position)
+        ours = dihedral_edges(mesh, angle, normals, position)
         differ = len(ours ^ theirs)
         if best is None or differ < best[1]:
             best = (angle, differ, len(ours), len(ours - theirs), len(theirs - ours))
-    at15 = dihedral_edges(mesh, 15, links, normals, position)
+    at15 = dihedral_edges(mesh, 15, normals, position)
     return {"mesh": Path(path).name, "faces": len(f), "hunyuan": len(theirs), "best_angle": best[0],
             "differ": best[1], "ours_at_best": best[2], "ours_only": best[3], "theirs_only": best[4],
             "ours_at_15": len(at15), "differ_at_15": len(at15 ^ theirs)}

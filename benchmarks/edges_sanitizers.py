@@ -33,9 +33,9 @@ for name, v, f in (("part, corners repeated", part.vertices[part.faces].reshape(
                    ("skull", np.asarray(skull.vertices, float), np.asarray(skull.faces, np.int64))):
     v = np.ascontiguousarray(v, dtype=np.float64)
     valid = np.any(face_normals(v, f) != 0, axis=1)
-    kernel, twin = sharp.edge_links(v, f, valid), sharp._numpy_links(v, f, valid)
+    kernel, twin = sharp.edge_slots(v, f, valid), sharp._numpy_edge_slots(v, f, valid)
     assert all(np.array_equal(a, b) for a, b in zip(kernel, twin)), name
-    print(f"edge links: {name}, {len(f):,} faces under the sanitizers, the NumPy twin's arrays")
+    print(f"edge edges_: {name}, {len(f):,} faces under the sanitizers, the NumPy twin's arrays")
 '''
 
 

@@ -65,17 +65,16 @@ def nearest_edge(points):
     return which, best, along
 
 
-def links_of(mesh):
+def arrays_of(mesh):
+    """(vertices, faces, unit face normals) of a trimesh mesh, as the sampler has them."""
     v, f = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
-    n = face_normals(v, f)
-    return sharp.edge_links(v, f, np.any(n != 0, axis=1)), n
+    return v, f, face_normals(v, f)
 
 
 # -- which edges are sharp --------------------------------------------------------------
 
 def test_a_box_has_twelve_sharp_edges():
-    links, normals = links_of(box_mesh())
-    found = sharp.sharp_edges(links, normals)
+    found = sharp.sharp_edges(*arrays_of(box_mesh()))
     assert len(found) == 12 and (found.kind == 2).all() and np.allclose(found.angle, 90.0)
 
 
@@ -90,7 +89,7 @@ def hinge(degrees):
 def test_a_crease_is_sharp_from_the_angle_on(degrees, is_sharp):
     v, f = hinge(degrees)
     n = face_normals(v, f)
-    found = sharp.sharp_edges(sharp.edge_links(v, f, np.ones(2, bool)), n, 15.0)
+    found = sharp.sharp_edges(v, f, n, 15.0)
     interior = found.kind == 2
     assert interior.sum() == is_sharp
     if is_sharp:
@@ -99,21 +98,21 @@ def test_a_crease_is_sharp_from_the_angle_on(degrees, is_sharp):
 
 def test_the_angle_threshold_is_the_option():
     v, f = hinge(20.0)
-    links, n = sharp.edge_links(v, f, np.ones(2, bool)), face_normals(v, f)
-    assert (sharp.sharp_edges(links, n, 19.0).kind == 2).sum() == 1
-    assert (sharp.sharp_edges(links, n, 21.0).kind == 2).sum() == 0
+    n = face_normals(v, f)
+    assert (sharp.sharp_edges(v, f, n, 19.0).kind == 2).sum() == 1
+    assert (sharp.sharp_edges(v, f, n, 21.0).kind == 2).sum() == 0
 
 
-def test_boundary_and_non_manifold_edges_are_always_sharp():
+def test_boundary_and_non_manifold_slotsare_always_sharp():
     # a flat square (two coplanar triangles): its 4 boundary edges, not the diagonal
     v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     f = np.array([[0, 1, 2], [0, 2, 3]], np.int64)
-    found = sharp.sharp_edges(sharp.edge_links(v, f, np.ones(2, bool)), face_normals(v, f))
+    found = sharp.sharp_edges(v, f, face_normals(v, f))
     assert sorted(found.kind.tolist()) == [1, 1, 1, 1]
     # three flat-ish faces on one edge (a fin): the shared edge is non-manifold, whatever the angle
     v = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, -1, 1e-3]], float)
     f = np.array([[0, 1, 2], [1, 0, 3], [1, 0, 4]], np.int64)
-    found = sharp.sharp_edges(sharp.edge_links(v, f, np.ones(3, bool)), face_normals(v, f), 179.0)
+    found = sharp.sharp_edges(v, f, face_normals(v, f), 179.0)
     assert (found.kind == 3).sum() == 1 and found.face[found.kind == 3][0] == 0
 
 
@@ -124,7 +123,7 @@ def test_degenerate_faces_have_no_edges():
     n = face_normals(v, f)
     valid = np.any(n != 0, axis=1)
     assert valid.tolist() == [True, True, False]
-    found = sharp.sharp_edges(sharp.edge_links(v, f, valid), n)
+    found = sharp.sharp_edges(v, f, n)
     assert (found.kind == 2).sum() == 1 and (found.kind == 3).sum() == 0
 
 
@@ -134,12 +133,12 @@ def test_split_corners_link_as_the_welded_mesh():
     box = box_mesh()
     split_v = box.vertices[box.faces].reshape(-1, 3)
     split_f = np.arange(len(split_v)).reshape(-1, 3)
-    welded = sharp.sharp_edges(*links_of(box))
-    links = sharp.edge_links(split_v, split_f, np.ones(len(split_f), bool))
-    split = sharp.sharp_edges(links, face_normals(split_v, split_f))
+    welded = sharp.sharp_edges(*arrays_of(box))
+    normals = face_normals(split_v, split_f)
+    split = sharp.sharp_edges(split_v, split_f, normals)
     assert np.array_equal(split.slot, welded.slot) and np.array_equal(split.kind, welded.kind)
-    by_number = sharp._numpy_links(np.arange(len(split_v))[:, None] * np.ones(3), split_f, np.ones(12, bool))
-    assert (sharp.sharp_edges(by_number, face_normals(split_v, split_f)).kind == 1).all()
+    by_number = np.arange(len(split_v))[:, None] * np.ones(3)  # every vertex a position of its own
+    assert (sharp.sharp_edges(by_number, split_f, normals).kind == 1).all()
 
 
 def random_meshes():
@@ -152,22 +151,26 @@ def random_meshes():
 
 
 @given(random_meshes())
-def test_the_kernel_links_as_numpy_does(mesh):
+def test_the_kernel_finds_the_slotsnumpy_finds(mesh):
     coords, faces, valid = mesh
     v = np.array(coords, float)
     f = np.array(faces, np.int64) % len(v)
     ok = np.array(valid[: len(f)], bool)
-    kernel = sharp.edge_links(v, f, ok)
-    twin = sharp._numpy_links(v, f, ok)
-    assert np.array_equal(kernel[0], twin[0]) and np.array_equal(kernel[1], twin[1])
+    normals = face_normals(v, f)
+    for limit in (np.inf, 0.9):
+        kernel = sharp.edge_slots(v, f, ok, normals, limit)
+        twin = sharp._numpy_edge_slots(v, f, ok, normals, limit)
+        for field in ("head", "second", "count", "rest"):
+            assert np.array_equal(getattr(kernel, field), getattr(twin, field)), (field, limit)
 
 
 def test_the_kernel_refuses_an_index_out_of_range():
     if sharp._kernel is None:
         pytest.skip("no compiled kernels")
-    first, nxt = np.empty(3, np.int64), np.empty(3, np.int64)
+    out = [np.empty(3, np.int64) for _ in range(4)]
     with pytest.raises(ValueError, match="out of range"):
-        sharp._kernel.links(np.zeros((2, 3)), np.array([[0, 1, 2]], np.int64), np.ones(1, bool), first, nxt)
+        sharp._kernel.edges(np.zeros((2, 3)), np.array([[0, 1, 2]], np.int64), np.ones(1, bool), np.zeros((1, 3)),
+                            np.inf, *out)
 
 
 # -- points on the edges of a box --------------------------------------------------------
@@ -186,7 +189,7 @@ def test_edge_points_lie_on_the_edges(box_run):
     assert np.median(dist) > 0.1  # face points are spread over the faces
 
 
-def test_edges_are_chosen_by_length(box_run):
+def test_slotsare_chosen_by_length(box_run):
     which, _, _ = nearest_edge(box_run.points[box_run.sharp == 1])
     lengths = np.array([np.linalg.norm(b - a) for a, b in box_edges()])
     counts = np.bincount(which, minlength=12)
@@ -237,7 +240,7 @@ def test_face_points_are_uniform_by_area(box_run):
     assert chi2_gof(np.bincount(face, minlength=12), np.ones(12))[2] < LEVEL  # the broken variant
 
 
-def test_the_edges_do_not_depend_on_vertex_numbering(tmp_path):
+def test_the_slotsdo_not_depend_on_vertex_numbering(tmp_path):
     """A split STL, the welded PLY of its float32 coordinates and the same PLY with its
     vertices renumbered give the same bytes; ordering the edges by vertex number would not."""
     box = box_mesh()
@@ -263,14 +266,14 @@ def test_edge_order_by_vertex_number_would_differ(monkeypatch):
     renumbered = trimesh.Trimesh(v[perm], np.argsort(perm)[box.faces], process=False)
     real = sharp.sharp_edges
 
-    def by_vertex(links, normals, angle=15.0, faces=None):
-        found = real(links, normals, angle)
+    def by_vertex(vertices, faces, normals, angle=15.0):
+        found = real(vertices, faces, normals, angle)
         key = np.minimum(faces[found.face, found.corner], faces[found.face, (found.corner + 1) % 3])
         order = np.argsort(key, kind="stable")
         return sharp.SharpEdges(found.slot[order], found.kind[order], found.angle[order], found.normal[order])
 
     def run(mesh):
-        monkeypatch.setattr(edges_module, "sharp_edges", lambda l, n, a: by_vertex(l, n, a, np.asarray(mesh.faces)))
+        monkeypatch.setattr(edges_module, "sharp_edges", by_vertex)
         return scatter_cli.sample(mesh, 500, edges=1).points
 
     assert not np.array_equal(run(box), run(renumbered))

@@ -20,7 +20,7 @@ import numpy as np
 from ..surface.model import apply_matrix, normal_transforms
 from .normals import face_normals
 from .plan import RawChunk, _guide_table, select
-from .sharp import SHARP_ANGLE, SharpEdges, edge_links, is_similarity, sharp_edges
+from .sharp import SHARP_ANGLE, SharpEdges, is_similarity, sharp_edges
 
 EDGE_DRAWS = 2  # the edge, then the point along it
 STREAM_KEY = 0x65646765  # "edge": keys the edge stream apart from the others
@@ -62,22 +62,21 @@ class EdgeTable:
 
     def __init__(self, surface, angle: float = SHARP_ANGLE):
         self.surface, self.angle = surface, float(angle)
-        found = {}  # geometry -> (links, local unit normals, local SharpEdges)
+        found = {}  # geometry -> (local unit normals, local SharpEdges)
         parts = []
         transforms = normal_transforms([inst.matrix for inst in surface.instances])
         for k, inst in enumerate(surface.instances):
             g = surface.geometries[inst.geometry]
             if inst.geometry not in found:
                 normals = face_normals(g.vertices, g.faces)
-                links = edge_links(g.vertices, g.faces, np.any(normals != 0, axis=1))
-                found[inst.geometry] = links, normals, sharp_edges(links, normals, self.angle)
-            links, normals, edges = found[inst.geometry]
+                found[inst.geometry] = normals, sharp_edges(g.vertices, g.faces, normals, self.angle)
+            normals, edges = found[inst.geometry]
             if inst.matrix is None:
                 world_normals = edges.normal
             elif is_similarity(inst.matrix):  # angles kept: the geometry's edges, turned
                 world_normals = _unit(edges.normal @ transforms[k].T)
             else:  # the angles of this instance are not those of its geometry
-                edges = sharp_edges(links, _unit(normals @ transforms[k].T), self.angle)
+                edges = sharp_edges(g.vertices, g.faces, _unit(normals @ transforms[k].T), self.angle)
                 world_normals = edges.normal
             parts.append(self._placed(k, inst, g, edges, world_normals))
         self.a, self.b, self.face, self.corner, self.instance, self.normal = (

@@ -25,41 +25,71 @@ SHARP_ANGLE = 15.0  # degrees: the default --sharp-angle
 _kernel = native.kernel("_cedges")
 
 
-def edge_links(vertices, faces, valid):
-    """(first, next), each (3 F,) int64: for the corner slots of the ``valid`` (F,) bool
-    faces of ``faces`` (F, 3) int64 over ``vertices`` (V, 3) float64, ``first[s]`` is
-    the lowest slot of the edge of slot ``s`` (by position) and ``next[s]`` the next
-    slot of that edge in slot order, -1 after its last; -1 and -1 for other slots."""
+@dataclass
+class EdgeSlots:
+    """The edges of a triangle list, in head order: head, second, count (E,) int64, each
+    edge's lowest slot, its next one (-1 for a boundary edge) and how many it has; rest
+    (R,) int64, the slots after the second of the edges with more (non-manifold ones),
+    edge after edge, each edge's in slot order."""
+
+    head: np.ndarray
+    second: np.ndarray
+    count: np.ndarray
+    rest: np.ndarray
+
+    def members(self, index):
+        """For the edges ``index`` (k,) int64: [(k,) int64] their slots after the second,
+        one array per step (-1 where an edge has no more)."""
+        offsets = np.cumsum(np.maximum(self.count - 2, 0)) - np.maximum(self.count - 2, 0)
+        extra = np.maximum(self.count[index] - 2, 0)
+        return [np.where(extra > step, self.rest[np.minimum(offsets[index] + step, max(len(self.rest) - 1, 0))], -1)
+                for step in range(int(extra.max(initial=0)))]
+
+
+def edge_slots(vertices, faces, valid, normals=None, limit=np.inf) -> EdgeSlots:
+    """The :class:`EdgeSlots` of the ``valid`` (F,) bool faces of ``faces`` (F, 3) int64
+    over ``vertices`` (V, 3) float64, by corner position; but for the pairs of faces whose
+    unit ``normals`` (F, 3) float64 have a dot product of ``limit`` or more (flat enough
+    not to be sharp: most edges of a mesh)."""
     faces = np.ascontiguousarray(faces, dtype=np.int64)
     valid = np.ascontiguousarray(valid, dtype=bool)
+    normals = np.zeros((len(faces), 3)) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
     if _kernel is None:
-        return _numpy_links(np.asarray(vertices, dtype=np.float64), faces, valid)
-    first, nxt = np.empty(3 * len(faces), np.int64), np.empty(3 * len(faces), np.int64)
-    _kernel.links(np.ascontiguousarray(vertices, dtype=np.float64), faces, valid, first, nxt)
-    return first, nxt
+        return _numpy_edge_slots(np.asarray(vertices, dtype=np.float64), faces, valid, normals, limit)
+    out = [np.empty(3 * len(faces), np.int64) for _ in range(4)]
+    edges, rests = _kernel.edges(np.ascontiguousarray(vertices, dtype=np.float64), faces, valid, normals,
+                                 float(limit), *out)
+    head, second, count, rest = out
+    return EdgeSlots(head[:edges], second[:edges], count[:edges], rest[:rests])
 
 
-def _numpy_links(vertices, faces, valid):
-    """:func:`edge_links` with NumPy: the same arrays as the kernel."""
-    first, nxt = np.full(3 * len(faces), -1, np.int64), np.full(3 * len(faces), -1, np.int64)
+def _numpy_edge_slots(vertices, faces, valid, normals, limit):
+    """:func:`edge_slots` with NumPy: the same arrays as the kernel."""
     good = np.flatnonzero(valid)
+    empty = np.empty(0, np.int64)
     if not len(good):
-        return first, nxt
+        return EdgeSlots(empty, empty, empty, empty)
     position = welded(vertices, faces[good])  # numbers of distinct positions
     a, b = position.reshape(-1), position[:, [1, 2, 0]].reshape(-1)
     slot = (3 * good[:, None] + np.arange(3)).reshape(-1)
     edge = a != b
     a, b, slot = a[edge], b[edge], slot[edge]
     if not len(slot):
-        return first, nxt
+        return EdgeSlots(empty, empty, empty, empty)
     key = np.minimum(a, b) * (int(position.max()) + 1) + np.maximum(a, b)
     order = np.argsort(key, kind="stable")  # within an edge, its slots stay in slot order
     key, slot = key[order], slot[order]
-    starts = np.r_[True, key[1:] != key[:-1]]
-    first[slot] = slot[np.flatnonzero(starts)][np.cumsum(starts) - 1]
-    follows = np.flatnonzero(~starts[1:])  # row i + 1 is on the same edge as row i
-    nxt[slot[follows]] = slot[follows + 1]
-    return first, nxt
+    start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    count = np.diff(np.r_[start, len(slot)])
+    second = np.where(count > 1, slot[np.minimum(start + 1, len(slot) - 1)], -1)
+    f1, f2 = slot[start] // 3, second // 3
+    cols = [np.ascontiguousarray(normals[:, c]) for c in range(3)]
+    dot = cols[0][f1] * cols[0][f2] + cols[1][f1] * cols[1][f2] + cols[2][f1] * cols[2][f2]
+    keep = np.flatnonzero((count != 2) | ~(dot >= limit))
+    keep = keep[np.argsort(slot[start[keep]], kind="stable")]
+    start, count, second = start[keep], count[keep], second[keep]
+    rest = [slot[s + 2 : s + c] for s, c in zip(start[count > 2].tolist(), count[count > 2].tolist())]
+    return EdgeSlots(slot[start], second, count, np.concatenate(rest) if rest else empty)
 
 
 @dataclass
@@ -95,26 +125,21 @@ class SharpEdges:
         return vertices[faces[f, k]], vertices[faces[f, (k + 1) % 3]]
 
 
-def sharp_edges(links, normals, angle: float = SHARP_ANGLE) -> SharpEdges:
-    """The :class:`SharpEdges` of a triangle list from its :func:`edge_links` and its
-    unit face normals (F, 3) float64 (in the frame the angle is measured in)."""
-    first, nxt = links
-    head = np.flatnonzero(first == np.arange(len(first)))
-    second = nxt[head]
-    third = np.where(second >= 0, nxt[np.maximum(second, 0)], -1)
-    kind = np.where(second < 0, 1, np.where(third < 0, 2, 3)).astype(np.int8)
+def sharp_edges(vertices, faces, normals, angle: float = SHARP_ANGLE) -> SharpEdges:
+    """The :class:`SharpEdges` of a triangle list, vertices (V, 3) float64 and faces (F, 3)
+    int64, at ``angle`` degrees, from its unit face normals (F, 3) float64 (zero where a
+    face has no area or a non-finite corner; in the frame the angle is measured in)."""
+    # Most pairs of faces are far from the angle: their dot product settles them and
+    # they are never listed; the others get the angle itself (the dot product's margin is
+    # far beyond its rounding).
+    limit = math.cos(math.radians(angle)) + 1e-6
+    edges = edge_slots(vertices, faces, np.any(normals != 0, axis=1), normals, limit)
+    kind = np.where(edges.count == 1, 1, np.where(edges.count == 2, 2, 3)).astype(np.int8)
     two = np.flatnonzero(kind == 2)
-    # Most pairs are far from the angle: their dot product settles them; the rest get
-    # the angle itself (the dot product's margin is far beyond its rounding).
-    cols = [np.ascontiguousarray(normals[:, c]) for c in range(3)]
-    f1, f2 = head[two] // 3, second[two] // 3
-    dot = sum(np.take(col, f1) * np.take(col, f2) for col in cols)
-    near = np.flatnonzero(dot < math.cos(math.radians(angle)) + 1e-6)
-    degrees = np.full(len(head), np.nan)
-    degrees[two[near]] = angle_between(normals[f1[near]], normals[f2[near]])
+    degrees = np.full(len(edges.head), np.nan)
+    degrees[two] = angle_between(normals[edges.head[two] // 3], normals[edges.second[two] // 3])
     sharp = np.flatnonzero((kind != 2) | (degrees >= angle))
-    head, kind, degrees = head[sharp], kind[sharp], degrees[sharp]
-    return SharpEdges(head, kind, degrees, edge_normals(head, nxt, normals))
+    return SharpEdges(edges.head[sharp], kind[sharp], degrees[sharp], edge_normals(edges, sharp, normals))
 
 
 def angle_between(n1, n2):
@@ -125,19 +150,15 @@ def angle_between(n1, n2):
     return np.degrees(np.arctan2(sine, np.einsum("ij,ij->i", n1, n2)))
 
 
-def edge_normals(head, nxt, normals):
-    """(E, 3) float64: for each edge (its lowest slot ``head``), the normalized sum of the
-    unit normals of all its faces (following ``nxt``), or the lowest face's normal where
-    the sum is zero (a fin: two faces back to back)."""
-    lowest = normals[head // 3]
+def edge_normals(edges: EdgeSlots, index, normals):
+    """(k, 3) float64: for the edges ``index`` (k,), the normalized sum of the unit normals
+    of all their faces, or the lowest face's normal where the sum is zero (a fin: two
+    faces back to back)."""
+    lowest = normals[edges.head[index] // 3]
     total = lowest.copy()
-    slot = nxt[head]
-    while True:
+    for slot in [edges.second[index], *edges.members(index)]:
         on = np.flatnonzero(slot >= 0)
-        if not len(on):
-            break
         total[on] += normals[slot[on] // 3]
-        slot = np.where(slot >= 0, nxt[np.maximum(slot, 0)], -1)
     length = np.sqrt(np.einsum("ij,ij->i", total, total))
     flat = length <= 1e-9
     with np.errstate(invalid="ignore", divide="ignore"):
