@@ -170,7 +170,7 @@ def test_the_kernel_refuses_an_index_out_of_range():
     out = [np.empty(3, np.int64) for _ in range(4)]
     with pytest.raises(ValueError, match="out of range"):
         sharp._kernel.edges(np.zeros((2, 3)), np.array([[0, 1, 2]], np.int64), np.ones(1, bool), np.zeros((1, 3)),
-                            np.inf, *out)
+                            np.inf, 1, *out)
 
 
 # -- points on the edges of a box --------------------------------------------------------

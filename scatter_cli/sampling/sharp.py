@@ -58,7 +58,7 @@ def edge_slots(vertices, faces, valid, normals=None, limit=np.inf) -> EdgeSlots:
         return _numpy_edge_slots(np.asarray(vertices, dtype=np.float64), faces, valid, normals, limit)
     out = [np.empty(3 * len(faces), np.int64) for _ in range(4)]
     edges, rests = _kernel.edges(np.ascontiguousarray(vertices, dtype=np.float64), faces, valid, normals,
-                                 float(limit), *out)
+                                 float(limit), native.worker_count(), *out)
     head, second, count, rest = out
     return EdgeSlots(head[:edges], second[:edges], count[:edges], rest[:rests])
 
