@@ -457,3 +457,22 @@ def test_preview_colours_edge_points_apart(tmp_path):
     assert not (plain[sharp_rows] == render.SHARP_RGB).all()  # the broken variant: the column ignored
     inside = render.point_colors(points.points, {**points.attributes, "inside": np.ones(400)})
     assert (inside == render.INSIDE_RGB).all()
+
+
+@pytest.mark.parametrize("threads", ["1", "2", "3", "7", "16"])
+def test_the_kernel_finds_the_same_edges_on_any_thread_count(threads, monkeypatch):
+    """The skull (100k faces) and its corners repeated per face: the NumPy twin's edges
+    whatever the threads (every step's shares are fixed, not raced for)."""
+    if sharp._kernel is None:
+        pytest.skip("no compiled kernels")
+    skull = trimesh.load(ROOT / "samples" / "skull.ply", process=False)
+    v, f = np.asarray(skull.vertices, float), np.asarray(skull.faces, np.int64)
+    split_v = np.ascontiguousarray(v[f].reshape(-1, 3))
+    monkeypatch.setenv("SCATTER_THREADS", threads)
+    for vertices, faces in ((v, f), (split_v, np.arange(len(split_v)).reshape(-1, 3))):
+        normals = face_normals(vertices, faces)
+        valid = np.any(normals != 0, axis=1)
+        got = sharp.edge_slots(vertices, faces, valid, normals, 0.99)
+        want = sharp._numpy_edge_slots(vertices, faces, valid, normals, 0.99)
+        for field in ("head", "second", "count", "rest"):
+            assert np.array_equal(getattr(got, field), getattr(want, field)), field
