@@ -12,7 +12,7 @@ from setuptools import Extension, setup
 
 
 def _registry():
-    """native.KERNELS (kernel -> its package), read without importing the package."""
+    """native.KERNELS (kernel -> its package and holders), read without importing the package."""
     spec = importlib.util.spec_from_file_location("_native", os.path.join("scatter_cli", "core", "native.py"))
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -42,4 +42,6 @@ def kernel(name, package):
 
 # the headers every kernel may include (-I scatter_cli/core)
 HEADERS = ["scatter_cli/core/_ckernel.h", "scatter_cli/core/_cmorton.h", "scatter_cli/core/_cthreads.h"]
-setup(ext_modules=[kernel(name, package) for name, package in _registry().items()])
+# the kernels compile side by side, one a core
+setup(ext_modules=[kernel(name, entry.package) for name, entry in _registry().items()],
+      options={"build_ext": {"parallel": True}})

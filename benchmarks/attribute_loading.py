@@ -36,7 +36,7 @@ def build(folder, subdivisions):
     import numpy as np
     import trimesh
 
-    from tests.test_reader_attributes import obj_text, write_ply
+    from testkit.meshfiles import obj_text, write_ply
 
     paths = {label: folder / f"ico{subdivisions}-{label.replace(' ', '-').lower()}.{label.split()[-1].lower()}"
              for label in ("binary PLY", "ASCII PLY", "OBJ")}

@@ -1,7 +1,7 @@
 """The enclosure kernel under AddressSanitizer and UndefinedBehaviorSanitizer.
 
 Builds scatter_cli/sampling/exterior/_cenclosure.c with -fsanitize=address,undefined into a copy of the
-package (and of the tests and benchmarks, which they import) in a temporary directory, then, with the sanitizer runtimes
+package (and of tests, testkit and benchmarks) in a temporary directory, then, with the sanitizer runtimes
 preloaded, runs tests/test_enclosure_native.py (built scenes, 60 hypothesis scenes of
 random shells, degenerate input: NaN/inf, huge and tiny coordinates, duplicate and
 zero-area faces, and the bad calls the kernel must refuse) and tests/test_enclosure.py,
@@ -37,7 +37,7 @@ print("enclosure kernel: hidden20 certified under the sanitizers:", int(out.sum(
 
 def main():
     with tempfile.TemporaryDirectory() as tmp:
-        env = sanitized_copy(tmp, "_cenclosure", also=("tests", "benchmarks"))
+        env = sanitized_copy(tmp, "_cenclosure", also=("tests", "testkit", "benchmarks"))
         env["SCATTER_REQUIRE_KERNELS"] = "1"
         os.symlink(ROOT / "samples", Path(tmp) / "samples")
         # run from tmp: the copied tests import the copied package, which holds the sanitized kernel

@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from tests.fuzz_inputs import SEEDS, differential, exercise, mutate, random_ops  # noqa: E402
+from testkit.fuzz_inputs import SEEDS, differential, exercise, mutate, random_ops  # noqa: E402
 
 
 def main():

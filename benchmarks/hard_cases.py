@@ -21,7 +21,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from scatter_cli.sampling.plan import SamplePlan  # noqa: E402
 from scatter_cli.loading.load import load_surface  # noqa: E402
-from benchmarks.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_pvalue,  # noqa: E402
+from testkit.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_pvalue,  # noqa: E402
                                   spread_triangles, triangles_mesh, two_sum_le_one)
 
 

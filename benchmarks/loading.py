@@ -9,7 +9,7 @@ Part 1 runs `scatter sample FILE -n 1000000 -o out.ply -q` for each format, the 
 taken in turn round after round (so a change in the machine's load hits them alike), and
 CloudCompare on the OBJ; it prints medians of wall time and peak memory, and each
 format's ratio to binary PLY from the same rounds. Part 2 loads each icosphere file in a
-fresh process and prints its peak memory beyond the arrays it returns (tests/loadmemory.py).
+fresh process and prints its peak memory beyond the arrays it returns (testkit/loadmemory.py).
 Part 3 loads small meshes in one process, each with the fast readers
 (load_surface(plain=True)) and with trimesh.load (process=False), and prints the median
 time per mesh of each. ``--formats``: parts 1 and 2 for those formats only (and binary PLY,
@@ -113,7 +113,7 @@ def part_whole_commands(paths, runs, cloudcompare, work):
 
 
 def part_memory(paths):
-    from tests.loadmemory import load_memory
+    from testkit.loadmemory import load_memory
 
     def run(cmd, env=None):
         return subprocess.run(cmd, env=child_env(), capture_output=True, text=True)

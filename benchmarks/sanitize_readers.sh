@@ -16,7 +16,7 @@ INPUTS=${1:-20000}
 SEED=${2:-0}
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
-cp -r scatter_cli tests benchmarks setup.py pyproject.toml README.md "$WORK"/
+cp -r scatter_cli tests testkit benchmarks setup.py pyproject.toml README.md "$WORK"/
 find "$WORK"/scatter_cli -name "*.so" -delete
 SCATTER_SANITIZE=1 "$PYTHON" -m pip wheel -q --no-deps -w "$WORK/dist" "$WORK" >/dev/null
 "$PYTHON" - "$WORK" <<'PY'

@@ -15,12 +15,12 @@ import numpy
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from scatter_cli.core.native import KERNELS  # noqa: E402 (kernel -> its package)
+from scatter_cli.core.native import KERNELS  # noqa: E402 (kernel -> its package and holders)
 
 
 def folder(kernel):
     """The folder of ``kernel``'s C file, relative to the repository."""
-    return Path(*KERNELS[kernel].split("."))
+    return Path(*KERNELS[kernel].package.split("."))
 
 
 def sanitized_copy(tmp, kernel, also=()):
@@ -49,12 +49,12 @@ def sanitized_copy(tmp, kernel, also=()):
 
 
 def run_sanitized(kernel, module, tests, script):
-    """Build KERNEL.c with the sanitizers in a temporary copy (tests and benchmarks beside
-    it, samples linked), then run there, on 2 threads: the test file ``tests`` (a conftest
+    """Build KERNEL.c with the sanitizers in a temporary copy (tests, testkit and
+    benchmarks beside it, samples linked), then run there, on 2 threads: the test file ``tests`` (a conftest
     line checks that the kernel of ``module``, a dotted name under scatter_cli, is the
     sanitized one) and the Python ``script`` (the copy's path as its argv[1]). Any report aborts."""
     with tempfile.TemporaryDirectory() as tmp:
-        env = sanitized_copy(tmp, kernel, also=("tests", "benchmarks"))
+        env = sanitized_copy(tmp, kernel, also=("tests", "testkit", "benchmarks"))
         env["SCATTER_REQUIRE_KERNELS"] = "1"
         env["SCATTER_THREADS"] = "2"
         os.symlink(ROOT / "samples", Path(tmp) / "samples")

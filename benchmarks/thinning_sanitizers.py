@@ -2,7 +2,7 @@
 UndefinedBehaviorSanitizer.
 
 Builds scatter_cli/sampling/poisson/_cthinning.c with -fsanitize=address,undefined into a copy of the
-package (and of the tests and benchmarks, which they import) in a temporary directory, then, with the
+package (and of tests, testkit and benchmarks) in a temporary directory, then, with the
 sanitizer runtimes preloaded, runs tests/test_native.py (the thinning kernels against
 their NumPy twins, the bad calls they must refuse), tests/test_thinning.py and the
 thinning cases of tests/test_kernel_parity.py, with and without the AVX-512 loops where
@@ -23,7 +23,7 @@ from sanitized import ROOT, sanitized_copy  # noqa: E402
 
 def main():
     with tempfile.TemporaryDirectory() as tmp:
-        env = sanitized_copy(tmp, "_cthinning", also=("tests", "benchmarks"))
+        env = sanitized_copy(tmp, "_cthinning", also=("tests", "testkit", "benchmarks"))
         env["SCATTER_REQUIRE_KERNELS"] = "1"
         os.symlink(ROOT / "samples", Path(tmp) / "samples")
         with open(Path(tmp) / "tests" / "conftest.py", "a") as conf:  # the tests must see the sanitized kernel

@@ -2,7 +2,7 @@
 UndefinedBehaviorSanitizer.
 
 Builds scatter_cli/volume/_cvolume.c with -fsanitize=address,undefined into a copy of the
-package (and of the tests and benchmarks) in a temporary directory, then, with the
+package (and of tests, testkit and benchmarks) in a temporary directory, then, with the
 sanitizer runtimes preloaded, runs tests/test_distance.py (brute-force comparisons on
 closed, open, self-intersecting and instanced meshes, grazing rays, the kernel against
 the NumPy path, 60 hypothesis soups with degenerate triangles and coordinates from 1e-100

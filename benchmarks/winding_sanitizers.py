@@ -1,7 +1,7 @@
 """The winding-number kernel under AddressSanitizer and UndefinedBehaviorSanitizer.
 
 Builds scatter_cli/volume/_cwinding.c with -fsanitize=address,undefined into a copy of the
-package (and of the tests and benchmarks, which they import) in a temporary directory,
+package (and of tests, testkit and benchmarks) in a temporary directory,
 then, with the sanitizer runtimes preloaded, runs tests/test_winding.py (brute-force
 cases, kernel/NumPy parity, bad arrays the kernel must refuse, fuzzed soups with NaN,
 inf, huge and tiny coordinates and zero-area faces, fuzzed links), then the kernel on the

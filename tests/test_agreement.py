@@ -73,6 +73,7 @@ def sized(options):
     return options if {"-n", "--density", "--radius"} & set(options) else [*options, "-n", "300"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(SETS))
 def test_sample_and_batch_agree(meshes, tmp_path, name):
     mesh, options, suffix, status = SETS[name]
@@ -105,6 +106,7 @@ def test_the_python_batch_and_sample_agree_too(meshes, tmp_path):
     assert failed[0]["status"] == "failed" and "Nope" in failed[0]["error"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", ["ply", "las"])
 def test_api_write_writes_what_the_command_writes(meshes, tmp_path, suffix):
     from scatter_cli import api

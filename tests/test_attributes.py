@@ -7,7 +7,6 @@ must-fail case showing that the test would catch the mistake it guards against.
 import numpy as np
 import pytest
 import trimesh
-from scipy import stats
 
 import scatter_cli
 from scatter_cli.run.attributes import AttributeMaker
@@ -18,6 +17,7 @@ from scatter_cli.surface.model import Geometry
 from scatter_cli.surface.texture import CLAMP_TO_EDGE, MIRRORED_REPEAT, REPEAT, bilinear, wrap_index
 from scatter_cli.surface.data import vertex_normal_table
 from scatter_cli.sampling.weighting import barycentric
+from scatter_cli.stats.chisquare import chi2_gof
 
 from .conftest import SAMPLES, run_scatter, scaled_scene
 
@@ -32,7 +32,7 @@ def chi_p(counts, expect):
     if np.any(counts[expect <= 0] > 0):
         return 0.0
     keep = expect > 0
-    return stats.chisquare(counts[keep], expect[keep] / expect[keep].sum() * counts[keep].sum()).pvalue
+    return chi2_gof(counts[keep], expect[keep])[2]
 
 
 def attributes_at(mesh, face, bary, names):
@@ -102,6 +102,7 @@ def test_smooth_normals_use_the_file_normals():
     np.testing.assert_allclose(got, want, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_computed_vertex_normals_are_trimeshs(monkeypatch):
     # Without file normals, smooth normals come from our own array code: trimesh's needs
     # SciPy, which the command line hides, and its fallback is quadratic in the vertex count.
@@ -207,6 +208,7 @@ def test_bilinear_hits_texel_centres_and_wrap_modes():
     np.testing.assert_allclose(bilinear(px, [[0.0, 0.75]])[:, 0], [(0 + 3) / 2])
 
 
+@pytest.mark.slow
 def test_attributes_the_file_cannot_provide_are_clear_errors(tmp_path):
     with pytest.raises(ScatterError, match=r"koala\.obj.*'uv'"):
         scatter_cli.sample(SAMPLES / "koala.obj", 10, attributes=("uv",))
@@ -267,6 +269,7 @@ def test_vertex_colour_weight_chi_square_against_area_times_exact_mean_weight():
     assert chi_p(np.bincount(u.face, minlength=30), expect) < ALPHA
 
 
+@pytest.mark.slow
 def test_vertex_colour_weight_is_exact_inside_a_face():
     # Density w0 b0 + w1 b1 + w2 b2 on one triangle: sub-triangle masses are exact
     # (area times the weight at its centroid, as the weight is linear).
@@ -279,13 +282,13 @@ def test_vertex_colour_weight_is_exact_inside_a_face():
     expect = subs.mean(axis=1) @ w
     expect = expect / expect.sum() * len(u)
     counts = np.bincount(locate(bary, subs), minlength=len(subs))
-    assert stats.chisquare(counts, expect).pvalue > ALPHA
+    assert chi2_gof(counts, expect)[2] > ALPHA
     # Must-fail: the plain uniform warp on the same face.
     from scatter_cli.sampling.warps import square_to_triangle
 
     b = square_to_triangle(u[:, :2])
     uni = np.bincount(locate(np.column_stack([1 - b.sum(1), b]), subs), minlength=len(subs))
-    assert stats.chisquare(uni, expect).pvalue < ALPHA
+    assert chi2_gof(uni, expect)[2] < ALPHA
 
 
 def texture_mask_quad():
@@ -304,6 +307,7 @@ def exact_u_bins(mesh, channel, edges):
     return np.histogram(u, edges, weights=w)[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("channel", ["r", "g"])
 def test_texture_weight_chi_square_and_zero_region(channel):
     mesh = texture_mask_quad()
@@ -320,6 +324,7 @@ def test_texture_weight_chi_square_and_zero_region(channel):
     assert chi_p(np.histogram(u.uv[:, 0], edges)[0], expect) < ALPHA
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("weight,mesh", [("vertex-color:g", "boxvertexcolors.glb"), ("texture:a", "cesiummilktruck.glb"),
                                          ("texture:r", "boxtextured.glb")])
 def test_weighted_output_identical_for_any_chunk_size(weight, mesh):
@@ -329,6 +334,7 @@ def test_weighted_output_identical_for_any_chunk_size(weight, mesh):
         assert got.points.tobytes() == ref.points.tobytes() and got.color.tobytes() == ref.color.tobytes()
 
 
+@pytest.mark.slow
 def test_bad_weights_are_clear_errors():
     with pytest.raises(ScatterUsageError):
         scatter_cli.sample(SAMPLES / "boxvertexcolors.glb", 10, weight="vertex-color:x")

@@ -24,6 +24,7 @@ def meshes(tmp_path_factory):
     return base, paths, reference(base, paths), reference(base, paths[:2], "--ascii", "-f", "ply")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_batch_writes_what_sample_writes(tmp_path, meshes, jobs):
     base, paths, ref, _ = meshes
@@ -37,6 +38,7 @@ def test_batch_writes_what_sample_writes(tmp_path, meshes, jobs):
     assert set(lines[0]) == {"input", "output", "status", "error", "count", "faces", "area", "seconds"}
 
 
+@pytest.mark.slow
 def test_batch_ascii_ply(tmp_path, meshes):
     base, paths, _, ref_ascii = meshes
     scatter_cli.batch(paths[:2], str(tmp_path / "{stem}"), jobs=2, count=300, attributes="normal,face", ascii=True,
@@ -97,6 +99,7 @@ def test_workers_are_forked_only_from_a_lone_main_thread():
     assert got == [False]
 
 
+@pytest.mark.slow
 def test_bad_meshes_fail_alone(tmp_path, meshes, workers):
     base, paths, ref, _ = meshes
     bad = bad_meshes(tmp_path / "bad")
@@ -125,6 +128,7 @@ def test_bad_meshes_fail_alone(tmp_path, meshes, workers):
     assert no_temporary_files(tmp_path)
 
 
+@pytest.mark.slow
 def test_a_worker_killed_mid_batch_fails_its_mesh_alone(tmp_path, meshes, workers):
     base, paths, ref, _ = meshes
     fifo = tmp_path / "in" / "fifo.csv.ply"
@@ -147,6 +151,7 @@ def test_a_worker_killed_mid_batch_fails_its_mesh_alone(tmp_path, meshes, worker
     assert no_temporary_files(tmp_path)
 
 
+@pytest.mark.slow
 def test_a_forked_worker_is_not_charged_for_the_memory_it_shares(tmp_path, monkeypatch):
     """A worker forked from a large process (a program calling scatter_cli.batch) shares
     that process's pages: --max-memory counts the worker's own. The worker waits on a FIFO
@@ -168,6 +173,7 @@ def test_a_forked_worker_is_not_charged_for_the_memory_it_shares(tmp_path, monke
     del ballast
 
 
+@pytest.mark.slow
 def test_the_job_queued_behind_a_killed_one_goes_to_the_next_worker(tmp_path, meshes, monkeypatch):
     """After a short job a lane sends the next one before the answer comes; here the FIFO
     mesh runs with a good mesh queued behind it in the same worker. The worker is killed:

@@ -17,6 +17,8 @@ from .conftest import SAMPLES, popen_user, run_scatter, run_user, scatter_comman
 from .batchtools import (alive, collection, outputs, parent_of, reader_fd, reference, wait_for_reader,
                          warning_meshes)
 
+pytestmark = pytest.mark.slow  # batches of subprocesses
+
 MESHES = ["icosahedron_binary.stl", "moebius-160-10.ply", "hemisphere.off", "narrow_triangles.obj"]
 
 

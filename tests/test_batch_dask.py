@@ -86,6 +86,7 @@ def meshes(tmp_path_factory):
     return base, paths, reference(base, paths)
 
 
+@pytest.mark.slow
 def test_dask_writes_what_sample_writes(tmp_path, cluster, meshes):
     client, address, _, _ = cluster
     base, paths, ref = meshes
@@ -126,6 +127,7 @@ def batch_in_thread(client, inputs, out, **options):
     return thread, result
 
 
+@pytest.mark.slow
 def test_a_dask_worker_killed_mid_batch(tmp_path, cluster, meshes):
     """The lost worker's task runs again on the other one: every good mesh is written."""
     client, address, workers, _ = cluster
@@ -159,6 +161,7 @@ def test_a_dask_worker_killed_mid_batch(tmp_path, cluster, meshes):
     assert not alive(reader)  # the sampling process died with its Dask worker
 
 
+@pytest.mark.slow
 def test_a_rerun_task_reports_written_what_this_batch_wrote(tmp_path, meshes, monkeypatch):
     """--skip-existing: a task that Dask runs again after losing its worker reports the
     meshes it had written there written (as an uninterrupted batch reports them), not
@@ -210,6 +213,7 @@ def fragile_cluster():
         stop(procs)
 
 
+@pytest.mark.slow
 def test_a_mesh_whose_workers_keep_dying_fails_alone(tmp_path, fragile_cluster, meshes):
     """Each time a worker opens the FIFO, it is killed: Dask gives the task up (KilledWorker)
     and the batch reports that mesh failed, one line, and writes every other mesh."""
@@ -251,6 +255,7 @@ def test_a_mesh_whose_workers_keep_dying_fails_alone(tmp_path, fragile_cluster, 
     assert not [p for p in tmp_path.rglob("*.part")]
 
 
+@pytest.mark.slow
 def test_a_group_that_loses_its_workers_runs_again_one_mesh_a_task(tmp_path, fragile_cluster, meshes, monkeypatch):
     """A task of four meshes, one of them killing each worker that reads it: when Dask gives
     the task up, its meshes run again one a task; the three others are written, the killer
@@ -293,6 +298,7 @@ def test_group_size_follows_the_measured_time_per_mesh():
     assert skipped.size == dask_engine.MAX_GROUP
 
 
+@pytest.mark.slow
 def test_relative_paths_are_the_commands_not_the_workers(tmp_path, cluster, meshes):
     """The Dask workers run in a folder of their own: relative inputs, template and report
     are the command's, and --skip-existing looks where the tasks write."""
@@ -321,6 +327,7 @@ def test_relative_paths_are_the_commands_not_the_workers(tmp_path, cluster, mesh
     assert not [p for p in home.rglob("*") if p.name in ref or p.suffix == ".jsonl"]
 
 
+@pytest.mark.slow
 def test_warnings_name_their_mesh_on_both_engines(tmp_path, cluster):
     """A mesh's warnings reach the command's standard error from a Dask worker as from a
     local one: the lines `scatter sample` prints, each naming its mesh."""

@@ -46,6 +46,7 @@ def case(request):
     return tri, areas, bench.exact_values(tri, areas)
 
 
+@pytest.mark.slow
 def test_exact_values_match_brute_force_quadrature(case):
     tri, areas, exact = case
     area = areas.sum()
@@ -64,6 +65,7 @@ def test_exact_values_match_brute_force_quadrature(case):
     assert abs(got[12] - exact.smooth) < 1e-4 * exact.smooth_rms
 
 
+@pytest.mark.slow
 def test_exact_values_match_a_high_count_estimate(case):
     """Five standard errors, from the sample itself, on every estimated integral."""
     tri, areas, exact = case
@@ -92,6 +94,7 @@ def _signed(surface, exact, method, warp, seeds, n=200_000):
     return np.array(out)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["random", "sobol"])
 def test_bench_integrals_detect_the_naive_warps_bias(method):
     """t-test over 8 seeds that the estimates' mean error is zero (Bonferroni over the
@@ -114,6 +117,7 @@ def test_slope_fit():
     assert bench.fit_slope(rows) == pytest.approx(-0.5)
 
 
+@pytest.mark.slow
 def test_same_seed_same_errors(tmp_path):
     mesh = tmp_path / "sphere.ply"
     bench.icosphere(2).export(mesh)
@@ -126,6 +130,7 @@ def test_same_seed_same_errors(tmp_path):
     assert {"random/sqrt/64", "stratified/sqrt/64", "sobol/sqrt/64", "sobol/naive/64"} <= set(rows(a))
 
 
+@pytest.mark.slow
 def test_quick_bench_command_writes_all_three_outputs(tmp_path):
     out = tmp_path / "bench"
     proc = run_scatter("bench", "--quick", "--out", out, timeout=900)
@@ -145,6 +150,7 @@ def test_quick_bench_command_writes_all_three_outputs(tmp_path):
     assert "stratified/sqrt/64" in proc.stdout.decode()
 
 
+@pytest.mark.slow
 def test_bench_without_matplotlib_says_how_to_install(tmp_path):
     import sys
 
@@ -155,6 +161,7 @@ def test_bench_without_matplotlib_says_how_to_install(tmp_path):
     assert "pip install" in proc.stderr.decode() and "matplotlib" in proc.stderr.decode()
 
 
+@pytest.mark.slow
 def test_bench_rejects_bad_counts(tmp_path):
     proc = run_scatter("bench", "--counts", "10,abc", "--out", tmp_path)
     assert proc.returncode == 2

@@ -19,6 +19,7 @@ def unweighted_sampler(surface, count, seed):
     return UnweightedSource(SamplePlan(surface), count, seed).draw(0, count).points
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", MESHES)
 def test_check_passes_on_real_meshes(sample_mesh, name):
     lines = []
@@ -26,6 +27,7 @@ def test_check_passes_on_real_meshes(sample_mesh, name):
     assert lines[-1].startswith("PASS")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["skull.ply", "koala.obj", "cesiummilktruck.glb"])
 def test_check_fails_when_area_weights_are_dropped(sample_mesh, name):
     lines = []
@@ -34,6 +36,7 @@ def test_check_fails_when_area_weights_are_dropped(sample_mesh, name):
     assert lines[-1].startswith("FAIL")
 
 
+@pytest.mark.slow
 def test_check_command_exit_code_and_table(sample_mesh):
     proc = run_scatter("check", sample_mesh("hemisphere.off"), "-n", 20000)
     out = proc.stdout.decode()
@@ -56,7 +59,7 @@ def three_cubes(tmp_path):
     ulp above the highest vertex."""
     import trimesh
 
-    from .gltfwrite import glb_bytes
+    from testkit.gltfwrite import glb_bytes
 
     box = trimesh.creation.box()
     nodes = [(0, None), (0, _rotation_z(0.3, [2.1, 0.3, 0.7])), (0, _rotation_z(1.1, [-1.7, 0.9, 1.3]))]
@@ -65,6 +68,7 @@ def three_cubes(tmp_path):
     return path
 
 
+@pytest.mark.slow
 def test_check_counts_points_an_ulp_off_in_the_region_they_are_on(three_cubes):
     """pymeshlab's points on the top face sit an ulp above the highest vertex (checked
     here, so the case is exercised); they must count in the top face's slab, not in a
@@ -81,6 +85,7 @@ def test_check_counts_points_an_ulp_off_in_the_region_they_are_on(three_cubes):
     assert "the sets differ" not in text and lines[-1].startswith("PASS"), text
 
 
+@pytest.mark.slow
 def test_check_says_which_sampler_fits_when_the_sets_differ(three_cubes, monkeypatch):
     """With pymeshlab replaced by a sampler that ignores the areas, the sets differ:
     check names the slab, each sampler's count there against the exact area, and that
@@ -107,6 +112,7 @@ def test_check_says_which_sampler_fits_when_the_sets_differ(three_cubes, monkeyp
     assert lines[-1].startswith("PASS") and "pymeshlab's count is off" in lines[-1], text
 
 
+@pytest.mark.slow
 def test_check_fails_a_sampler_a_hair_off_the_surface(three_cubes):
     """The broken variant for the rounding allowance: points moved 1e-7 of the size
     above the surface (far more than rounding, far less than any slab) must FAIL, as
@@ -125,6 +131,7 @@ def test_check_fails_a_sampler_a_hair_off_the_surface(three_cubes):
     assert int(row.split()[-2].replace(",", "")) > 100
 
 
+@pytest.mark.slow
 def test_check_fails_a_sampler_that_thins_the_highest_top(three_cubes):
     """A sampler that drops a third of the points of the highest cube's top (the face at
     the rounding-prone end of the z slabs) must FAIL."""
@@ -151,6 +158,7 @@ def _terrain(n=120):
     return np.c_[x.ravel(), y.ravel(), z.ravel()][faces]
 
 
+@pytest.mark.slow
 def test_exact_slabs_work_is_a_small_multiple_of_the_faces(monkeypatch):
     """The exact regions of a large terrain: the passes over (target, face) pairs over all
     seven directions (evaluations of the area and its derivative, narrowings, the exact

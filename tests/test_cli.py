@@ -36,12 +36,14 @@ def write_obj(path, vertices, faces):
     return path
 
 
+@pytest.mark.slow
 def test_missing_file(tmp_path, existing):
     proc = run_scatter("sample", tmp_path / "nope.obj", "-o", existing)
     assert_one_line_error(proc, 1, "nope.obj", "no such file")
     assert_untouched(existing)
 
 
+@pytest.mark.slow
 def test_not_a_mesh(tmp_path, existing):
     bad = tmp_path / "bad.ply"
     bad.write_bytes(b"this is not a ply file\x00\x01\x02")
@@ -49,6 +51,7 @@ def test_not_a_mesh(tmp_path, existing):
     assert_untouched(existing)
 
 
+@pytest.mark.slow
 def test_empty_file(tmp_path, existing):
     empty = tmp_path / "empty.stl"
     empty.write_bytes(b"")
@@ -71,6 +74,7 @@ def feed_fifo(path, data):
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="named pipes")
 def test_mesh_from_a_pipe_is_read_once(tmp_path, sample_mesh):
     # `scatter sample <(gunzip -c mesh.ply.gz)`: a pipe has no size and cannot be reread.
@@ -85,22 +89,26 @@ def test_mesh_from_a_pipe_is_read_once(tmp_path, sample_mesh):
     assert_one_line_error(run_scatter("sample", feed_fifo(tmp_path / "none.ply", b""), "-n", 5), 1, "no data")
 
 
+@pytest.mark.slow
 def test_directory(tmp_path):
     assert_one_line_error(run_scatter("sample", tmp_path), 1, "directory")
 
 
+@pytest.mark.slow
 def test_mesh_without_faces(tmp_path):
     path = tmp_path / "points.obj"
     path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
     assert_one_line_error(run_scatter("sample", path), 1, "points.obj")
 
 
+@pytest.mark.slow
 def test_mesh_without_area(tmp_path, existing):
     path = write_obj(tmp_path / "flat.obj", [[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2], [0, 0, 1]])
     assert_one_line_error(run_scatter("sample", path, "-o", existing), 1, "flat.obj", "area")
     assert_untouched(existing)
 
 
+@pytest.mark.slow
 def test_non_finite_vertices_are_skipped_with_a_warning(tmp_path):
     path = write_obj(tmp_path / "nan.obj", [[0, 0, 0], [1, 0, 0], [0, 1, 0], [float("nan"), 0, 0]], [[0, 1, 2], [0, 1, 3]])
     proc = run_scatter("sample", path, "-n", 100, "-a", "face")
@@ -112,11 +120,13 @@ def test_non_finite_vertices_are_skipped_with_a_warning(tmp_path):
     assert quiet.returncode == 0 and quiet.stderr == b""
 
 
+@pytest.mark.slow
 def test_all_vertices_non_finite(tmp_path):
     path = write_obj(tmp_path / "allnan.obj", [[float("nan"), 0, 0], [1, 0, 0], [0, float("inf"), 0]], [[0, 1, 2]])
     assert_one_line_error(run_scatter("sample", path), 1, "allnan.obj")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "args,words",
     [
@@ -143,21 +153,25 @@ def test_usage_errors_exit_2(sample_mesh, existing, args, words):
     assert_untouched(existing)
 
 
+@pytest.mark.slow
 def test_output_suffix_unknown(sample_mesh, tmp_path):
     assert_one_line_error(run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-o", tmp_path / "x.e57"), 2, "x.e57")
 
 
+@pytest.mark.slow
 def test_output_folder_missing(sample_mesh, tmp_path):
     out = tmp_path / "no" / "such" / "out.ply"
     assert_one_line_error(run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-o", out), 1, "does not exist")
 
 
+@pytest.mark.slow
 def test_attribute_the_mesh_cannot_provide(sample_mesh, existing):
     proc = run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-a", "uv", "-o", existing)
     assert_one_line_error(proc, 1, "uv", "icosahedron_binary.stl")
     assert_untouched(existing)
 
 
+@pytest.mark.slow
 def test_stdin_needs_input_format(sample_mesh):
     data = sample_mesh("icosahedron_binary.stl").read_bytes()
     assert_one_line_error(run_scatter("sample", "-", input=data), 2, "--input-format")
@@ -165,29 +179,34 @@ def test_stdin_needs_input_format(sample_mesh):
     assert len(proc.stdout.decode().splitlines()) == 10
 
 
+@pytest.mark.slow
 def test_output_replaces_existing_file_atomically_on_success(sample_mesh, existing):
     run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-n", 10, "-o", existing, check=True)
     assert existing.read_bytes().startswith(b"ply\n")
     assert not [p for p in existing.parent.iterdir() if p.name.endswith(".part")]
 
 
+@pytest.mark.slow
 def test_new_file_gets_ordinary_permissions(sample_mesh, tmp_path):
     out = tmp_path / "perm.ply"
     run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-n", 10, "-o", out, check=True)
     assert out.stat().st_mode & 0o644 == 0o644
 
 
+@pytest.mark.slow
 def test_count_zero_writes_an_empty_valid_file(sample_mesh, tmp_path):
     out = tmp_path / "zero.npy"
     run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-n", 0, "-o", out, check=True)
     assert np.load(out).shape == (0,)
 
 
+@pytest.mark.slow
 def test_density_sets_the_count(sample_mesh):
     proc = run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "--density", 100, "-f", "xyz", check=True)
     assert len(proc.stdout.decode().splitlines()) == round(100 * 9.574541)
 
 
+@pytest.mark.slow
 def test_stats_json(sample_mesh, tmp_path):
     import json
 
@@ -198,6 +217,7 @@ def test_stats_json(sample_mesh, tmp_path):
     assert "timings" in info
 
 
+@pytest.mark.slow
 def test_help_teaches():
     proc = run_scatter("sample", "--help", check=True)
     out = proc.stdout.decode()
@@ -205,6 +225,7 @@ def test_help_teaches():
         assert word in out
 
 
+@pytest.mark.slow
 def test_closed_pipe_is_quiet(sample_mesh):
     import subprocess
 
@@ -217,6 +238,7 @@ def test_closed_pipe_is_quiet(sample_mesh):
     assert err == b"", err
 
 
+@pytest.mark.slow
 def test_progress_on_a_terminal_only(sample_mesh):
     import os
     import pty
@@ -247,6 +269,7 @@ def test_progress_on_a_terminal_only(sample_mesh):
 FULL = "/dev/full"
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not __import__("os").path.exists(FULL), reason="no /dev/full on this system")
 @pytest.mark.parametrize("args", [
     ["sample", "{mesh}", "-n", "10"],
@@ -286,6 +309,7 @@ def test_tests_start_children_through_conftest():
     assert not direct, direct
 
 
+@pytest.mark.slow
 def test_version():
     from scatter_cli import version
 
@@ -294,6 +318,7 @@ def test_version():
     assert version()[0].isdigit()
 
 
+@pytest.mark.slow
 def test_help_lists_every_format_and_attribute():
     from scatter_cli.run.fields import ATTRIBUTES
     from scatter_cli.writers.formats import FORMATS
@@ -363,6 +388,7 @@ def test_the_sample_options_are_the_fields_of_a_run_and_the_output_options():
     assert unmatched([*cli.SAMPLE_OPTIONS, "chunksize"]) == {"fmt", "ascii", "crs", "oversampling", "chunksize"}
 
 
+@pytest.mark.slow
 def test_debug_shows_the_traceback_of_an_internal_error(sample_mesh):
     import sys
 
@@ -380,6 +406,7 @@ def test_debug_shows_the_traceback_of_an_internal_error(sample_mesh):
     assert debug.returncode == 1 and "Traceback" in err and "broken on purpose" in err, err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("threads", ["abc", "1.5"])
 def test_bad_thread_count_is_a_usage_error(sample_mesh, threads):
     proc = run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-n", 10, env={"SCATTER_THREADS": threads})
@@ -390,6 +417,7 @@ def test_bad_thread_count_is_a_usage_error(sample_mesh, threads):
 # usage lines and counts as users type them
 
 
+@pytest.mark.slow
 def test_scatter_alone_prints_the_usage_line_and_a_hint(tmp_path):
     proc = run_scatter()
     err = proc.stderr.decode().splitlines()
@@ -398,16 +426,19 @@ def test_scatter_alone_prints_the_usage_line_and_a_hint(tmp_path):
     assert len(err) == 2  # not the whole help: no option or command list
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["sample", "info", "check", "bench", "batch", "merge"])
 def test_usage_lines_have_no_braces(command):
     usage = run_scatter(command, "--help", check=True).stdout.decode().splitlines()[0]
     assert usage.startswith(f"Usage: scatter {command} ") and "{" not in usage and "}" not in usage, usage
 
 
+@pytest.mark.slow
 def test_a_missing_mesh_is_one_line_naming_it():
     assert_one_line_error(run_scatter("sample"), 2, "MESH", "--help")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["sample", "batch"])
 def test_counts_and_densities_in_scientific_notation(sample_mesh, tmp_path, command):
     mesh = sample_mesh("icosahedron_binary.stl")

@@ -18,6 +18,7 @@ def test_stream_positions_do_not_depend_on_chunking():
     np.testing.assert_array_equal(whole, parts)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("chunk_size", [1, 7, 1000, 4096, 1 << 20])
 def test_api_identical_for_any_chunk_size(sample_mesh, chunk_size):
     ref = scatter_cli.sample(sample_mesh("koala.obj"), 20_000, attributes=("face", "bary"), seed=3)
@@ -41,6 +42,7 @@ def test_api_identical_for_any_thread_count(sample_mesh, threads):
     assert _bytes(prepare(*args, **options, chunk_size=1000), threads=threads) == ref
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["stratified", "sobol"])
 @pytest.mark.parametrize("chunk_size", [1, 7, 1000, 1 << 20])
 def test_methods_identical_for_any_chunk_size(sample_mesh, method, chunk_size):
@@ -79,6 +81,7 @@ def test_seeds_give_different_points(sample_mesh):
     assert not np.array_equal(a, b)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt,method", [("ply", "random"), ("csv", "random"), ("npy", "random"),
                                         ("ply", "stratified"), ("ply", "sobol")])
 def test_command_output_bytes_identical_across_chunk_sizes_and_threads(sample_mesh, tmp_path, fmt, method):
@@ -94,6 +97,7 @@ def test_command_output_bytes_identical_across_chunk_sizes_and_threads(sample_me
     assert len(digests) == 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("attrs", [("normal",), ("smooth-normal", "bary", "object")])
 def test_transformed_instances_identical_across_chunk_sizes(sample_mesh, attrs):
     """Rotated and instanced nodes: matrices are applied element-wise, so rounding does

@@ -214,6 +214,7 @@ def test_triangles_and_indexed_faces_give_the_same_answer():
 
 # ---- parity ----
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CLOSED)
 def test_parity_is_exact_on_closed_meshes(name, path):
     v, f = mesh(name)
@@ -243,6 +244,7 @@ def no_tie_rule(e, ex, ey):
     return np.where(e >= 0, 1, -1).astype(np.int8)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["cube", "icosahedron", "icosphere"])
 @pytest.mark.parametrize("broken", [False, True])
 def test_parity_counts_a_crossing_at_an_edge_or_vertex_once(name, broken, path, monkeypatch):
@@ -295,6 +297,7 @@ def test_kernel_and_numpy_give_the_same_bytes(name, monkeypatch):
     assert all(a.tobytes() == b.tobytes() for a, b in zip(kernel, twin))
 
 
+@pytest.mark.slow
 @needs_kernel
 def test_threads_and_chunks_change_nothing(monkeypatch):
     v, f = mesh("self-intersecting")
@@ -304,6 +307,10 @@ def test_threads_and_chunks_change_nothing(monkeypatch):
     one = distance.closest_points(tree, points) + (parity.parity_inside(tree, points),)
     monkeypatch.setenv("SCATTER_THREADS", "3")
     three = distance.closest_points(tree, points) + (parity.parity_inside(tree, points),)
+    for threads in ("2", "7", "20"):  # (20: more than the kernels start)
+        monkeypatch.setenv("SCATTER_THREADS", threads)
+        more = distance.closest_points(tree, points) + (parity.parity_inside(tree, points),)
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(one, more)), threads
     halves = [distance.closest_points(tree, points[s]) + (parity.parity_inside(tree, points[s]),)
               for s in (slice(0, 1234), slice(1234, None))]
     chunked = tuple(np.concatenate([h[k] for h in halves]) for k in range(4))
@@ -375,6 +382,7 @@ def test_the_kernel_refuses_bad_arrays():
 
 # ---- fuzz ----
 
+@pytest.mark.slow
 @needs_kernel
 @settings(max_examples=60, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(seed=st.integers(0, 2**32 - 1), faces=st.integers(1, 40), scale=st.sampled_from([1e-100, 1e-8, 1.0, 1e8, 1e100]),
@@ -405,6 +413,7 @@ def test_fuzz_kernel_against_numpy_and_brute_force(seed, faces, scale, degenerat
     assert np.all(pair_distance(tri[face] / scale, q / scale) <= 1e-9 * extent / scale)
 
 
+@pytest.mark.slow
 @needs_kernel
 @settings(max_examples=60, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(0, 3000), scale=st.sampled_from([1e-100, 1.0, 1e100]),

@@ -3,12 +3,15 @@
 import re
 import tomllib
 
+import pytest
+
 import scatter_cli
 from tests.conftest import ROOT, run_scatter
 
 TAKEN = "scatter-cli"  # an unrelated project on the package index
 
 
+@pytest.mark.slow
 def test_the_distribution_is_named_once_and_read_by_version():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert project["name"] == scatter_cli.DISTRIBUTION != TAKEN

@@ -16,7 +16,7 @@ from scatter_cli.errors import ScatterError
 from scatter_cli.loading.load import load_surface
 
 from .conftest import SAMPLES, run_scatter
-from .gltfwrite import glb_bytes
+from testkit.gltfwrite import glb_bytes
 from .test_scenes import two_sample_p
 
 pytest.importorskip("DracoPy")
@@ -130,6 +130,7 @@ def _chunks(data):
     return doc, data[20 + size + 8 :]
 
 
+@pytest.mark.slow
 def test_missing_dracopy_gives_one_line(tmp_path):
     path = _glb(tmp_path, "draco.glb", draco=True)
     fake = tmp_path / "nodraco"

@@ -31,6 +31,7 @@ def verdicts(surface, chunk, seed=3):
     return alone, skipped, occluder.enclosed, rays - fewer
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["box_in_box", "double_shell", "car", "overlapping_boxes", "cup"])
 def test_enclosed_faces_are_hidden_squares_and_change_no_verdict(name):
     scene, cells = getattr(es, name)()
@@ -87,6 +88,7 @@ def points_on_last_face(tri, n=20000, seed=0):
     return RawChunk(0, points, np.full(n, len(tri) - 1, np.int64), np.zeros(n, np.int64), None)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene, broken", [(cube_in_open_box, None), (cube_in_open_box, "open_surfaces_as_shells"),
                                            (poke_through_sphere, None), (poke_through_sphere, "no_clearance")])
 def test_no_certificate_where_rays_get_out(scene, broken, monkeypatch):
@@ -161,6 +163,7 @@ def nested_boxes(seed):
     return np.concatenate(parts)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("broken", [None, "open_surfaces_as_shells", "no_clearance"])
 def test_random_nested_boxes_keep_every_verdict(broken, monkeypatch):
     """16 random scenes, 20,000 uniform candidates each: the enclosed faces change no

@@ -37,14 +37,18 @@ def both_paths(vertices, faces, monkeypatch, offset=OFFSET, cells_shift=0):
         m.setattr(enclosure, "_kernel", None)
         part, closed = enclosure.closed_parts(vertices, faces)
         numpy_out = (part, closed, enclosure.enclosed_faces(vertices, faces, part, closed, offset))
+    return kernel_path(vertices, faces, offset, cells_shift), numpy_out
+
+
+def kernel_path(vertices, faces, offset=OFFSET, cells_shift=0):
     part, closed = enclosure.closed_parts(vertices, faces)
     if cells_shift:
         out = np.zeros(len(faces), np.uint8)
         cells = int(np.clip(4 * round(len(faces) ** (1 / 3)), *enclosure.GRID)) + cells_shift
         KERNEL.enclosed(vertices, faces, part, closed.astype(np.uint8), offset, cells, enclosure.MAX_SHELLS,
                         *enclosure.PROBE, enclosure.LIMIT, 2, out)
-        return (part, closed, out.view(bool)), numpy_out
-    return (part, closed, enclosure.enclosed_faces(vertices, faces, part, closed, offset)), numpy_out
+        return part, closed, out.view(bool)
+    return part, closed, enclosure.enclosed_faces(vertices, faces, part, closed, offset)
 
 
 def same(a, b):
@@ -78,6 +82,7 @@ def test_same_faces_on_built_scenes(name, vertices, faces, monkeypatch):
         assert kernel[2].any()  # something to compare
 
 
+@pytest.mark.slow
 def test_same_faces_on_random_nested_boxes_and_a_finer_grid_differs(monkeypatch):
     """24 scenes of boxes in a box: the same parts and faces; a kernel fed a grid one cell
     finer certifies other faces on some of them."""
@@ -92,9 +97,10 @@ def test_same_faces_on_random_nested_boxes_and_a_finer_grid_differs(monkeypatch)
     assert found > 100 and differs > 0
 
 
+@pytest.mark.slow
 def test_same_faces_whatever_the_thread_count(monkeypatch):
     """Shells large enough to be split between threads (a 327,680-face sphere holding a
-    sphere and a box): the same faces as NumPy on 1 to 3 threads."""
+    sphere and a box): the same faces as NumPy on 1, 2, 3 and 7 threads."""
     import trimesh
 
     outer, inner = trimesh.creation.icosphere(7), trimesh.creation.icosphere(4, radius=0.4)
@@ -102,12 +108,10 @@ def test_same_faces_whatever_the_thread_count(monkeypatch):
     v = np.vstack([outer.vertices, inner.vertices, box.reshape(-1, 3)])
     f = np.vstack([outer.faces, inner.faces + len(outer.vertices),
                    np.arange(len(box) * 3).reshape(-1, 3) + len(outer.vertices) + len(inner.vertices)]).astype(np.int64)
-    expected = None
-    for threads in ("1", "2", "3"):
+    _, expected = both_paths(v, f, monkeypatch)
+    for threads in ("1", "2", "3", "7"):
         monkeypatch.setenv("SCATTER_THREADS", threads)
-        kernel, numpy_out = both_paths(v, f, monkeypatch)
-        expected = numpy_out if expected is None else expected
-        assert same(kernel, expected)
+        assert same(kernel_path(v, f), expected), threads
     assert expected[2][len(outer.faces):].all() and not expected[2][:len(outer.faces)].any()
 
 
@@ -143,6 +147,7 @@ def shells_scene(draw):
     return np.concatenate(parts)
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_same_faces_on_random_shells(data, monkeypatch):
@@ -223,6 +228,7 @@ def test_bad_calls_are_refused():
             call()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("others", [8, 16, 32])
 def test_same_faces_with_many_shells(others, monkeypatch):
     """Shell bits past the 8th, 16th and 32nd (the kernel's cells carry 1, 2, 4 or 8 bytes
@@ -253,11 +259,12 @@ def test_same_faces_with_many_shells(others, monkeypatch):
         assert enclosed[centre].all() and wall_side.sum() == 12 and not enclosed[wall_side].any()
 
 
+@pytest.mark.slow
 def test_same_faces_for_many_parts_split_between_threads(monkeypatch):
     """400 small boxes (192 faces each, some turned, some crossing the big box's wall or
     each other) in a big box, as a triangle soup: 77,000 faces, so parts and certificate
     are split between threads with runs of faces cut at the threads' bounds. The same parts
-    and faces as NumPy on 1, 2 and 3 threads."""
+    and faces as NumPy on 1, 2, 3 and 7 threads."""
     rng = np.random.default_rng(5)
     parts = [es.cuboid([-2, -2, -2], [2, 2, 2], step=1.0)]
     for _ in range(400):
@@ -266,10 +273,8 @@ def test_same_faces_for_many_parts_split_between_threads(monkeypatch):
         parts.append((box - c) @ random_rotation(rng).T + c if rng.random() < 0.5 else box)
     v, f = soup(np.concatenate(parts))
     assert len(f) > 65536
-    expected = None
-    for threads in ("1", "2", "3"):
+    _, expected = both_paths(v, f, monkeypatch)
+    for threads in ("1", "2", "3", "7"):
         monkeypatch.setenv("SCATTER_THREADS", threads)
-        kernel, numpy_out = both_paths(v, f, monkeypatch)
-        expected = numpy_out if expected is None else expected
-        assert same(kernel, expected), threads
+        assert same(kernel_path(v, f), expected), threads
     assert 0 < expected[2].sum() < len(f) - len(parts[0]) and len(expected[1]) == 401

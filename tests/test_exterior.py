@@ -11,13 +11,13 @@ from . import exterior_scenes as es
 from .conftest import SAMPLES, run_scatter, triangles_mesh
 
 pytest.importorskip("embreex")
-from scipy import stats  # noqa: E402
 
 import scatter_cli  # noqa: E402
 from scatter_cli.sampling.exterior import rays as exterior_rays  # noqa: E402
 from scatter_cli.sampling.exterior.filter import classify  # noqa: E402
 from scatter_cli.sampling.plan import SamplePlan  # noqa: E402
 from scatter_cli.loading.load import load_surface  # noqa: E402
+from scatter_cli.stats.chisquare import chi2_gof  # noqa: E402
 
 LEVEL = 1e-3
 
@@ -75,7 +75,7 @@ def cell_test(name, n=6000, seed=1, occluder=None, monkeypatch=None, **options):
         exterior.append(ext)
     counts, areas, exterior = map(np.concatenate, (counts, areas, exterior))
     expected = counts[exterior].sum() * areas[exterior] / areas[exterior].sum()
-    return stats.chisquare(counts[exterior], expected).pvalue, int(counts[~exterior].sum())
+    return chi2_gof(counts[exterior], expected)[2], int(counts[~exterior].sum())
 
 
 SCENE_NAMES = ["box_in_box", "overlapping_boxes", "double_shell", "cup", "bowl", "car"]
@@ -114,6 +114,7 @@ def test_classifier_drops_under_1e3_of_exterior_and_keeps_no_hidden(name):
     assert dropped <= LEVEL * exterior
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("broken", [False, True])
 def test_normal_rays_cast_together_in_face_order_give_the_same_verdicts(broken):
     """The pass casts the normal rays of a round's candidates together, in face order
@@ -186,6 +187,7 @@ def two_spheres():
     return scene, ball, moved
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("occluder, fails", [(None, False), (TooFar, True)])
 def test_no_point_inside_the_other_sphere_by_winding_number(occluder, fails, monkeypatch):
     if occluder is not None:
@@ -208,6 +210,7 @@ def box_file(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("options", [["-n", "40000"], ["--poisson", "-n", "300"]])
 def test_same_bytes_and_stats_whatever_chunk_size_and_threads(box_file, tmp_path, options):
     outs, found = [], []
@@ -222,6 +225,7 @@ def test_same_bytes_and_stats_whatever_chunk_size_and_threads(box_file, tmp_path
     assert found[0] == found[1] == found[2]
 
 
+@pytest.mark.slow
 def test_ranges_are_a_pure_function_of_start_and_stop():
     scene, _ = es.car()
     run = scatter_cli.prepare(scene, 50000, seed=9, exterior=True, attributes=["face"])
@@ -242,6 +246,7 @@ def test_density_keeps_the_exterior_points_of_the_plain_run():
     assert np.array_equal(ext.collect().points, candidates.points[kept])
 
 
+@pytest.mark.slow
 def test_exterior_area_estimate_and_face_counts(box_file):
     """Exact exterior area 54 of 60 (the inner box's 6 is hidden): within 4 standard errors."""
     from scatter_cli.commands.info import describe
@@ -274,6 +279,7 @@ def test_sobol_keeps_no_hidden_point():
     assert len(s.points) == 2000 and not np.any(s.attributes["object"] == inner)
 
 
+@pytest.mark.slow
 def test_without_embreex_one_line_and_exit_1(box_file, tmp_path):
     fake = tmp_path / "embreex"
     fake.mkdir()
@@ -288,6 +294,7 @@ def test_without_embreex_one_line_and_exit_1(box_file, tmp_path):
     assert run_scatter("sample", box_file, "-n", "5", env=env).returncode == 0  # only --exterior needs it
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["skull.ply", "hemisphere.off"])
 def test_real_mesh_all_exterior_and_uniform(name):
     """A scan with holes and an open surface: every point is exterior (checked with 16x more
@@ -302,7 +309,7 @@ def test_real_mesh_all_exterior_and_uniform(name):
     bins = np.minimum(np.arange(len(area)) * 50 // len(area), 49)
     counts = np.bincount(bins[s.attributes["face"]], minlength=50)
     expected = n * np.bincount(bins, weights=area, minlength=50) / area.sum()
-    assert stats.chisquare(counts, expected).pvalue > LEVEL
+    assert chi2_gof(counts, expected)[2] > LEVEL
     many = exterior_rays.Occluder(surface, design_size=1024)
     from scatter_cli.sampling.plan import RawChunk
 
@@ -310,6 +317,7 @@ def test_real_mesh_all_exterior_and_uniform(name):
     assert classify(many, chunk, 77)[0].all()
 
 
+@pytest.mark.slow
 def test_cad_part_points_all_exterior_by_many_more_rays():
     """A CAD part whose pieces overlap (2 % of its area is hidden): every point kept is
     exterior for a classifier with 16x more directions."""

@@ -9,11 +9,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from .fuzz_inputs import MUTATIONS, SEEDS, differential, exercise, mutate
+from testkit.fuzz_inputs import MUTATIONS, SEEDS, differential, exercise, mutate
 
 ops = st.lists(st.tuples(st.integers(0, MUTATIONS - 1), st.integers(0, 1 << 16), st.integers(0, 1 << 16)), min_size=1, max_size=5)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(st.sampled_from(sorted(SEEDS)), ops)
 def test_malformed_mesh_bytes_never_crash(tmp_path, name, mutation):
@@ -35,6 +36,7 @@ def test_fuzz_findings_stay_fixed(tmp_path, data, suffix):
     assert exercise(data, suffix, tmp_path) in ("ok", "error")
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(st.sampled_from(sorted(SEEDS)), ops)
 def test_the_fast_readers_read_mutated_files_as_trimesh_does_or_hand_them_over(tmp_path, name, mutation):

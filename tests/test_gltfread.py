@@ -2,7 +2,7 @@
 
 Per placed geometry: the same world-space triangles, corners in the same order, the
 instances in the same order, and the same sampled bytes (face, bary, object); or it
-hands the file to trimesh. The files are built field by field (tests/gltfwrite.py), so
+hands the file to trimesh. The files are built field by field (testkit/gltfwrite.py), so
 that the reader is checked on layouts trimesh's exporter never writes.
 """
 
@@ -11,10 +11,10 @@ import pytest
 
 import scatter_cli
 from scatter_cli.loading.load import load_surface
+from testkit.fuzz_inputs import fast_read
+from testkit.gltfwrite import GLB
 
 from .conftest import run_scatter
-from .fuzz_inputs import fast_read
-from .gltfwrite import GLB
 from .test_readers import same_names, world_corners
 
 TETRA_V = [[0, 0, 0], [1, 0, 0], [0, 1.5, 0], [0.2, 0.1, 2]]
@@ -196,6 +196,7 @@ def test_cut_files_go_to_trimesh(cut):
 
 
 
+@pytest.mark.slow
 def test_a_node_graph_trimesh_cannot_walk_is_a_one_line_error(tmp_path):
     """A fuzz finding: a node among its own children made trimesh's graph walk raise."""
     path = tmp_path / "bad.glb"

@@ -13,6 +13,7 @@ from tests.conftest import ROOT, run_user
 from tests.golden import COMMANDS, DIGESTS
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("numpy_path", [False, True], ids=["kernels", "numpy"])
 def test_every_command_writes_its_pinned_bytes(numpy_path, tmp_path):
     # this tree's package, whatever PYTHONPATH or the installed copy say (the child runs elsewhere)

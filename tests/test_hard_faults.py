@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 
 from .conftest import SAMPLES, popen_user, run_scatter, run_user, scatter_command
-from .fuzz_inputs import SEEDS
+from testkit.fuzz_inputs import SEEDS
+
+pytestmark = pytest.mark.slow  # a subprocess a test
 
 PRECIOUS = b"precious bytes from an earlier run"
 

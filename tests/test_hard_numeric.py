@@ -18,7 +18,7 @@ from scatter_cli.sampling.sources import RandomSource
 from scatter_cli.loading.load import load_surface
 from scatter_cli.sampling.warps import square_to_triangle
 
-from benchmarks.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_pvalue, recover_bary,
+from testkit.hardcheck import (ALPHA, area_groups, exact_face_errors, pooled_pvalue, recover_bary,
                                   spread_triangles, triangles_mesh, two_sum_le_one, uniform_in_triangle_pvalue)
 from .doubles import Float32CdfPlan, UnweightedSource
 
@@ -63,6 +63,7 @@ def degenerate_mesh():
     return trimesh.Trimesh(v, f, process=False)
 
 
+@pytest.mark.slow
 def test_zero_area_faces_get_no_points_and_nothing_is_nan():
     mesh = degenerate_mesh()
     s = scatter_cli.sample(mesh, 200_000, attributes=("face", "bary", "normal"), seed=1, precision="float64")
@@ -108,6 +109,7 @@ def sliver_mesh():
     return trimesh.Trimesh(v, f, process=False)
 
 
+@pytest.mark.slow
 def test_slivers_next_to_big_faces():
     mesh = sliver_mesh()
     tri = np.asarray(mesh.vertices)[mesh.faces]
@@ -122,6 +124,7 @@ def test_slivers_next_to_big_faces():
     assert_on_faces(s.points, world_tri(mesh, s.face))
 
 
+@pytest.mark.slow
 def test_points_on_slivers_alone_stay_on_them():
     """A mesh of only slivers (aspect 1e8, areas 1e-20 to 1) so every point lands on one."""
     rng = np.random.default_rng(3)
@@ -169,6 +172,7 @@ def wide_mesh():
     return load_surface(triangles_mesh(tri)), areas
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind,should_pass", [("scatter", True), ("unweighted", False), ("float32 CDF", False)])
 def test_face_shares_follow_areas_from_1e_minus_12_to_1e6(wide_mesh, kind, should_pass):
     surface, areas = wide_mesh
@@ -197,6 +201,7 @@ def at_origin():
     return scatter_cli.sample(small_mesh(), 200_000, attributes=("face",), seed=8, precision="float64")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("offset", [0.0, 1e3, 1e6, 1e8])
 def test_huge_coordinates_points_on_faces_and_uniform(offset, at_origin):
     mesh = small_mesh(np.array([offset, -offset, 0.5 * offset]))
@@ -222,6 +227,7 @@ def test_float32_at_huge_coordinates_fails_the_same_test(offset):
     assert uniform_in_triangle_pvalue(b1, b2) < ALPHA
 
 
+@pytest.mark.slow
 def test_scene_translated_far_away():
     """The offset in a node transform (georeferenced glTF) rather than in the vertices."""
     mesh = small_mesh()
@@ -237,6 +243,7 @@ def test_scene_translated_far_away():
     assert uniform_in_triangle_pvalue(b1, b2) > ALPHA
 
 
+@pytest.mark.slow
 def test_auto_precision_switch_is_reported(tmp_path):
     from .conftest import run_scatter
 
@@ -315,6 +322,7 @@ def check_warp(u):
     return b
 
 
+@pytest.mark.slow
 @settings(max_examples=400, deadline=None)
 @given(st.lists(st.tuples(adversarial_u, adversarial_u), min_size=1, max_size=64))
 def test_warp_stays_in_the_triangle_for_adversarial_u(pairs):
@@ -329,6 +337,7 @@ def test_warp_ends_exhaustively():
     assert (b[u[:, 0] == ONE_MINUS, 0] <= 2**-53).all()
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.tuples(adversarial_u, adversarial_u), min_size=1, max_size=16),
        st.floats(-1e8, 1e8), st.integers(0, 2**32 - 1))
@@ -356,6 +365,7 @@ def test_a_million_draws_none_outside_the_unit_triangle():
 # ---------------------------------------------------------------- topology
 
 
+@pytest.mark.slow
 def test_polygons_and_quads_are_triangulated_in_file_order(tmp_path):
     path = tmp_path / "poly.obj"
     path.write_text("v 0 0 0\nv 2 0 0\nv 2 1 0\nv 0 1 0\nv 3 0.5 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\n"
@@ -380,6 +390,7 @@ def test_ply_quads(tmp_path):
     assert np.isfinite(s.points).all() and (s.points[:, :2] >= 0).all() and (s.points[:, :2] <= 1).all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dup_seed,should_pass", [(12, True)])
 def test_duplicate_faces_count_twice_and_non_manifold_and_flipped(dup_seed, should_pass):
     """Three faces on one edge (non-manifold), one listed twice, one flipped: shares 1:1:2:1."""
@@ -441,6 +452,7 @@ def random_meshes(draw):
     return v, f
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(random_meshes(), st.integers(0, 3000), st.integers(0, 2**63), st.integers(1, 5000),
        st.sampled_from(["auto", "float64", "float32"]), st.booleans())
@@ -477,6 +489,7 @@ def test_random_meshes_invariants(mesh_arrays, count, seed, chunk, precision, in
         assert_on_faces(a.points, world, units=ON_FACE_UNITS + (8 if in_scene else 0))
 
 
+@pytest.mark.slow
 def test_rotated_scene_bytes_do_not_depend_on_chunk_size():
     """Regression: the node matrix was applied with a BLAS product, whose rounding depends
     on the number of rows, so --chunk-size changed the output bytes of rotated instances."""

@@ -113,6 +113,7 @@ def test_a_scene_counts_every_instance_and_its_area():
     assert report["boundary_area"] == pytest.approx(5 * area, rel=1e-12)  # 1 + 2 squared
 
 
+@pytest.mark.slow
 def test_info_says_it_in_text_and_json(tmp_path):
     closed = json.loads(run_scatter("info", SAMPLES / "icosahedron_binary.stl", "--json", check=True).stdout)
     assert closed["closed"] and closed["boundary_edges"] == closed["non_manifold_edges"] == 0

@@ -28,6 +28,7 @@ def writing_started(folder, fmt):
     return False
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_a_signal_during_a_write_stops_it_cleanly(tmp_path, fmt, sig):

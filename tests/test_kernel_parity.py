@@ -1,15 +1,18 @@
 """Every compiled kernel gives the bytes of its NumPy twin, over the same cases.
 
 One parametrized test: each case runs once with the kernels as built and once with the
-kernel it exercises switched off (the module attributes that hold it set to None, as
-SCATTER_NUMPY=1 leaves them), and the two results must be byte-identical. Every kernel
-native.KERNELS names has cases here, and each case checks that the kernel was there to
-compare. A kernel made one ulp wrong fails the same comparison (the broken variant).
+kernel it exercises switched off in every module native.KERNELS says holds it (as
+SCATTER_NUMPY=1 leaves them), and the two results must be byte-identical. The kernel's
+functions are watched: the NumPy run must call none of them (else some module holds the
+kernel outside the registry), and every function the kernel exports has a case that must
+call it (CALLED_BY). A kernel made one ulp wrong fails the same comparison, and so does a
+registry that leaves a holder out (the broken variants).
 
 Every other test runs with the kernels (CI builds them), so these are what carries those
 results over to the NumPy path that runs where no C compiler was found.
 """
 
+import importlib
 import os
 
 import numpy as np
@@ -22,8 +25,6 @@ from scatter_cli.sampling.exterior import enclosure, rayscene
 from scatter_cli.core import native
 from scatter_cli.sampling import normals, plan as sampling
 from scatter_cli.sampling.poisson import pairs, thinning
-from scatter_cli.loading import fast as readers
-from scatter_cli.sampling.stable import source as stable
 from scatter_cli.loading.load import load_surface
 from scatter_cli.surface.model import Geometry, Instance, Surface
 
@@ -31,19 +32,6 @@ from . import exterior_scenes as es
 from .conftest import SAMPLES, spread_triangles, triangles_mesh
 
 REQUIRED = os.environ.get("SCATTER_REQUIRE_KERNELS", "") not in ("", "0")
-
-# Where each kernel is held: switching it off sets these to None.
-SWITCHES = {
-    "_csampling": [(sampling, "_kernel"), (normals, "_kernel")],
-    "_cthinning": [(pairs, "_kernel")],
-    "_cstable": [(stable, "_kernel")],
-    "_creaders": [(readers, "_kernel")],
-    "_cenclosure": [(enclosure, "_kernel")],
-    "_cembree": [(rayscene, "_kernel")],
-    "_cwinding": [(winding, "_kernel")],
-    "_cvolume": [(distance, "_kernel"), (parity, "_kernel")],
-}
-
 
 # -- sampling (_csampling) -----------------------------------------------------------------
 
@@ -83,6 +71,7 @@ MESHES = {
     "textured": lambda: str(SAMPLES / "boxtextured.glb"),
     "koala": lambda: str(SAMPLES / "koala.obj"),
     "hemisphere": lambda: str(SAMPLES / "hemisphere.off"),
+    "pediment": lambda: str(SAMPLES / "pediment_join_plate_12.stl"),
 }
 
 
@@ -179,6 +168,23 @@ def thinning_case(name):
         return {"by_radius": by_radius.tobytes(), "by_count": idx.tobytes(), "d_min": d_min}
 
     return run
+
+
+def plain_loops_case(name):
+    """Thinning with the kernel's plain distance loops (SCATTER_NO_AVX512=1's choice; the
+    only loops on a CPU without AVX-512)."""
+    run = thinning_case(name)
+
+    def plain():
+        if pairs._kernel is None:
+            return run()
+        pairs._kernel.use_avx512(False)
+        try:
+            return run()
+        finally:
+            native.kernel("_cthinning")  # back to the environment's choice
+
+    return plain
 
 
 def pairs_case(name):
@@ -327,6 +333,7 @@ CASES = {
     },
     "_cthinning": {
         **{f"thin-{n}": thinning_case(n) for n in point_sets()},
+        "thin-line-plain-loops": plain_loops_case("line"),
         **{f"pairs-{n}": pairs_case(n) for n in ("sphere", "clustered", "far")},
         "sample-poisson": lambda: sample_bytes("koala", seed=3, attributes="face", poisson=True, count=3000),
         "sample-radius": lambda: sample_bytes("koala", seed=3, attributes="face", radius=0.04),
@@ -348,6 +355,13 @@ CASES = {
         "winding-order-1": winding_case("moebius-160-10.ply", order=1, accuracy=3.0),
         "sample-volume": lambda: sample_bytes("hemisphere", volume=True, count=2000, attributes="winding,inside"),
     },
+    "_cedges": {
+        "edges-pediment": lambda: sample_bytes("pediment", count=3000, edges=0.5, attributes="normal,face,sharp"),
+        "edges-truck": lambda: sample_bytes("truck", count=2000, edges="0.3", sharp_angle=30,
+                                            attributes="object,bary,sharp"),
+        "edges-near": lambda: sample_bytes("hemisphere", near=(0.02,), near_edges=(0.005,), edges=0.4, count=2000,
+                                           attributes="sdf,sharp"),
+    },
     "_cvolume": {
         **{f"distance-{n}": distance_case(n) for n in ("icosahedron_binary.stl", "narrow_triangles.obj", "scene")},
         "sample-near": lambda: sample_bytes("hemisphere", near=(0.02,), count=2000, sign="parity",
@@ -356,28 +370,113 @@ CASES = {
 }
 
 
+# For every function each kernel exports, a case that must call it (small ones: these cases
+# run in the fast loop, pytest -m "not slow", and all the others are marked slow).
+CALLED_BY = {
+    "_csampling": {"areas": "sample-skull-plain", "draw": "sample-skull-plain", "guide": "sample-skull-plain",
+                   "place": "sample-skull-method=stratified", "select": "sample-skull-method=stratified",
+                   "unit_normals": "normals-0-none"},
+    "_cthinning": {"grid": "pairs-far", "pairs": "pairs-far", "greedy": "thin-line",
+                   "use_avx512": "thin-line-plain-loops"},
+    "_cstable": {"faces": "truck", "arrivals": "truck", "order": "truck", "place": "pediment-radius"},
+    "_creaders": {"read_obj": "obj-hemisphere.off", "read_off": "off-hemisphere.off",
+                  "read_ply_ascii": "ply-ascii-hemisphere.off", "read_stl_ascii": "stl-ascii-hemisphere.off"},
+    "_cenclosure": {"parts": "box_in_box", "enclosed": "box_in_box"},
+    "_cembree": {f: "box_in_box" for f in ("load", "new_scene", "add", "buffers", "commit", "occluded")},
+    "_cwinding": {f: "winding-icosahedron_binary.stl" for f in ("morton", "order", "subtree_sums", "moments",
+                                                                "radii", "winding")},
+    "_cvolume": {f: "distance-icosahedron_binary.stl" for f in ("wide", "order", "visit", "closest", "crossings")},
+    "_cedges": {"edges": "edges-pediment"},
+}
+
+
 def run_case(run, tmp_path):
     return run(tmp_path) if run.__code__.co_argcount else run()
 
 
-def test_every_kernel_has_cases_and_a_switch():
-    assert set(CASES) == set(SWITCHES) == set(native.KERNELS)
+def holding(kernel):
+    """The modules that hold ``kernel``, from the registry."""
+    return [importlib.import_module(name) for name in native.holders(kernel)]
 
 
-@pytest.mark.parametrize("kernel,case", [(k, c) for k in CASES for c in CASES[k]])
-def test_kernel_gives_its_numpy_twin_s_bytes(kernel, case, tmp_path, monkeypatch):
-    held = [getattr(module, attr) for module, attr in SWITCHES[kernel]]
-    if any(h is None for h in held):
+def compiled_module(kernel):
+    """The built kernel, or None."""
+    return native.kernel(kernel) if all(m._kernel is not None for m in holding(kernel)) else None
+
+
+def functions_of(module):
+    return {name for name in dir(module) if not name.startswith("_") and callable(getattr(module, name))}
+
+
+def watch(module, monkeypatch):
+    """Record the name of each function of the compiled ``module`` called from now on."""
+    called = set()
+
+    def watched(name, function):
+        def call(*args, **kwargs):
+            called.add(name)
+            return function(*args, **kwargs)
+
+        return call
+
+    for name in functions_of(module):
+        monkeypatch.setattr(module, name, watched(name, getattr(module, name)))
+    return called
+
+
+def need_kernel(kernel):
+    module = compiled_module(kernel)
+    if module is None:
         if REQUIRED:
             pytest.fail(f"{kernel} is not built")
         pytest.skip(f"{kernel} is not built (SCATTER_REQUIRE_KERNELS=1 makes this a failure)")
+    return module
+
+
+def test_every_kernel_has_cases():
+    assert set(CASES) == set(CALLED_BY) == set(native.KERNELS)
+
+
+def uncompared(kernel, table):
+    """The functions of ``kernel`` with no case in ``table`` that must call them, and the
+    cases ``table`` names that do not exist."""
+    listed = table[kernel]
+    return (functions_of(need_kernel(kernel)) ^ set(listed)) | {c for c in listed.values() if c not in CASES[kernel]}
+
+
+@pytest.mark.parametrize("kernel", sorted(native.KERNELS))
+def test_every_function_of_every_kernel_is_compared(kernel):
+    assert not uncompared(kernel, CALLED_BY)
+
+
+def test_a_function_left_out_of_the_table_is_reported():
+    table = {"_csampling": {f: c for f, c in CALLED_BY["_csampling"].items() if f != "guide"}}
+    assert uncompared("_csampling", table) == {"guide"}
+    table = {"_csampling": CALLED_BY["_csampling"] | {"unit_normals": "no-such-case"}}
+    assert uncompared("_csampling", table) == {"no-such-case"}
+
+
+def every_case():
+    """Every (kernel, case), slow but for the cases CALLED_BY names."""
+    named = {(k, c) for k, table in CALLED_BY.items() for c in table.values()}
+    return [pytest.param(k, c, marks=() if (k, c) in named else pytest.mark.slow) for k in CASES for c in CASES[k]]
+
+
+@pytest.mark.parametrize("kernel,case", every_case())
+def test_kernel_gives_its_numpy_twin_s_bytes(kernel, case, tmp_path, monkeypatch):
+    called = watch(need_kernel(kernel), monkeypatch)
     run = CASES[kernel][case]
     with np.errstate(all="ignore"):
         compiled = run_case(run, tmp_path / "kernel")
+        reached = set(called)
+        called.clear()
         with monkeypatch.context() as m:
-            for module, attr in SWITCHES[kernel]:
-                m.setattr(module, attr, None)
+            for module in holding(kernel):
+                m.setattr(module, "_kernel", None)
             twin = run_case(run, tmp_path / "numpy")
+    assert not called, f"the NumPy run called {sorted(called)}: a module holds {kernel} outside native.KERNELS"
+    missed = {f for f, c in CALLED_BY[kernel].items() if c == case} - reached
+    assert not missed, f"{case} did not reach {sorted(missed)}"
     assert compiled.keys() == twin.keys()
     for key in compiled:
         assert compiled[key] == twin[key], key
@@ -400,8 +499,26 @@ class _OneUlpOff:
 
 
 def test_a_kernel_one_ulp_off_fails_the_comparison(tmp_path, monkeypatch):
-    if sampling._kernel is None:
-        pytest.skip("the sampling kernel is not built")
+    need_kernel("_csampling")
     monkeypatch.setattr(sampling, "_kernel", _OneUlpOff(sampling._kernel))
-    with pytest.raises(AssertionError):
+    with pytest.raises(AssertionError, match="points"):
         test_kernel_gives_its_numpy_twin_s_bytes("_csampling", "sample-skull-plain", tmp_path, monkeypatch)
+
+
+@pytest.mark.parametrize("kernel,left_out,case", [("_cstable", "faces", "truck"),
+                                                  ("_cvolume", "parity", "distance-icosahedron_binary.stl"),
+                                                  ("_csampling", "normals", "sample-instances-attributes=face,object,normal")])
+def test_a_holder_left_out_of_the_registry_fails_the_comparison(kernel, left_out, case, tmp_path, monkeypatch):
+    """The NumPy run of a registry without ``left_out`` still calls the kernel there."""
+    need_kernel(kernel)
+    package, modules = native.KERNELS[kernel]
+    monkeypatch.setitem(native.KERNELS, kernel, native.Kernel(package, tuple(m for m in modules if m != left_out)))
+    with pytest.raises(AssertionError, match="outside native.KERNELS"):
+        test_kernel_gives_its_numpy_twin_s_bytes(kernel, case, tmp_path, monkeypatch)
+
+
+def test_a_case_that_does_not_reach_its_function_fails(tmp_path, monkeypatch):
+    need_kernel("_csampling")
+    monkeypatch.setitem(CALLED_BY, "_csampling", CALLED_BY["_csampling"] | {"draw": "normals-0-none"})
+    with pytest.raises(AssertionError, match="did not reach"):
+        test_kernel_gives_its_numpy_twin_s_bytes("_csampling", "normals-0-none", tmp_path, monkeypatch)

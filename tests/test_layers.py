@@ -107,10 +107,12 @@ def cycle(root=PACKAGE):
     return None
 
 
+@pytest.mark.slow
 def test_no_module_imports_one_of_a_later_layer():
     assert backward_imports() == []
 
 
+@pytest.mark.slow
 def test_no_import_cycle():
     assert cycle() is None
 
@@ -133,6 +135,7 @@ def copy(tmp_path):
     return tmp_path / "scatter_cli"
 
 
+@pytest.mark.slow
 def test_a_backward_import_inside_a_function_fails(copy):
     """The broken variant: the surface model importing the loader in a function."""
     with open(copy / "surface" / "model.py", "a") as f:
@@ -140,18 +143,21 @@ def test_a_backward_import_inside_a_function_fails(copy):
     assert backward_imports(copy) == [("surface.model", "loading.load")]
 
 
+@pytest.mark.slow
 def test_a_backward_absolute_import_fails(copy):
     with open(copy / "core" / "hashing.py", "a") as f:
         f.write("\nimport scatter_cli.sampling.plan\n")
     assert backward_imports(copy) == [("core.hashing", "sampling.plan")]
 
 
+@pytest.mark.slow
 def test_a_module_outside_every_layer_fails(copy):
     (copy / "stray").mkdir()
     (copy / "stray" / "__init__.py").write_text("")
     assert ("stray", "<no layer>") in backward_imports(copy)
 
 
+@pytest.mark.slow
 def test_the_cycle_finder_sees_a_function_level_import(copy):
     with open(copy / "sampling" / "warps.py", "a") as f:
         f.write("\n\ndef plan():\n    from . import plan\n\n    return plan\n")

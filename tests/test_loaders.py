@@ -18,6 +18,7 @@ def test_the_table_names_every_input_format():
 # -- standard input ------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_glb_bytes_on_stdin_read_as_gltf_are_the_glb(tmp_path):
     """`--input-format gltf` with binary glTF bytes: the same points as the file itself."""
     path = SAMPLES / "boxtextured.glb"
@@ -28,6 +29,7 @@ def test_glb_bytes_on_stdin_read_as_gltf_are_the_glb(tmp_path):
         assert piped.stdout == by_path.stdout
 
 
+@pytest.mark.slow
 def test_gltf_json_on_stdin_read_as_glb_is_the_gltf(tmp_path):
     """The other way round: JSON glTF (buffers embedded) with `--input-format glb`."""
     data = trimesh.Scene(trimesh.creation.box()).export(file_type="gltf", embed_buffers=True)["model.gltf"]
@@ -38,12 +40,14 @@ def test_gltf_json_on_stdin_read_as_glb_is_the_gltf(tmp_path):
     assert piped.stdout == by_path.stdout
 
 
+@pytest.mark.slow
 def test_stdin_without_a_format_lists_every_format_it_can_carry():
     proc = run_scatter("sample", "-", "-n", 5, input=(SAMPLES / "hemisphere.off").read_bytes())
     assert_one_line_error(proc, 2, "--input-format", *(f" {k}" for k in inputs.STDIN_FORMATS[1:]))
     assert "(" + inputs.STDIN_FORMATS[0] in proc.stderr.decode()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["usda", "obj"])
 def test_stdin_carries_the_formats_the_error_lists(kind, tmp_path):
     """Two of the listed formats, one through trimesh and one through a temporary USD file:
@@ -61,6 +65,7 @@ def test_stdin_carries_the_formats_the_error_lists(kind, tmp_path):
     assert piped.stdout.splitlines()[1:] == by_path.stdout.splitlines()[1:]
 
 
+@pytest.mark.slow
 def test_a_gltf_with_buffer_files_on_stdin_says_why_it_cannot_be_read(tmp_path):
     files = trimesh.Scene(trimesh.creation.box()).export(file_type="gltf")
     for name, data in files.items():
@@ -77,6 +82,7 @@ def test_a_gltf_with_buffer_files_on_stdin_says_why_it_cannot_be_read(tmp_path):
 OBJ = "mtllib paint.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\n"
 
 
+@pytest.mark.slow
 def test_a_missing_material_library_is_named_when_colours_are_asked_for(tmp_path):
     (tmp_path / "m.obj").write_text(OBJ)
     proc = run_scatter("sample", tmp_path / "m.obj", "-n", 5, "-a", "color")
@@ -85,6 +91,7 @@ def test_a_missing_material_library_is_named_when_colours_are_asked_for(tmp_path
     assert run_scatter("sample", tmp_path / "m.obj", "-n", 5).returncode == 0
 
 
+@pytest.mark.slow
 def test_the_same_obj_with_its_material_library_gives_its_colour(tmp_path):
     """The paired case: the library there, the colour comes from it (so the error above is
     about the missing file, not about OBJ colours)."""
@@ -98,6 +105,7 @@ def test_the_same_obj_with_its_material_library_gives_its_colour(tmp_path):
     assert colours == {("255", "0", "0")}
 
 
+@pytest.mark.slow
 def test_vertex_colours_need_no_material_library(tmp_path):
     (tmp_path / "m.obj").write_text(OBJ.replace("v 0 0 0", "v 0 0 0 0 1 0").replace("v 1 0 0", "v 1 0 0 0 1 0")
                                     .replace("v 0 1 0", "v 0 1 0 0 1 0"))

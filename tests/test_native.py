@@ -1,8 +1,11 @@
 """The compiled kernels are built, share the NumPy path's constants, are switched off by
 SCATTER_NUMPY=1, take their choices from Python (threads, AVX-512) without changing a
-result, and refuse bad arrays. Their parity with the NumPy twins is
-tests/test_kernel_parity.py."""
+result, and refuse bad arrays; the registry (native.KERNELS) names every module that
+holds one, and docs/development.md's table agrees with it. Their parity with the NumPy
+twins is tests/test_kernel_parity.py."""
 
+import ast
+import json
 import os
 import re
 import sys
@@ -50,27 +53,78 @@ def test_scatter_numpy_switches_them_off(monkeypatch):
 
 
 _HELD = """
-from scatter_cli.loading import fast as readers
-from scatter_cli.sampling import normals, plan as sampling
-from scatter_cli.sampling.exterior import enclosure, rayscene
-from scatter_cli.sampling.poisson import pairs
-from scatter_cli.sampling.stable import source as stable
-from scatter_cli.volume import distance, parity, winding
-print(sum(m._kernel is not None for m in (enclosure, pairs, rayscene, readers, sampling, stable, normals,
-                                         winding, distance, parity)))
+import importlib, json
+from scatter_cli.core import native
+print(json.dumps({m: importlib.import_module(m)._kernel is not None for k in native.KERNELS for m in native.holders(k)}))
 """
 
 
-@pytest.mark.parametrize("switch,held", [("1", 0), ("", 10)])
-def test_every_module_looks_its_kernel_up_once_through_native(switch, held):
-    """Each module holds its kernel from its import: SCATTER_NUMPY=1 leaves every one None
-    (the paired case: unset, every one is there)."""
+@pytest.mark.slow
+@pytest.mark.parametrize("switch,held", [("1", False), ("", True)])
+def test_scatter_numpy_empties_every_holder_in_the_registry(switch, held):
+    """SCATTER_NUMPY=1 leaves every module that native.KERNELS says holds a kernel holding
+    None (the paired case: unset, every one holds its kernel)."""
     proc = run_user([sys.executable, "-c", _HELD], cwd=REPO, env={"SCATTER_NUMPY": switch}, check=True)
-    assert int(proc.stdout) == held
+    got = json.loads(proc.stdout)
+    assert sorted(got) == sorted(m for k in native.KERNELS for m in native.holders(k))
+    assert set(got.values()) == {held}
+
+
+def _is_lookup(node):
+    """Whether ``node`` is a call ``native.kernel(...)``."""
+    f = node.func if isinstance(node, ast.Call) else None
+    return isinstance(f, ast.Attribute) and f.attr == "kernel" and isinstance(f.value, ast.Name) and f.value.id == "native"
+
+
+def kernel_lookups(root, package="scatter_cli"):
+    """({kernel: {module}}, [(module, line) wrong]) for the package at ``root``: each module
+    that holds a kernel as ``_kernel = native.kernel("name")`` at its top level, and the
+    lines that look a kernel up or set ``_kernel`` any other way."""
+    found, wrong = {}, []
+    for path in sorted(root.rglob("*.py")):
+        if path.name == "native.py":
+            continue
+        name = ".".join((package, *path.relative_to(root).with_suffix("").parts))
+        tree = ast.parse(path.read_text())
+        held = set()
+        for node in tree.body:
+            value = node.value if isinstance(node, ast.Assign) else None
+            if [getattr(t, "id", None) for t in getattr(node, "targets", [])] == ["_kernel"]:
+                if _is_lookup(value) and len(value.args) == 1 and isinstance(value.args[0], ast.Constant):
+                    found.setdefault(value.args[0].value, set()).add(name)
+                    held.add(value)
+                else:
+                    wrong.append((name, node.lineno))
+        wrong += [(name, node.lineno) for node in ast.walk(tree) if _is_lookup(node) and node not in held]
+    return found, wrong
+
+
+def registry_gaps(found, kernels):
+    """The (kernel, module) pairs that ``found`` and the registry ``kernels`` do not share."""
+    listed = {(k, f"{entry.package}.{m}") for k, entry in kernels.items() for m in entry.holders}
+    return sorted(listed ^ {(k, m) for k, modules in found.items() for m in modules})
+
+
+@pytest.mark.slow
+def test_the_registry_names_every_module_that_holds_a_kernel():
+    """Every module that looks a kernel up is listed under it in native.KERNELS and every
+    listed module looks it up, once, at import, through native.kernel()."""
+    found, wrong = kernel_lookups(REPO / "scatter_cli")
+    assert not wrong
+    assert not registry_gaps(found, native.KERNELS)
     for path in (REPO / "scatter_cli").rglob("*.py"):
-        text = path.read_text()
-        assert not re.search(r"import\s+_c\w+|import_module\(.*_c", text) or path.name == "native.py", path.name
-        assert "kernel(" not in text.replace("native.kernel(", "").replace("def kernel(", ""), path.name
+        assert not re.search(r"import\s+_c\w+|import_module\(.*_c", path.read_text()) or path.name == "native.py", path
+
+
+def test_a_holder_the_registry_leaves_out_is_reported(tmp_path):
+    (tmp_path / "a.py").write_text('from .core import native\n_kernel = native.kernel("_cx")\n')
+    (tmp_path / "b.py").write_text("from . import a\n_kernel = a._kernel\n")  # held outside native
+    (tmp_path / "c.py").write_text('def f():\n    return native.kernel("_cx")\n')  # not at import
+    (tmp_path / "d.py").write_text('_kernel = native.kernel("_cx")\n')
+    found, wrong = kernel_lookups(tmp_path, "p")
+    assert found == {"_cx": {"p.a", "p.d"}} and wrong == [("p.b", 2), ("p.c", 2)]
+    registry = {"_cx": native.Kernel("p", ("a", "e"))}
+    assert registry_gaps(found, registry) == [("_cx", "p.d"), ("_cx", "p.e")]
 
 
 def test_no_compiled_file_reads_the_environment_and_all_share_the_checks():
@@ -82,6 +136,20 @@ def test_no_compiled_file_reads_the_environment_and_all_share_the_checks():
         takes_arrays = "PyArray_DATA" in text
         assert ('#include "_ckernel.h"' in text) == takes_arrays, path.name
         assert "PyArray_IS_C_CONTIGUOUS" not in text, path.name  # the checks are get() and get_rows()
+
+
+def own_threads(files):
+    """The C files (name -> text) other than _cthreads.h that start threads or cap them
+    themselves (the header's in_parallel and MAX_THREADS are the only ones)."""
+    return sorted(name for name, text in files.items()
+                  if name != "_cthreads.h" and re.search(r"pthread_create|pthread\.h|#\s*define\s+MAX_THREADS", text))
+
+
+def test_every_kernel_starts_its_threads_through_cthreads_h():
+    files = {p.name: p.read_text() for p in (REPO / "scatter_cli").rglob("_c*.[ch]")}
+    assert "_cthreads.h" in files and not own_threads(files)
+    hand_made = "static void *run(void *a) { return a; }\nvoid go(pthread_t *t) { pthread_create(t, 0, run, 0); }"
+    assert own_threads(files | {"_cnew.c": hand_made, "_cold.c": "#define MAX_THREADS 8"}) == ["_cnew.c", "_cold.c"]
 
 
 def test_the_avx512_choice_is_passed_from_python():
@@ -97,10 +165,12 @@ def test_large_meshes_go_in_face_order_and_larger_chunks():
     assert large.in_face_order and large.default_chunk == sampling.LARGE_MESH_CHUNK
 
 
-@pytest.mark.parametrize("threads", ["1", "2", "5"])
+@pytest.mark.slow
+@pytest.mark.parametrize("threads", ["2", "3", "7", "20"])
 def test_greedy_does_not_depend_on_the_thread_count(threads, monkeypatch):
-    # enough points for the kernel to split the crowding pass (16,384 a thread at least)
-    points = np.random.default_rng(5).normal(size=(90_000, 3))
+    # enough points for the kernel to split the crowding pass on 7 threads (16,384 a thread
+    # at least); 20 is more than the kernels start
+    points = np.random.default_rng(5).normal(size=(120_000, 3))
     points /= np.linalg.norm(points, axis=1, keepdims=True)
     radius = 0.02
     monkeypatch.setenv("SCATTER_THREADS", "1")
@@ -126,6 +196,7 @@ np.savez(sys.argv[1], **out)
 """
 
 
+@pytest.mark.slow
 def test_the_avx512_loops_keep_the_same_points(tmp_path):
     """With and without the AVX-512 distance loops (SCATTER_NO_AVX512=1) the kernel finds
     the same pairs and keeps the same points. (On a CPU without AVX-512 both runs take
@@ -150,3 +221,34 @@ def test_kernels_refuse_bad_arrays_instead_of_crashing():
         k.areas(np.zeros((3, 3), dtype=np.float32), np.array([[0, 1, 2]]), None, out)
     with pytest.raises(TypeError):
         pairs._kernel.grid(np.zeros((4, 2)), np.zeros(3), 1.0, 0)
+
+
+def kernel_table_errors(text, kernels):
+    """The rows of the kernel table in ``text`` (docs/development.md) that disagree with
+    the registry ``kernels`` on the C file or the modules holding it, and the kernels it lacks."""
+    rows = {}
+    for line in text.splitlines():
+        cells = [c.strip().replace("`", "") for c in line.strip("| ").split("|")]
+        if line.startswith("| `_c") and len(cells) == 4:
+            rows[cells[0]] = (cells[1], cells[2])
+    errors = sorted(set(kernels) ^ set(rows))
+    for name in set(kernels) & set(rows):
+        c_file = "/".join([*kernels[name].package.split(".")[1:], name + ".c"])
+        want = (c_file, ", ".join(h.removeprefix("scatter_cli.") for h in native.holders(name)))
+        if rows[name] != want:
+            errors.append(name)
+    return errors
+
+
+def test_the_development_guide_lists_every_kernel():
+    assert not kernel_table_errors((REPO / "docs" / "development.md").read_text(), native.KERNELS)
+    for path in REPO.glob("scatter_cli/**/_c*.c"):  # and every C file is a kernel of the registry
+        assert native.KERNELS[path.stem].package == ".".join(path.parent.relative_to(REPO).parts)
+
+
+def test_a_kernel_missing_from_the_table_is_reported():
+    text = (REPO / "docs" / "development.md").read_text()
+    no_row = "\n".join(line for line in text.splitlines() if not line.startswith("| `_cstable`"))
+    assert kernel_table_errors(no_row, native.KERNELS) == ["_cstable"]
+    moved = text.replace("`volume.distance`, `volume.parity`", "`volume.distance`")
+    assert kernel_table_errors(moved, native.KERNELS) == ["_cvolume"]

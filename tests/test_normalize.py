@@ -59,6 +59,7 @@ def test_the_frame_follows_instances_in_world_space():
     assert s.info["normalize"]["scale"] == pytest.approx(2 / 11)
 
 
+@pytest.mark.slow
 def test_none_writes_world_space_and_a_bad_mode_is_a_usage_error(tmp_path):
     mesh, _ = mesh_with_stray_vertex()
     path = tmp_path / "m.ply"
@@ -69,6 +70,7 @@ def test_none_writes_world_space_and_a_bad_mode_is_a_usage_error(tmp_path):
     assert proc.returncode == 2 and proc.stderr.decode().startswith("error: unknown normalize 'unit-ball'")
 
 
+@pytest.mark.slow
 def test_the_command_writes_the_frame_to_stats(tmp_path):
     mesh, used = mesh_with_stray_vertex()
     path = tmp_path / "m.ply"

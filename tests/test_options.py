@@ -59,6 +59,7 @@ def test_right_options_do_read_the_file(monkeypatch):
         api.prepare("never-read.ply", 10, poisson=True)
 
 
+@pytest.mark.slow
 def test_the_command_names_the_option_not_the_missing_file(tmp_path):
     proc = run_scatter("sample", tmp_path / "missing.ply", "--poisson", "--radius", 0.5)
     err = proc.stderr.decode()

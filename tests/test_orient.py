@@ -74,6 +74,7 @@ def test_orient_moves_no_point(extra):
     np.testing.assert_array_equal(plain.points, with_orient.points)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("extra", [{}, {"poisson": True}])
 def test_same_bytes_for_any_chunk_size_and_threads(extra, monkeypatch):
     ref = scatter_cli.sample(SAMPLES / "koala.obj", 1000, seed=8, attributes=("orient", "smooth-normal"), **extra)

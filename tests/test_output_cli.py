@@ -13,6 +13,7 @@ from .test_cli import assert_one_line_error
 MESH = SAMPLES / "boxvertexcolors.glb"
 
 
+@pytest.mark.slow
 def test_pcd_ascii_and_las_stats(tmp_path):
     o3d = pytest.importorskip("open3d")
     laspy = pytest.importorskip("laspy")
@@ -31,6 +32,7 @@ def test_pcd_ascii_and_las_stats(tmp_path):
     assert las.header.point_count == 300
 
 
+@pytest.mark.slow
 def test_usd_instancer_from_the_suffix(tmp_path):
     pytest.importorskip("pxr")
     from pxr import Usd, UsdGeom
@@ -40,6 +42,7 @@ def test_usd_instancer_from_the_suffix(tmp_path):
     assert len(UsdGeom.PointInstancer(stage.GetPrimAtPath("/Scatter/Instancer")).GetPositionsAttr().Get()) == 50
 
 
+@pytest.mark.slow
 def test_las_into_a_pipe_is_one_line_and_ascii_las_a_usage_error(tmp_path):
     proc = run_scatter("sample", MESH, "-n", 10, "-f", "las")
     assert_one_line_error(proc, 1, "needs a file")
@@ -127,6 +130,7 @@ def test_room_is_checked_to_the_byte(tmp_path, monkeypatch):
         pass
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["ply", "npy", "pcd", "las"])
 def test_a_count_that_cannot_fit_is_refused_before_any_work(tmp_path, fmt):
     if fmt == "las":
@@ -139,6 +143,7 @@ def test_a_count_that_cannot_fit_is_refused_before_any_work(tmp_path, fmt):
 
 # -- merge: directories, and only the formats it joins ----------------------------------
 
+@pytest.mark.slow
 def test_merge_of_a_directory_says_it_is_one(tmp_path):
     part = tmp_path / "a.ply"
     run_scatter("sample", MESH, "-n", 10, "-o", part, check=True)
@@ -148,6 +153,7 @@ def test_merge_of_a_directory_says_it_is_one(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.ply", "parts"]
 
 
+@pytest.mark.slow
 def test_merge_offers_only_the_formats_it_joins(tmp_path):
     from scatter_cli.writers import MERGEABLE
 
@@ -162,6 +168,7 @@ def test_merge_offers_only_the_formats_it_joins(tmp_path):
 
 # -- --crs through the command ----------------------------------------------------------
 
+@pytest.mark.slow
 def test_crs_through_sample_and_batch(tmp_path):
     laspy = pytest.importorskip("laspy")
     pyproj = pytest.importorskip("pyproj")
@@ -172,6 +179,7 @@ def test_crs_through_sample_and_batch(tmp_path):
     assert laspy.read(tmp_path / "s.laz").header.parse_crs() == pyproj.CRS.from_epsg(2056)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["sample", "batch"])
 def test_crs_elsewhere_or_malformed_is_a_usage_error(tmp_path, command):
     pytest.importorskip("pyproj")

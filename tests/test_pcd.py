@@ -10,7 +10,11 @@ from scatter_cli.writers import write_samples
 
 from .conftest import SAMPLES
 
-o3d = pytest.importorskip("open3d")
+
+@pytest.fixture
+def o3d():
+    """Open3D, imported by the tests that read with it (its import takes seconds)."""
+    return pytest.importorskip("open3d")
 
 
 def write(tmp_path, ascii, precision="float32", n=600, attributes="normal,color,face,orient", name="t.pcd", **kw):
@@ -20,8 +24,9 @@ def write(tmp_path, ascii, precision="float32", n=600, attributes="normal,color,
     return out, run.collect()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("ascii", [False, True])
-def test_open3d_reads_points_normals_colours(tmp_path, ascii):
+def test_open3d_reads_points_normals_colours(tmp_path, ascii, o3d):
     out, s = write(tmp_path, ascii)
     cloud = o3d.io.read_point_cloud(str(out))
     np.testing.assert_array_equal(np.asarray(cloud.points).astype(np.float32), s.points)
@@ -30,8 +35,9 @@ def test_open3d_reads_points_normals_colours(tmp_path, ascii):
     assert len(np.unique(s.color[:, :3], axis=0)) > 1  # the colours tell points apart
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("ascii", [False, True])
-def test_float64_and_other_fields_through_the_tensor_reader(tmp_path, ascii):
+def test_float64_and_other_fields_through_the_tensor_reader(tmp_path, ascii, o3d):
     out, s = write(tmp_path, ascii, precision="float64")
     cloud = o3d.t.io.read_point_cloud(str(out)).point
     np.testing.assert_array_equal(cloud.positions.numpy(), s.points)

@@ -159,6 +159,7 @@ def test_plain_jobs_give_the_same_bytes_either_way(face_props, attributes, ball,
         assert fast.attributes[name].tobytes() == slow.attributes[name].tobytes()
 
 
+@pytest.mark.slow
 def test_bad_indices_still_get_the_one_line_error(ball, tmp_path):
     v, f = ball
     f = f.copy()
@@ -169,6 +170,7 @@ def test_bad_indices_still_get_the_one_line_error(ball, tmp_path):
     assert proc.stderr.strip().splitlines() == [f"error: {path}: face indices out of range in geometry '{path}'"]
 
 
+@pytest.mark.slow
 def test_a_plain_ply_job_never_imports_trimesh(tmp_path):
     args = ["sample", str(SAMPLES / "skull.ply"), "-n", "100", "-a", "face,normal", "-o", str(tmp_path / "o.ply")]
     code = f"import sys\nfrom scatter_cli import cli\nassert cli.main({args!r}) == 0\nprint('trimesh' in sys.modules)"

@@ -22,6 +22,7 @@ def min_distance(points):
     return d[:, 1].min()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,radius", [("skull.ply", 0.35), ("koala.obj", 0.08), ("cesiummilktruck.glb", 0.1)])
 def test_radius_mode_is_spaced_and_maximal(sample_mesh, name, radius):
     run = api.prepare(sample_mesh(name), radius=radius, precision="float64", seed=2)
@@ -59,6 +60,7 @@ def face_order_thinning(candidates, count):
     return raw.points[np.argsort(raw.face, kind="stable")[:count]]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["skull.ply", "koala.obj"])
 def test_thinned_set_is_uniform_at_coarse_scale(sample_mesh, name):
     surface = load_surface(sample_mesh(name))
@@ -86,6 +88,7 @@ def test_thinned_points_keep_their_face_and_weights(sample_mesh):
     np.testing.assert_allclose(rebuilt, s.points, rtol=0, atol=1e-9 * extent)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args", [["--poisson", "-n", "700"], ["--radius", "0.5"]])
 def test_command_is_deterministic_across_chunk_sizes(sample_mesh, tmp_path, args):
     outs = []
@@ -96,22 +99,26 @@ def test_command_is_deterministic_across_chunk_sizes(sample_mesh, tmp_path, args
     assert outs[0] == outs[1]
 
 
+@pytest.mark.slow
 def test_radius_larger_than_the_mesh_gives_one_point(sample_mesh):
     proc = run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "--radius", 100, "-f", "xyz", check=True)
     assert len(proc.stdout.splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_tiny_radius_is_a_clear_error(sample_mesh):
     proc = run_scatter("sample", sample_mesh("skull.ply"), "--radius", 1e-5)
     # too small for this mesh's area: a failure of the mesh (exit 1), as in a batch
     assert proc.returncode == 1 and proc.stderr.decode().startswith("error: --radius")
 
 
+@pytest.mark.slow
 def test_poisson_and_radius_together_is_a_usage_error(sample_mesh):
     proc = run_scatter("sample", sample_mesh("skull.ply"), "--radius", 1, "--poisson")
     assert proc.returncode == 2 and b"error:" in proc.stderr
 
 
+@pytest.mark.slow
 def test_stats_report_rho(sample_mesh, tmp_path):
     import json
 
@@ -120,6 +127,7 @@ def test_stats_report_rho(sample_mesh, tmp_path):
     assert info["count"] == 1000 and info["rho"] > 0.7 and info["mean_nn"] > info["d_min"] > 0
 
 
+@pytest.mark.slow
 def test_check_poisson_against_pymeshlab(sample_mesh):
     pytest.importorskip("pymeshlab")
     from scatter_cli.commands.check import run_check

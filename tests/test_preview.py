@@ -6,7 +6,6 @@ import sys
 
 import numpy as np
 import pytest
-from PIL import Image
 
 from scatter_cli.commands import preview as PREVIEW  # the module (the package's `preview` is the function)
 from scatter_cli.commands import render
@@ -14,6 +13,8 @@ from scatter_cli.errors import ScatterError
 from scatter_cli.writers.pointfiles import read_points
 
 from .conftest import SAMPLES, run_scatter, run_user, scatter_command
+
+Image = pytest.importorskip("PIL.Image")  # the preview extra
 
 WHITE = render.BACKGROUND
 
@@ -121,6 +122,7 @@ def front_face_share(points, normals):
     return (image[inner] == face).all(axis=1).mean()
 
 
+@pytest.mark.slow
 def test_a_cube_seen_from_the_front_shows_one_face():
     points, normals = cube(150000)  # dense: the discs of the front face close up
     assert front_face_share(points, normals) > 0.99
@@ -163,6 +165,7 @@ def test_a_volume_is_cut_open_to_show_its_inside():
 
 
 
+@pytest.mark.slow
 def test_preview_cuts_open_files_with_inside_or_sdf(tmp_path):
     rng = np.random.default_rng(5)
     volume = rng.uniform(-1, 1, (20000, 3))
@@ -260,6 +263,7 @@ def point_files(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_every_format_scatter_writes_reads_back(point_files):
     rows = np.load(point_files / "spot.npy")  # NumPy's own reader: the reference
     points, normals = (np.stack([rows[c] for c in names], axis=1) for names in ("xyz", ("nx", "ny", "nz")))
@@ -272,6 +276,7 @@ def test_every_format_scatter_writes_reads_back(point_files):
         assert got.up_axis == ("Y" if path.suffix.startswith(".usd") else "Z")  # the USD writer's default
 
 
+@pytest.mark.slow
 def test_colour_reads_back(point_files):
     from scatter_cli import sample
 
@@ -281,6 +286,7 @@ def test_colour_reads_back(point_files):
         assert (read_points(point_files / f"box.{fmt}").attributes["color"] == expected).all(), fmt
 
 
+@pytest.mark.slow
 def test_large_files_are_decimated_evenly(point_files):
     full = read_points(point_files / "spot.ply").points
     for name in ("spot.ply", "spot.npy", "spot.pcd"):  # binary: every k-th row
@@ -317,6 +323,7 @@ def cells(sheet_path, size, views=1):
     return inked, image.shape[:2]
 
 
+@pytest.mark.slow
 def test_pages_and_grid(tmp_path):
     src = small_files(tmp_path / "in", 7)
     proc = run_scatter("preview", src, "--per-page", "3", "--columns", "2", "--size", "64",
@@ -330,6 +337,7 @@ def test_pages_and_grid(tmp_path):
     assert last == [(0, 0)] and shape == (gap + cell_h + gap, gap + 64 + gap)
 
 
+@pytest.mark.slow
 def test_views_side_by_side_and_default_columns(tmp_path):
     src = small_files(tmp_path / "in", 5)
     proc = run_scatter("preview", src, "--view", "front", "--view", "top", "--size", "48", "-o", tmp_path / "s.png")
@@ -361,6 +369,7 @@ def caption_ink(image, slot_origin, size, line):
     return (strip.min(axis=2) < 128).sum()
 
 
+@pytest.mark.slow
 def test_captions_name_and_count(tmp_path):
     src = small_files(tmp_path / "in", 2)
     run_scatter("preview", src, "--size", "96", "-o", tmp_path / "s.png", check=True)
@@ -381,6 +390,7 @@ def test_meshes_are_sampled_and_the_count_shown(tmp_path):
     assert up == "Y" and len(pts) == 100  # glTF is Y up
 
 
+@pytest.mark.slow
 def test_same_inputs_same_bytes(tmp_path):
     src = small_files(tmp_path / "in", 3)
     args = ["preview", src, SAMPLES / "hemisphere.off", "-n", "2000", "--size", "64"]
@@ -393,6 +403,7 @@ def test_same_inputs_same_bytes(tmp_path):
     assert hashlib.sha256((tmp_path / "c.png").read_bytes()).hexdigest() not in digests
 
 
+@pytest.mark.slow
 def test_bad_inputs_are_crossed_out_and_the_sheet_written(tmp_path):
     src = small_files(tmp_path / "in", 1)
     (tmp_path / "broken.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 100\n"
@@ -416,6 +427,7 @@ def test_bad_inputs_are_crossed_out_and_the_sheet_written(tmp_path):
     assert foreground(good).any() and not (good == PREVIEW.CROSS_RGB).all(axis=2).any()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args, message", [
     (["--size", "0"], "error: --size must be a positive integer, not 0"),
     (["--view", "up"], "error: unknown view 'up' (choose from: iso, front, side, top)"),
@@ -431,6 +443,7 @@ def test_usage_errors(tmp_path, args, message):
     assert not list(tmp_path.glob("s.*"))
 
 
+@pytest.mark.slow
 def test_non_finite_points_are_counted_and_a_missing_folder_is_an_error_before_work(tmp_path):
     points = sphere(400)
     points[:3] = np.nan
@@ -462,6 +475,7 @@ def test_python_api_returns_the_sheets(tmp_path):
     assert not list(tmp_path.glob("q*.png"))
 
 
+@pytest.mark.slow
 def test_help_imports_neither_numpy_nor_pillow():
     code = ("import sys; from scatter_cli.cli import main; code = main(['preview', '--help']); "
             "print(code, sorted(m for m in ('numpy', 'PIL') if m in sys.modules))")

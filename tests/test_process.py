@@ -24,6 +24,7 @@ print(faults)
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux") or any(k.startswith("MALLOC_") for k in os.environ)
                     or "malloc" in os.environ.get("GLIBC_TUNABLES", ""),
                     reason="glibc's mallopt, with glibc's own defaults (no MALLOC_* or GLIBC_TUNABLES malloc settings)")
@@ -71,6 +72,7 @@ print(len(os.listdir("/proc/self/task")))
 """
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux") or (os.cpu_count() or 1) < 2,
                     reason="threads counted in /proc; OpenBLAS starts one a core")
 def test_blas_runs_on_one_thread_unless_the_user_chose(tmp_path):

@@ -92,6 +92,7 @@ def test_a_scene_missing_a_face_fails_the_same_check(monkeypatch, tmp_path):
     assert np.any(fast.occluded(o, d) != slow.occluded(o, d))
 
 
+@pytest.mark.slow
 def test_exterior_output_is_the_same_without_the_kernels(tmp_path):
     path = tmp_path / "car.glb"
     es.car()[0].export(path)

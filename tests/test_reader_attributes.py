@@ -20,42 +20,15 @@ import scatter_cli
 from scatter_cli.loading import ply as plyread
 from scatter_cli.loading.load import load_surface
 from scatter_cli.surface.data import VertexTables, uv_table, vertex_normal_table, weighted_vertex_normals
+from testkit.fuzz_inputs import fast_read
+from testkit.loadmemory import load_memory
+from testkit.meshfiles import obj_text, write_ply
 
 from .conftest import run_scatter, run_user
-from .fuzz_inputs import fast_read
-from .loadmemory import load_memory
 from .test_readers import MESHES, assert_same_load, positions_and_faces, run_user_text
 
 MESHES_BY_NAME = {m.name: m for m in MESHES}
 ATTRIBUTES = ("face,bary,color", "face,smooth-normal", "color,smooth-normal")
-PLY_NAMES = {"f4": "float", "f8": "double", "u1": "uchar", "i1": "char", "u2": "ushort", "i2": "short",
-             "i4": "int", "u4": "uint"}
-
-
-def write_ply(path, columns, faces, fmt="ascii"):
-    """A PLY of vertex ``columns`` [(name, NumPy type, (V,) values)] and ``faces`` (a list
-    of index lists, any sizes for ASCII; triangles for binary), in ``fmt``: ascii,
-    binary_little_endian or binary_big_endian."""
-    n = len(columns[0][2])
-    head = ["ply", f"format {fmt} 1.0", f"element vertex {n}"]
-    head += [f"property {PLY_NAMES[t]} {name}" for name, t, _ in columns]
-    head += [f"element face {len(faces)}", "property list uchar int vertex_indices", "end_header"]
-    with open(path, "wb") as f:
-        f.write(("\n".join(head) + "\n").encode())
-        if fmt == "ascii":
-            cells = [[repr(float(x)) if t[0] == "f" else str(int(x)) for x in np.asarray(v, dtype=t)]
-                     for _, t, v in columns]
-            rows = [" ".join(r) for r in zip(*cells)] + [" ".join(map(str, [len(q), *q])) for q in faces]
-            f.write(("\n".join(rows) + "\n").encode())
-        else:
-            order = "<" if fmt == "binary_little_endian" else ">"
-            rec = np.zeros(n, dtype=[(name, order + t) for name, t, _ in columns])
-            for name, _, values in columns:
-                rec[name] = values
-            frec = np.zeros(len(faces), dtype=[("n", "u1"), ("i", order + "i4", 3)])
-            frec["n"], frec["i"] = 3, faces
-            f.write(rec.tobytes() + frec.tobytes())
-    return path
 
 
 def sample_bytes(source, attributes):
@@ -90,6 +63,7 @@ def attributed_columns(mesh_path, most_faces=3000, seed=0):
     return columns, faces
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
 @pytest.mark.parametrize("mesh", MESHES, ids=[m.name for m in MESHES])
 def test_resaved_meshes_with_normals_and_colours_sample_as_with_trimesh(mesh, fmt, tmp_path):
@@ -201,6 +175,7 @@ def test_the_comparison_fails_readers_that_drop_normals_or_alpha(tmp_path, monke
         assert sample_bytes(path, attributes) != sample_bytes(slow, attributes)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
 def test_a_load_with_normals_and_colours_takes_at_most_the_file_size_beyond_what_it_returns(fmt, tmp_path):
     """As the plain loads' bound (test_readers.py), the tables counted among the returned
@@ -246,27 +221,7 @@ def assert_obj_as_trimesh(path, attributes=OBJ_ATTRIBUTES):
         assert got[0] == got[1], a
 
 
-def obj_text(vertices, faces, form, seed=0, negative=False):
-    """An OBJ of ``vertices`` and ``faces`` (index lists) whose vt and vn refs are drawn
-    so that a vertex meets several UVs and normals (a split) and triples repeat."""
-    rng = np.random.default_rng(seed)
-    nt, nn = len(vertices) // 2 + 3, len(vertices) // 3 + 2
-    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in np.asarray(vertices, dtype=float).tolist()]
-    if "vt" in form:
-        lines += [f"vt {u!r} {v!r}" for u, v in rng.random((nt, 2)).tolist()]
-    if "vn" in form:
-        lines += [f"vn {a!r} {b!r} {c!r}" for a, b, c in rng.normal(size=(nn, 3)).tolist()]
-    flat = np.concatenate([np.asarray(q) for q in faces])
-    coin = rng.integers(0, 2, (2, len(flat)))
-    refs = np.stack([flat, (flat * 7 + coin[0]) % nt, (flat * 5 + coin[1]) % nn])
-    refs += np.array([[len(vertices)], [nt], [nn]]) * -1 if negative else 1
-    pattern = {"v/vt/vn": "{0}/{1}/{2}", "v/vt": "{0}/{1}", "v//vn": "{0}//{2}"}[form]
-    words = [pattern.format(*r) for r in refs.T.tolist()]
-    at = np.cumsum([0] + [len(q) for q in faces]).tolist()
-    lines += ["f " + " ".join(words[a:b]) for a, b in zip(at[:-1], at[1:])]
-    return "\n".join(lines) + "\n"
-
-
+@pytest.mark.slow
 @pytest.mark.parametrize("form", ["v/vt/vn", "v/vt", "v//vn"])
 @pytest.mark.parametrize("mesh", MESHES, ids=[m.name for m in MESHES])
 def test_resaved_meshes_with_uvs_and_normals_sample_as_with_trimesh(mesh, form, tmp_path):
@@ -371,6 +326,7 @@ def test_the_obj_comparison_fails_a_split_in_file_order(tmp_path, monkeypatch):
         assert_obj_as_trimesh(path)
 
 
+@pytest.mark.slow
 def test_an_obj_load_with_uvs_and_normals_takes_at_most_the_file_size_beyond_what_it_returns(tmp_path):
     """The icosphere(7) with v/vt/vn refs that split its vertices about 3 times: the
     split vertices, UVs, normals and faces counted as returned."""
@@ -391,6 +347,7 @@ def command_case(name, tmp_path):
     return path, "face,bary,uv,smooth-normal,object"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ply", "obj", "obj quads"])
 def test_an_attribute_job_never_imports_trimesh(name, tmp_path):
     path, attributes = command_case(name, tmp_path)
@@ -400,6 +357,7 @@ def test_an_attribute_job_never_imports_trimesh(name, tmp_path):
     assert proc.stdout.strip() == "False", proc.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ply", "obj"])
 def test_the_command_writes_the_same_bytes_either_way(name, tmp_path):
     """The whole command, fast and through trimesh (SCATTER_NUMPY=1: no compiled readers;

@@ -16,10 +16,10 @@ import trimesh
 
 import scatter_cli
 from scatter_cli.loading.load import load_surface
+from testkit.fuzz_inputs import SEEDS, fast_read
+from testkit.loadmemory import load_memory
 
 from .conftest import SAMPLES, run_scatter, run_user
-from .fuzz_inputs import SEEDS, fast_read
-from .loadmemory import load_memory
 
 SHARED = Path("/work/shared/meshes")
 MESHES = sorted({p.name: p for d in (SHARED, SAMPLES) if d.is_dir() for p in d.iterdir()
@@ -200,6 +200,7 @@ def test_constructs_outside_the_subset_go_to_trimesh(suffix, text, tmp_path):
     assert fast_read(path, suffix) is None
 
 
+@pytest.mark.slow
 def test_the_command_writes_the_same_bytes_either_way(tmp_path):
     path = tmp_path / "m.obj"
     path.write_bytes(OBJ_CASES["materials"].encode())
@@ -211,6 +212,7 @@ def test_the_command_writes_the_same_bytes_either_way(tmp_path):
     assert outs[0] == outs[1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("attributes", ["face", "face,smooth-normal"])
 @pytest.mark.parametrize("suffix", ["obj", "off", "stl"])
 def test_a_plain_text_job_never_imports_trimesh(suffix, attributes, tmp_path):
@@ -240,8 +242,8 @@ def test_numbers_convert_as_python_floats_do():
     assert got.view(np.int64).tolist() == want.view(np.int64).tolist()
 
 
-def big_ascii_stl(facets=48000, seed=0):
-    """About 13 MB of ASCII STL: large enough for the reader to split it into parts."""
+def big_ascii_stl(facets=56000, seed=0):
+    """About 13.5 MB of ASCII STL: large enough for the reader to split it into 3 parts."""
     rng = np.random.default_rng(seed)
     x = rng.standard_normal((facets, 3, 3))
     rows = ["facet normal 0 0 1\n outer loop\n" + "".join("  vertex %r %r %r\n" % tuple(v) for v in f.tolist())
@@ -249,6 +251,7 @@ def big_ascii_stl(facets=48000, seed=0):
     return rows
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["plain", "crlf", "endsolid early", "endsolid early, then other bytes",
                                   "a second solid late", "a bad line late"])
 def test_ascii_stl_read_in_parts_is_read_as_in_one(case):
@@ -273,7 +276,7 @@ def test_ascii_stl_read_in_parts_is_read_as_in_one(case):
     one = _creaders.read_stl_ascii(data, 1)
     want = {"endsolid early": 3 * k, "plain": 3 * len(rows), "crlf": 3 * len(rows)}.get(case)
     assert (one is None) if want is None else len(one) == want
-    for threads in (2, 3):
+    for threads in (2, 3, 7):  # (7: still 3 parts, of 4 MB at least)
         parts = _creaders.read_stl_ascii(data, threads)
         assert (parts is None) == (one is None)
         assert one is None or parts.tobytes() == one.tobytes()
@@ -289,6 +292,7 @@ def icosphere_files(folder, subdivisions):
     return paths
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", sorted(FORMATS))
 def test_a_load_takes_at_most_the_file_size_beyond_what_it_returns(fmt, tmp_path_factory):
     """Peak resident memory of a load in a fresh process, less the returned arrays and
@@ -299,6 +303,7 @@ def test_a_load_takes_at_most_the_file_size_beyond_what_it_returns(fmt, tmp_path
     assert got["extra"] <= got["file"], got
 
 
+@pytest.mark.slow
 def test_the_memory_check_fails_a_loader_that_makes_objects_per_face(tmp_path_factory):
     """The broken variant: the OFF through trimesh (compiled readers off), which parses
     with Python objects per line, exceeds the same bound."""

@@ -1,7 +1,8 @@
 """Scenes: world-space transforms (non-uniform scale changes areas), instancing without
 copies, --object selection and the per-point object index.
 
-Two-sample tests compare voxel counts (chi-square contingency) at significance ALPHA,
+Two-sample tests compare voxel counts (the two-sample chi-square of
+scatter_cli.stats.chisquare) at significance ALPHA,
 each with a paired must-fail case.
 """
 
@@ -14,6 +15,7 @@ import scatter_cli
 from scatter_cli.errors import ScatterError, ScatterUsageError
 from scatter_cli.sampling.plan import SamplePlan
 from scatter_cli.loading.load import load_surface
+from scatter_cli.stats.chisquare import chi2_gof, chi2_two_sample
 
 from .conftest import SAMPLES, run_scatter, scaled_scene
 
@@ -28,7 +30,7 @@ def two_sample_p(a, b, bins=5):
     ca = np.histogramdd(a, edges)[0].ravel()
     cb = np.histogramdd(b, edges)[0].ravel()
     keep = (ca + cb) > 0
-    return stats.chi2_contingency(np.stack([ca[keep], cb[keep]])).pvalue
+    return chi2_two_sample(ca[keep], cb[keep])[2]
 
 
 def flattened_sample(mesh, n, seed):
@@ -49,6 +51,7 @@ def test_world_area_includes_non_uniform_scale():
     assert s.info["area"] == pytest.approx(scene.to_mesh().area, rel=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["scaled", "cesiummilktruck.glb"])
 def test_scene_and_flattened_mesh_give_the_same_distribution(which):
     scene = scaled_scene() if which == "scaled" else trimesh.load(SAMPLES / which, process=False)
@@ -83,11 +86,12 @@ def test_object_index_counts_follow_world_areas():
                       for nd in scene.graph.nodes_geometry])
     s = scatter_cli.sample(scene, 30_000, attributes=("object",), seed=13)
     counts = np.bincount(s.object, minlength=4)
-    assert stats.chisquare(counts, areas / areas.sum() * counts.sum()).pvalue > ALPHA
+    assert chi2_gof(counts, areas)[2] > ALPHA
     local = np.array([scene.geometry[scene.graph[nd][1]].area for nd in scene.graph.nodes_geometry])
-    assert stats.chisquare(counts, local / local.sum() * counts.sum()).pvalue < ALPHA  # must-fail
+    assert chi2_gof(counts, local)[2] < ALPHA  # must-fail
 
 
+@pytest.mark.slow
 def test_object_selection_by_geometry_and_node_name(tmp_path):
     path = SAMPLES / "cesiummilktruck.glb"
     surface = load_surface(path)

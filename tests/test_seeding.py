@@ -13,6 +13,7 @@ SEEDS = st.integers(min_value=0, max_value=2**200)
 STEPS = st.integers(min_value=0, max_value=2**130)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(SEEDS)
 def test_seed_sequence_is_numpys(seed):
@@ -21,6 +22,7 @@ def test_seed_sequence_is_numpys(seed):
     assert seeding.generate_state(seed, 4) == [int(w) for w in sequence.generate_state(4, np.uint64)]
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(SEEDS, STEPS)
 def test_seeded_and_advanced_state_is_numpys(seed, steps):

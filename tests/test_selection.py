@@ -12,7 +12,7 @@ from scatter_cli.sampling.plan import SamplePlan
 from scatter_cli.sampling.sources import RandomSource
 from scatter_cli.loading.load import load_surface
 
-from benchmarks.hardcheck import pooled_pvalue
+from testkit.hardcheck import pooled_pvalue
 from .conftest import spread_triangles, triangles_mesh
 from .doubles import UnweightedSource
 
@@ -123,7 +123,7 @@ def three_cubes(path, instanced=False):
     placed three times)."""
     import trimesh
 
-    from .gltfwrite import glb_bytes
+    from testkit.gltfwrite import glb_bytes
 
     box = trimesh.creation.box()
     meshes = [(box.vertices, box.faces)] * (1 if instanced else 3)
@@ -145,6 +145,7 @@ def info_indices(path):
     return {o["name"]: o["index"] for o in objects}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("instanced", [False, True])
 def test_object_index_under_object_is_the_index_info_lists(tmp_path, instanced):
     import scatter_cli

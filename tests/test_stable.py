@@ -253,6 +253,7 @@ def _points_on(raw, unchanged):
 EDIT_CASES = [(m, e) for m in sorted(EDIT_MESHES) for e in sorted(EDITS) if m != "skull" or e in ("delete", "move")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mesh, edit", EDIT_CASES)
 def test_an_edit_moves_only_the_points_it_should(mesh, edit):
     n = 6000
@@ -351,7 +352,7 @@ def test_radius_set_is_spaced_maximal_and_local():
 # -- determinism ------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("threads", ["1", "2", "3"])
+@pytest.mark.parametrize("threads", ["1", "2", "3", "7"])
 def test_any_chunking_and_thread_count_gives_the_same_bytes(threads, monkeypatch):
     v, f = _load("spot_triangulated.obj")
     src, ref = run(_mesh(v, f), seed=1, count=7000)
@@ -437,7 +438,7 @@ class _SideSizes:
 
 
 @needs_kernel
-@pytest.mark.parametrize("threads, room", [("2", None), ("3", None), ("2", -50.0)])
+@pytest.mark.parametrize("threads, room", [("2", None), ("3", None), ("7", None), ("2", -50.0)])
 def test_kernel_sorts_across_threads_in_numpys_order(threads, room, monkeypatch):
     """Over 2^16 arrivals: several face ranges write into each time bucket, several
     threads sort bucket ranges in place (each writing its lowest positions to side arrays
@@ -531,6 +532,7 @@ def test_vertex_colour_weight_rate_is_area_times_mean_weight():
         assert (p > ALPHA) == passes
 
 
+@pytest.mark.slow
 def test_cli_stable_renumbered_file_gives_the_same_output_bytes(tmp_path):
     from .conftest import run_scatter
 
@@ -546,6 +548,7 @@ def test_cli_stable_renumbered_file_gives_the_same_output_bytes(tmp_path):
     assert len(outs[0].splitlines()) == 2001
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("bad", [["--method", "sobol"], ["--method", "stratified"], ["--poisson"]])
 def test_cli_stable_with_another_method_or_poisson_is_a_usage_error_before_reading(bad, tmp_path):
     from .conftest import run_scatter

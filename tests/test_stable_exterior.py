@@ -74,6 +74,7 @@ def exterior_run(tri, n, seed=3, **kw):
                               precision="float64", **kw)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("broken", [False, True])
 def test_an_edit_elsewhere_moves_no_exterior_point_on_unchanged_faces(broken, monkeypatch):
     """Moving the patch changes the arrivals on it and so the place in the stream of every
@@ -96,6 +97,7 @@ def test_an_edit_elsewhere_moves_no_exterior_point_on_unchanged_faces(broken, mo
     assert (a[:common].tobytes() == b[:common].tobytes()) != broken
 
 
+@pytest.mark.slow
 def test_the_n_earliest_exterior_arrivals_in_arrival_order():
     """The output is the stable arrival stream filtered by the classifier, first N kept;
     -n N is the prefix of -n N + k."""
@@ -112,6 +114,7 @@ def test_the_n_earliest_exterior_arrivals_in_arrival_order():
     assert longer.points[:3000].tobytes() == out.points.tobytes()
 
 
+@pytest.mark.slow
 def test_density_keeps_the_exterior_arrivals_before_d_and_is_local():
     tri, fixed = window_box()
     d = 400.0
@@ -139,6 +142,7 @@ def test_radius_keeps_exterior_points_spaced():
 # -- determinism ------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("options", [["-n", "20000"], ["--density", "200"], ["--radius", "0.3"]])
 def test_same_bytes_and_stats_whatever_chunk_size_and_threads(tmp_path, options):
     tri, _ = window_box()

@@ -5,7 +5,9 @@ bound below is one that a wrong formula would exceed.
 """
 
 import math
+import re
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -168,6 +170,7 @@ def test_height_cdf_equal_heights_have_no_nan():
     assert exact_reference.height_cdf(tri, areas, d, np.zeros((2, 3))).shape == (2, 3)
 
 
+@pytest.mark.slow
 def test_height_cdf_matches_monte_carlo_dkw():
     """sup |ECDF - F| <= eps with probability 1 - ALPHA (DKW inequality)."""
     tri, areas = arrays(capsule())
@@ -289,6 +292,7 @@ def test_exact_slab_areas_equal_every_faces_sum(name, monkeypatch):
         assert np.abs(prob * 32 - 1).max() <= 2.0**-surface_measures.SLAB_ITERATIONS
 
 
+@pytest.mark.slow
 def test_the_slab_checks_fail_a_wrong_area_and_an_off_by_one_slab(monkeypatch):
     """The checks above fail an area function missing part of one face (2e-13 of the
     area: twice the tolerance), probabilities shifted by one slab, edges shifted by one
@@ -320,6 +324,7 @@ def test_the_slab_checks_fail_a_wrong_area_and_an_off_by_one_slab(monkeypatch):
     assert not equal(_slabs(tri, monkeypatch, early))
 
 
+@pytest.mark.slow
 def test_exact_slabs_survive_a_wrong_first_guess(monkeypatch):
     """Brackets around a wrong first guess (every target guessed at the lowest height)
     widen until they hold their targets: the same equal-area slabs with exact areas.
@@ -386,6 +391,7 @@ def test_surface_covariance_survives_large_offsets():
     assert np.allclose(cov1, cov0, atol=1e-6 * np.abs(cov0).max())
 
 
+@pytest.mark.slow
 def test_surface_moments_against_monte_carlo():
     """10^7 uniform points; all 3 mean and 6 second-moment z-scores within
     the Bonferroni bound for ALPHA."""
@@ -479,6 +485,7 @@ def subdivide(tri, times):
     return tri
 
 
+@pytest.mark.slow
 def test_surface_integral_converges_for_smooth_function():
     mesh = trimesh.creation.icosphere(subdivisions=2)
     mesh.apply_scale([1.0, 0.7, 1.3])
@@ -555,3 +562,25 @@ def test_fourth_moments_rule_agrees_with_the_product_rule():
     want = surface_measures.surface_integral(f, tri, areas, order=3) / areas.sum()
     assert np.allclose(surface_measures.fourth_central_moments(tri, areas), want, rtol=1e-13, atol=0)
     assert not np.allclose(surface_measures.surface_integral(f, tri, areas, order=2) / areas.sum(), want, rtol=1e-6, atol=0)
+
+
+# ---------------------------------------------------------------------------
+# one harness
+
+OWN_CHI_SQUARE = re.compile(r"chisquare\(|chi2_contingency|chi2\.sf|chdtrc|gammaincc")
+
+
+def own_chi_squares(files):
+    """The files (name -> text) that compute a chi-square p-value themselves."""
+    return sorted(name for name, text in files.items() if OWN_CHI_SQUARE.search(text))
+
+
+def test_every_chi_square_goes_through_the_one_harness():
+    """Tests, benchmarks and the package compute chi-squares with scatter_cli.stats.chisquare
+    (this file compares that harness with SciPy's, so it alone may call SciPy's)."""
+    root = Path(__file__).resolve().parents[1]
+    files = {p.relative_to(root).as_posix(): p.read_text()
+             for folder in ("scatter_cli", "tests", "benchmarks") for p in (root / folder).rglob("*.py")}
+    assert own_chi_squares(files) == ["scatter_cli/stats/chisquare.py", "tests/test_stats.py"]
+    files["tests/test_new.py"] = "assert stats.chisquare(counts).pvalue > ALPHA"  # a test with its own
+    assert "tests/test_new.py" in own_chi_squares(files)

@@ -68,6 +68,7 @@ def test_by_radius_sphere_spacing_and_maximal(n, radius):
     assert_poisson_disk(p, kept, radius)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "mesh",
     [
@@ -82,6 +83,7 @@ def test_by_radius_meshes(mesh):
     assert_poisson_disk(p, thin_by_radius(p, 0.05), 0.05)
 
 
+@pytest.mark.slow
 def test_thin_wall_uses_3d_distance():
     # two parallel plates 0.01 apart: a surface-only (per-plate) thinning
     # would keep points facing each other across the wall
@@ -142,6 +144,7 @@ def test_checker_can_fail():
 # --- thin_to_count --------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("count", [2, 17, 500, 2999, 3000])
 def test_to_count_exact(count):
     p = sphere_points(3000, seed=11)
@@ -151,6 +154,7 @@ def test_to_count_exact(count):
     assert d_min == pytest.approx(brute_min_distance(p[idx]))
 
 
+@pytest.mark.slow
 def test_to_count_degenerate():
     p = sphere_points(50, seed=2)
     with pytest.raises(ValueError, match="more than the 50 candidate"):

@@ -2,8 +2,8 @@
 (geometry stored once), --object by prim path, primvars for uv / color / smooth-normal.
 
 The stage is written here with usd-core and compared with an equivalent GLB written by
-tests/gltfwrite.py, whose node matrices are worked out by hand from the authored ops:
-per-object counts (chi-square contingency) and each coordinate (two-sample KS), every
+testkit/gltfwrite.py, whose node matrices are worked out by hand from the authored ops:
+per-object counts (two-sample chi-square) and each coordinate (two-sample KS), every
 test at significance ALPHA, each paired with wrong-transform GLBs that must fail.
 """
 
@@ -18,9 +18,10 @@ import scatter_cli
 from scatter_cli.errors import ScatterError, ScatterUsageError
 from scatter_cli.commands.info import describe
 from scatter_cli.loading.load import load_surface
+from scatter_cli.stats.chisquare import chi2_two_sample
 
 from .conftest import run_scatter
-from .gltfwrite import glb_bytes
+from testkit.gltfwrite import glb_bytes
 
 pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom, Vt  # noqa: E402
@@ -163,7 +164,7 @@ def _agreement(usd_path, glb_path, n=20_000):
     order = [glb_names.index(f"node{k}") for k in range(len(NAMES))]  # node k is NAMES[k]
     ca = np.bincount(a.object, minlength=len(NAMES))
     cb = np.bincount(b.object, minlength=len(NAMES))[order]
-    p = [stats.chi2_contingency(np.stack([ca, cb])).pvalue]
+    p = [chi2_two_sample(ca, cb)[2]]
     p += [stats.ks_2samp(a.points[:, c], b.points[:, c]).pvalue for c in range(3)]
     return min(p)
 
@@ -198,6 +199,7 @@ def test_object_by_prim_path(files):
     assert np.abs(s.points - box).max() <= 1.0 + 1e-6  # on the unit icosphere at rock_a
 
 
+@pytest.mark.slow
 def test_info_lists_the_stage_objects(files):
     report = describe(files["usd"])
     assert report["instances"] == 6 and report["geometries"] == 3
@@ -329,6 +331,7 @@ def test_chunk_size_and_threads_change_no_byte(files, tmp_path, monkeypatch):
 
 # -- errors -------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_malformed_stage_is_one_line(tmp_path):
     bad = tmp_path / "bad.usda"
     bad.write_text('#usda 1.0\ndef Mesh "m" { int[] faceVertexCounts = [3\n')
@@ -346,6 +349,7 @@ def test_bad_topology_is_an_error(tmp_path):
         load_surface(tmp_path / "t.usda")
 
 
+@pytest.mark.slow
 def test_missing_usd_core_gives_one_line(files, tmp_path):
     fake = tmp_path / "nousd" / "pxr"
     fake.mkdir(parents=True)

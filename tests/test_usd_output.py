@@ -63,6 +63,7 @@ def test_validators_can_fail(tmp_path):
     assert validation_errors(Usd.Stage.Open(str(tmp_path / "t.usda")))
 
 
+@pytest.mark.slow
 def test_instancer_orientations(tmp_path):
     s, _ = write(tmp_path / "t.usdc", "normal,orient")
     stage = Usd.Stage.Open(str(tmp_path / "t.usdc"))
@@ -141,12 +142,14 @@ def units_written(tmp_path, mesh, *extra):
     return UsdGeom.GetStageUpAxis(stage), UsdGeom.GetStageMetersPerUnit(stage), stats["output"]["usd"]["from_input"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("up_axis, meters_per_unit", [("Z", 0.01), ("Z", 0.3048), ("Y", 1000.0)])
 def test_up_axis_and_units_carried_from_a_usd_input(tmp_path, up_axis, meters_per_unit):
     mesh = stage_with_units(tmp_path / "in.usda", up_axis, meters_per_unit)
     assert units_written(tmp_path, mesh) == (up_axis, meters_per_unit, True)
 
 
+@pytest.mark.slow
 def test_a_stage_without_units_keeps_usds_fallbacks(tmp_path):
     # Unauthored, a stage is Y up in centimetres (USD's fallbacks): the output says so
     # rather than metres, so the points keep their size in a consumer that converts units.
@@ -154,6 +157,7 @@ def test_a_stage_without_units_keeps_usds_fallbacks(tmp_path):
     assert units_written(tmp_path, mesh) == ("Y", 0.01, True)
 
 
+@pytest.mark.slow
 def test_gltf_input_is_y_up_metres_and_others_say_nothing(tmp_path):
     assert units_written(tmp_path, SAMPLES / "boxtextured.glb") == ("Y", 1.0, True)
     assert units_written(tmp_path, SAMPLES / "skull.ply") == ("Y", 1.0, False)  # the default, not from the file

@@ -99,6 +99,7 @@ def test_the_area_check_fails_prototypes_walked_with_the_default_predicate(tmp_p
     assert describe(str(path))["area"] != pytest.approx(drawn_area("class"), rel=1e-12)
 
 
+@pytest.mark.slow
 def test_the_class_held_instances_get_their_share_of_the_points(tmp_path):
     """Points per object: the 4 instancer boxes get the share of their area (binomial,
     two-sided at ALPHA)."""
@@ -114,6 +115,7 @@ def test_the_class_held_instances_get_their_share_of_the_points(tmp_path):
     assert abs(z) < 3.9, (hits, n * p)  # |z| >= 3.9 has probability < 1e-4
 
 
+@pytest.mark.slow
 def test_info_lists_what_is_not_sampled_and_why(tmp_path):
     path = write_stage(tmp_path / "def.usda", "def")
     report = json.loads(run_scatter("info", path, "--json", check=True).stdout)
@@ -128,6 +130,7 @@ def test_info_lists_what_is_not_sampled_and_why(tmp_path):
     assert sum(line.startswith("not sampled") for line in text.splitlines()) == 5
 
 
+@pytest.mark.slow
 def test_a_run_warns_when_what_is_not_sampled_holds_area(tmp_path):
     hidden = run_scatter("sample", write_stage(tmp_path / "a.usda", "def"), "-n", 10, check=True)
     lines = [s for s in hidden.stderr.decode().splitlines() if s.strip()]

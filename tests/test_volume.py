@@ -12,19 +12,13 @@ import scatter_cli
 from scatter_cli.volume.source import VolumeSource, gaussians, parts_of, sampling_box, volume_uniforms, world_triangles
 from scatter_cli.sampling.plan import SamplePlan
 from scatter_cli.loading.load import load_surface
+from scatter_cli.stats.chisquare import chi2_gof
 from tests.conftest import SAMPLES, scaled_scene
 from tests.volume_reference import exact_distance, solid_angle_winding
 
 LEVEL = 1e-3  # statistical tests reject at this level
 
 LABELS = ("sdf", "inside", "winding", "closest", "face", "object")
-
-
-def _chi2_p(observed, expected):
-    from scipy.stats import chi2
-
-    stat = float(((observed - expected) ** 2 / expected).sum())
-    return chi2.sf(stat, len(observed) - 1)
 
 
 def _box_cells(points, box, k=4):
@@ -47,12 +41,12 @@ def test_box_points_are_uniform_in_the_padded_box():
     box = sampling_box(tris, 0.1)
     assert (s.points >= box[0]).all() and (s.points <= box[1]).all()
     counts = _box_cells(s.points, box)
-    assert _chi2_p(counts, np.full(64, len(s) / 64)) > LEVEL
+    assert chi2_gof(counts, np.ones(64))[2] > LEVEL
     # a biased box (u**1.1 along x) fails the same test
     biased = s.points.copy()
     u = (biased[:, 0] - box[0, 0]) / (box[1, 0] - box[0, 0])
     biased[:, 0] = box[0, 0] + u**1.1 * (box[1, 0] - box[0, 0])
-    assert _chi2_p(_box_cells(biased, box), np.full(64, len(s) / 64)) < LEVEL
+    assert chi2_gof(_box_cells(biased, box), np.ones(64))[2] < LEVEL
 
 
 def test_padding_grows_the_box_by_its_largest_side():
@@ -66,6 +60,7 @@ def _near_distances(points, tris):
     return exact_distance(tris, points)[0]
 
 
+@pytest.mark.slow
 def test_near_points_are_a_surface_point_plus_a_gaussian_of_deviation_sigma():
     """Two-sample test of the distance to the surface: ours against a reference made in
     the test (trimesh's uniform surface points plus NumPy's normals times sigma)."""
@@ -90,9 +85,9 @@ def test_parts_take_their_shares():
     part = parts_of(u, 0.2, 3)
     counts = np.bincount(part + 1, minlength=4)
     expected = np.array([0.2, 0.8 / 3, 0.8 / 3, 0.8 / 3]) * len(u)
-    assert _chi2_p(counts, expected) > LEVEL
+    assert chi2_gof(counts, expected)[2] > LEVEL
     # shares 0.3 / 0.7 claimed while 0.2 / 0.8 is drawn fails
-    assert _chi2_p(counts, np.array([0.3, 0.7 / 3, 0.7 / 3, 0.7 / 3]) * len(u)) < LEVEL
+    assert chi2_gof(counts, np.array([0.3, 0.7 / 3, 0.7 / 3, 0.7 / 3]))[2] < LEVEL
 
 
 def test_gaussians_are_standard_normal():
@@ -162,6 +157,7 @@ def _check_labels(s, tris, instance, face, flip=False):
     assert np.abs(np.linalg.norm(s.closest - s.points, axis=1) - np.abs(s.sdf)).max() < 1e-9 * diag
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_labels_match_brute_force(case):
     mesh = CASES[case]()
@@ -170,6 +166,7 @@ def test_labels_match_brute_force(case):
     _check_labels(s, tris, instance, face)
 
 
+@pytest.mark.slow
 def test_a_flipped_sign_fails_the_label_check():
     mesh = CASES["closed"]()
     s = scatter_cli.sample(mesh, 500, volume=True, attributes=LABELS, seed=4, precision="float64")
@@ -178,6 +175,7 @@ def test_a_flipped_sign_fails_the_label_check():
         _check_labels(s, tris, instance, face, flip=True)
 
 
+@pytest.mark.slow
 def test_normalized_frames():
     mesh = SAMPLES / "skull.ply"
     tris, _, _ = _triangles(mesh)

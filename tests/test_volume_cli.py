@@ -7,6 +7,8 @@ import pytest
 
 from tests.conftest import SAMPLES, run_scatter
 
+pytestmark = pytest.mark.slow  # a subprocess a test
+
 ICO = SAMPLES / "icosahedron_binary.stl"
 HEMI = SAMPLES / "hemisphere.off"
 

@@ -144,6 +144,7 @@ def failures(w, exact, away):
     return off, wrong
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 def test_winding_numbers_match_brute_force(name, case_data):
     tri, points, exact, away = case_data(name)
@@ -153,6 +154,7 @@ def test_winding_numbers_match_brute_force(name, case_data):
     assert np.abs(w - exact)[away].max() <= CLOSE
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", CASES)
 @pytest.mark.parametrize("broken", [{"accuracy": 0.5}, {"order": 0}])
 def test_broken_evaluations_fail_the_same_checks(name, broken, case_data):
@@ -162,6 +164,7 @@ def test_broken_evaluations_fail_the_same_checks(name, broken, case_data):
     assert failures(winding_numbers(WindingTree(tri), points, **broken), exact, away) != (0, 0)
 
 
+@pytest.mark.slow
 def test_the_reference_sees_a_flipped_triangle(case_data):
     """The checks are sharp enough to catch one triangle turned over."""
     tri, points, exact, away = case_data("icosphere")
@@ -170,6 +173,7 @@ def test_the_reference_sees_a_flipped_triangle(case_data):
     assert failures(winding_numbers(WindingTree(flipped), points), exact, away) != (0, 0)
 
 
+@pytest.mark.slow
 def test_closed_surfaces_give_whole_numbers_away_from_them(case_data):
     tri, points, exact, away = case_data("inner_shell")
     w = winding_numbers(WindingTree(tri), points)
@@ -214,6 +218,7 @@ def test_arctangent_is_within_two_ulp_of_numpys():
     assert np.isnan(winding.atan2(np.array([np.nan, 1.0]), np.array([1.0, np.nan]))).all()
 
 
+@pytest.mark.slow
 def test_infinite_accuracy_is_the_exact_sum(case_data):
     tri, points, exact, _ = case_data("open_sphere")
     w = winding_numbers(WindingTree(tri), points, accuracy=float("inf"))
@@ -248,6 +253,7 @@ def test_the_kernel_is_built():
     assert KERNEL is not None and KERNEL.FIELDS == winding.FIELDS
 
 
+@pytest.mark.slow
 @needs_kernel
 @pytest.mark.parametrize("name", CASES)
 @pytest.mark.parametrize("options", [{}, {"order": 0, "accuracy": 1.0}, {"order": 1, "accuracy": 3.0}])
@@ -258,16 +264,17 @@ def test_kernel_and_numpy_give_the_same_bytes(name, options, case_data, monkeypa
     assert k.tobytes() == numpy_winding(monkeypatch, tree, points, **options).tobytes()
 
 
+@pytest.mark.slow
 @needs_kernel
 def test_same_bytes_whatever_the_threads_and_chunks(case_data, monkeypatch):
     tri, points, _, _ = case_data("self_intersecting")
     tree = WindingTree(tri)
     ref = winding_numbers(tree, points)
-    for threads, chunk in ((1, 7), (3, 600), (8, 1 << 20)):
+    for threads, chunk in ((1, 7), (2, 1 << 20), (3, 600), (7, 1 << 20), (8, 1 << 20), (20, 1 << 20)):
         monkeypatch.setattr(native, "worker_count", lambda t=threads: t)
         monkeypatch.setattr(winding, "CHUNK", chunk)
         assert winding_numbers(tree, points).tobytes() == ref.tobytes()
-        if chunk >= 600:  # the NumPy walk's steps are whole-chunk array ops: tiny chunks only cost time
+        if threads in (3, 8):  # the NumPy walk's steps are whole-chunk array ops: tiny chunks only cost time
             assert numpy_winding(monkeypatch, tree, points).tobytes() == ref.tobytes()
     # the parity check is sharp: the same terms added in another order change some bytes
     reordered = WindingTree(tri)
@@ -315,6 +322,7 @@ finite = st.floats(-1e6, 1e6, allow_nan=False, width=64)
 coordinate = st.one_of(finite, st.sampled_from([0.0, 1e-300, -1e-300, 1e300, -1e300, np.nan, np.inf]))
 
 
+@pytest.mark.slow
 @needs_kernel
 @settings(max_examples=60)
 @given(st.lists(st.tuples(*[coordinate] * 9), min_size=0, max_size=40),
@@ -338,6 +346,7 @@ def test_fuzzed_soups_give_the_same_bytes_on_both_paths(tris, points, accuracy, 
     assert tree.nodes.tobytes() == numpy_tree.nodes.tobytes() and tree.links.tobytes() == numpy_tree.links.tobytes()
 
 
+@pytest.mark.slow
 @needs_kernel
 @settings(max_examples=60)
 @given(st.lists(st.tuples(st.integers(-3, 40), st.integers(-3, 80), st.integers(-3, 12)), min_size=1, max_size=30))
@@ -367,6 +376,7 @@ def nested(skip):
     return all(skip[j] <= skip[i] for i in range(len(skip)) for j in range(i + 1, min(skip[i], len(skip))))
 
 
+@pytest.mark.slow
 @needs_kernel
 @settings(max_examples=80)
 @given(st.lists(st.tuples(*[coordinate] * 3), min_size=0, max_size=60))
@@ -388,6 +398,7 @@ def test_kernel_morton_codes_and_order_are_numpys(points):
     assert order.tobytes() == want_order.astype(np.int64).tobytes()
 
 
+@pytest.mark.slow
 def test_trees_built_with_and_without_the_kernel_are_the_same(monkeypatch):
     mesh = trimesh.load(SAMPLES / "skull.ply", process=False)
     a = WindingTree(np.asarray(mesh.vertices, float), np.asarray(mesh.faces))

@@ -23,6 +23,7 @@ def command(sample_mesh, *extra):
     return ["sample", sample_mesh("koala.obj"), "-n", N, "-a", "bary,face", "--seed", 4, *extra]
 
 
+@pytest.mark.slow
 def test_binary_ply_read_by_trimesh(sample_mesh, tmp_path, reference):
     import trimesh
 
@@ -36,6 +37,7 @@ def test_binary_ply_read_by_trimesh(sample_mesh, tmp_path, reference):
     assert out.read_bytes().startswith(b"ply\nformat binary_little_endian 1.0\n")
 
 
+@pytest.mark.slow
 def test_ascii_ply_read_by_trimesh(sample_mesh, tmp_path, reference):
     import trimesh
 
@@ -46,6 +48,7 @@ def test_ascii_ply_read_by_trimesh(sample_mesh, tmp_path, reference):
     np.testing.assert_array_equal(np.asarray(cloud.vertices, np.float32), reference.points)
 
 
+@pytest.mark.slow
 def test_binary_ply_read_by_pymeshlab(sample_mesh, tmp_path, reference):
     pymeshlab = pytest.importorskip("pymeshlab")
     out = tmp_path / "m.ply"
@@ -57,6 +60,7 @@ def test_binary_ply_read_by_pymeshlab(sample_mesh, tmp_path, reference):
     np.testing.assert_array_equal(got.astype(np.float32), reference.points)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt,sep,header", [("csv", ",", True), ("xyz", " ", False)])
 def test_text_formats_read_by_numpy(sample_mesh, tmp_path, reference, fmt, sep, header):
     out = tmp_path / f"t.{fmt}"
@@ -71,6 +75,7 @@ def test_text_formats_read_by_numpy(sample_mesh, tmp_path, reference, fmt, sep, 
     np.testing.assert_array_equal(table[:, 4:].astype(np.float32), reference.bary)
 
 
+@pytest.mark.slow
 def test_npy_structured_array(sample_mesh, tmp_path, reference):
     out = tmp_path / "n.npy"
     run_scatter(*command(sample_mesh, "-o", out), check=True)
@@ -80,6 +85,7 @@ def test_npy_structured_array(sample_mesh, tmp_path, reference):
     np.testing.assert_array_equal(arr["face_index"], reference.face)
 
 
+@pytest.mark.slow
 def test_float64_text_round_trips_exactly(sample_mesh, tmp_path):
     out = tmp_path / "d.csv"
     run_scatter("sample", sample_mesh("koala.obj"), "-n", 500, "--precision", "float64", "-o", out, check=True)
@@ -88,6 +94,7 @@ def test_float64_text_round_trips_exactly(sample_mesh, tmp_path):
     np.testing.assert_array_equal(np.loadtxt(out, delimiter=",", skiprows=1), ref)
 
 
+@pytest.mark.slow
 def test_standard_output_is_csv(sample_mesh, reference):
     proc = run_scatter(*command(sample_mesh), check=True)
     lines = proc.stdout.decode().splitlines()
@@ -96,6 +103,7 @@ def test_standard_output_is_csv(sample_mesh, reference):
     np.testing.assert_array_equal(np.loadtxt(lines[1:], delimiter=",")[:, :3].astype(np.float32), reference.points)
 
 
+@pytest.mark.slow
 def test_standard_output_binary_formats(sample_mesh, reference):
     proc = run_scatter(*command(sample_mesh, "-f", "npy"), check=True)
     arr = np.load(io.BytesIO(proc.stdout))
@@ -240,6 +248,7 @@ def test_no_module_outside_the_writers_names_an_output_format(tmp_path):
     assert format_literals(tmp_path) == [("api.py", 5, ".usd"), ("api.py", 5, "LAZ"), ("api.py", 5, "las")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("argv", [["--help"], ["sample", "--help"], ["merge", "--help"]])
 def test_help_and_the_table_import_no_numpy(argv):
     import subprocess

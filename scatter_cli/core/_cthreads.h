@@ -1,23 +1,23 @@
-/* The kernels' threads: in_parallel() runs fn(ctx, k, count) for k = 0 .. count - 1 on
- * up to MAX_THREADS threads, and share() cuts 0 .. n - 1 into count fixed ranges, so that
- * which thread computes what never depends on timing. */
+/* The kernels' threads, the only place that starts any: in_parallel() runs fn(ctx, k,
+ * count) for k = 0 .. count - 1 on up to MAX_THREADS threads, and share() cuts 0 .. n - 1
+ * into count fixed ranges, so that which thread computes what never depends on timing. */
 #ifndef SCATTER_CTHREADS_H
 #define SCATTER_CTHREADS_H
 
 #include <pthread.h>
 #include <stdint.h>
 
-#define MAX_THREADS 8
+#define MAX_THREADS 16
 
 typedef struct {
     void (*fn)(void *ctx, int k, int count);
     void *ctx;
     int k, count;
-} Job;
+} ThreadCall;
 
-static void *run_job(void *arg)
+static void *thread_main(void *arg)
 {
-    Job *j = arg;
+    ThreadCall *j = arg;
     j->fn(j->ctx, j->k, j->count);
     return NULL;
 }
@@ -27,13 +27,13 @@ static void *run_job(void *arg)
 static void in_parallel(int count, void (*fn)(void *, int, int), void *ctx)
 {
     count = count < 1 ? 1 : count > MAX_THREADS ? MAX_THREADS : count;
-    Job job[MAX_THREADS];
+    ThreadCall job[MAX_THREADS];
     pthread_t id[MAX_THREADS];
     int started[MAX_THREADS] = {0};
     for (int k = 0; k < count; k++)
-        job[k] = (Job){fn, ctx, k, count};
+        job[k] = (ThreadCall){fn, ctx, k, count};
     for (int k = 1; k < count; k++)
-        started[k] = pthread_create(&id[k], NULL, run_job, &job[k]) == 0;
+        started[k] = pthread_create(&id[k], NULL, thread_main, &job[k]) == 0;
     fn(ctx, 0, count);
     for (int k = 1; k < count; k++)
         if (started[k])

@@ -11,20 +11,34 @@ the thinning kernel its plain distance loops instead of its AVX-512 ones.
 import functools
 import importlib
 import os
+from typing import NamedTuple
 
-# Every compiled kernel: its module name -> the package it sits in, beside the Python that
-# holds it (setup.py builds these).
+
+class Kernel(NamedTuple):
+    package: str  # where it sits, beside the Python that holds it (setup.py builds it there)
+    holders: tuple  # the modules of that package that hold it, each as its ``_kernel``
+
+
+# Every compiled kernel and every module that holds it. SCATTER_NUMPY=1 leaves all of those
+# None; tests/test_kernel_parity.py switches all of them off to compute the NumPy twin, and
+# tests/test_native.py checks that the modules looking a kernel up are exactly these.
 KERNELS = {
-    "_csampling": "scatter_cli.sampling",
-    "_cedges": "scatter_cli.sampling",
-    "_cthinning": "scatter_cli.sampling.poisson",
-    "_cstable": "scatter_cli.sampling.stable",
-    "_cenclosure": "scatter_cli.sampling.exterior",
-    "_cembree": "scatter_cli.sampling.exterior",
-    "_creaders": "scatter_cli.loading",
-    "_cwinding": "scatter_cli.volume",
-    "_cvolume": "scatter_cli.volume",
+    "_csampling": Kernel("scatter_cli.sampling", ("plan", "normals")),
+    "_cedges": Kernel("scatter_cli.sampling", ("sharp",)),
+    "_cthinning": Kernel("scatter_cli.sampling.poisson", ("pairs",)),
+    "_cstable": Kernel("scatter_cli.sampling.stable", ("source", "faces", "order")),
+    "_cenclosure": Kernel("scatter_cli.sampling.exterior", ("enclosure",)),
+    "_cembree": Kernel("scatter_cli.sampling.exterior", ("rayscene",)),
+    "_creaders": Kernel("scatter_cli.loading", ("fast",)),
+    "_cwinding": Kernel("scatter_cli.volume", ("winding",)),
+    "_cvolume": Kernel("scatter_cli.volume", ("distance", "parity")),
 }
+
+
+def holders(name):
+    """The dotted names of the modules that hold kernel ``name``."""
+    package, modules = KERNELS[name]
+    return [f"{package}.{module}" for module in modules]
 
 
 def kernel(name):
@@ -32,7 +46,7 @@ def kernel(name):
     if _flag("SCATTER_NUMPY"):
         return None
     try:
-        module = importlib.import_module(f"{KERNELS[name]}.{name}")
+        module = importlib.import_module(f"{KERNELS[name].package}.{name}")
     except ImportError:
         return None
     if name == "_cthinning":

@@ -15,7 +15,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
-#include <pthread.h>
+#include "_cthreads.h"
 
 #define MAX_INDEX 2147483647LL
 #define MAX_CORNERS 255
@@ -1272,14 +1272,14 @@ static int stl_body(stl_part *s)
     }
 }
 
-static void *stl_part_run(void *arg)
+/* part k of parts (count: how many there are) */
+static void stl_part_run(void *parts, int k, int count)
 {
-    stl_part *s = arg;
+    stl_part *s = (stl_part *)parts + k;
+    (void)count;
     s->status = stl_body(s);
-    return NULL;
 }
 
-#define MAX_PARTS 8
 #define MIN_PART (4 << 20)
 
 /* The parts in file order decide: the first to end at endsolid ends the file, a part
@@ -1314,7 +1314,7 @@ static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
         return NULL;
     const char *text = buf.buf, *end = text + buf.len;
     cursor c = {text, end};
-    stl_part parts[MAX_PARTS];
+    stl_part parts[MAX_THREADS];
     memset(parts, 0, sizeof parts);
     int n = 0, status = 1;
     Py_BEGIN_ALLOW_THREADS
@@ -1323,7 +1323,7 @@ static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
         c.p += 5;
         if (plain_line_rest(&c) == 0) {
             /* parts split at line breaks: every break ends a line, so each part starts at one */
-            int want = threads < 1 ? 1 : threads > MAX_PARTS ? MAX_PARTS : threads;
+            int want = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
             const char *from = c.p;
             while (n < want) {
                 const char *stop = end;
@@ -1338,17 +1338,7 @@ static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
                 if (stop == end)
                     break;
             }
-            pthread_t ids[MAX_PARTS];
-            int started[MAX_PARTS] = {0};
-            for (int k = 1; k < n; k++)
-                started[k] = pthread_create(&ids[k], NULL, stl_part_run, &parts[k]) == 0;
-            stl_part_run(&parts[0]);
-            for (int k = 1; k < n; k++) {
-                if (started[k])
-                    pthread_join(ids[k], NULL);
-                else
-                    stl_part_run(&parts[k]);
-            }
+            in_parallel(n, stl_part_run, parts);
             status = stl_join(parts, n);
         }
     }

@@ -21,10 +21,9 @@
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
-#include <pthread.h>
+#include "_cthreads.h"
 
 #define FIELDS 28
-#define MAX_THREADS 8
 #define BLOCK 256 /* points a thread takes at a time */
 #define DEPTH 256 /* subtrees at most, one in the other (a WindingTree: below 128) */
 
@@ -190,14 +189,17 @@ TARGETS static void winding_4(const Work *w, const int64_t *at, int64_t m)
         w->out[at[l]] = acc[l] != acc[l] ? NAN : acc[l];
 }
 
-static void *run(void *arg)
+/* blocks of points taken in turn from the shared counter until none is left (every
+ * thread runs the same loop: k and count do not matter) */
+static void run(void *arg, int k, int count)
 {
     Work *w = arg;
+    (void)k, (void)count;
     for (;;) {
         int64_t b = __atomic_fetch_add(&w->next, 1, __ATOMIC_RELAXED);
         int64_t i0 = b * BLOCK, i1 = i0 + BLOCK < w->n ? i0 + BLOCK : w->n;
         if (i0 >= w->n)
-            return NULL;
+            return;
         for (int64_t i = i0; i < i1; i += 4)
             winding_4(w, w->walk + i, i1 - i < 4 ? i1 - i : 4);
     }
@@ -333,17 +335,7 @@ static PyObject *winding(PyObject *self, PyObject *args)
         }
         w.hot = hot, w.walk = walk;
         int64_t blocks = (w.n + BLOCK - 1) / BLOCK;
-        int count = threads > MAX_THREADS ? MAX_THREADS : threads;
-        if (count > blocks)
-            count = blocks > 0 ? (int)blocks : 1;
-        pthread_t id[MAX_THREADS];
-        int started[MAX_THREADS] = {0};
-        for (int k = 1; k < count; k++)
-            started[k] = pthread_create(&id[k], NULL, run, &w) == 0;
-        run(&w); /* the caller takes blocks too, and finishes any a thread that did not start would have */
-        for (int k = 1; k < count; k++)
-            if (started[k])
-                pthread_join(id[k], NULL);
+        in_parallel(threads < blocks ? threads : (int)blocks, run, &w);
     }
     free(hot), free(walk);
     Py_END_ALLOW_THREADS

@@ -28,7 +28,7 @@ import numpy as np
 from . import distance
 from ..core import native
 
-_kernel = distance._kernel
+_kernel = native.kernel("_cvolume")
 
 SEED = 29
 # Points per block on the NumPy path.

@@ -507,11 +507,13 @@ typedef struct {
     int ok;
 } Share;
 
-static void *mark_share(void *arg)
+/* share ``part`` of the faces (count: how many shares there are) */
+static void mark_share(void *shares, int part, int count)
 {
     /* on copies: the threads' Share and Crossings lie side by side, and writing them at
      * every face would make the threads fight over their cache lines */
-    Share me = *(Share *)arg;
+    Share *w = (Share *)shares + part, me = *w;
+    (void)count;
     Crossings cross = *me.cross;
     const Grid *g = me.sc->g;
     const int64_t *n = me.n, *base = me.base, e1 = n[1] + 1, e2 = n[2] + 1;
@@ -549,10 +551,8 @@ static void *mark_share(void *arg)
         }
         ok = cross_face(me.sc, c, qlo, qhi, me.bit, &cross, me.unsure);
     }
-    Share *w = arg;
     w->diff = me.diff, w->ok = ok;
     *w->cross = cross;
-    return NULL;
 }
 
 /* prefix sums of a difference array d (e0, e1, e2) along each axis */
@@ -623,8 +623,7 @@ static int shell_pass(const Scene *sc, int64_t s0, int64_t s1, const double *slo
     int count = s1 - s0 < THREAD_FACES ? 1 : threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
     Share w[MAX_THREADS];
     Crossings more[MAX_THREADS];
-    pthread_t id[MAX_THREADS];
-    int started[MAX_THREADS] = {0}, ok = 1;
+    int ok = 1;
     uint8_t *spare = malloc((size_t)cells);
     for (int k = 0; k < count; k++) {
         more[k] = (Crossings){NULL, 0, 0};
@@ -633,16 +632,8 @@ static int shell_pass(const Scene *sc, int64_t s0, int64_t s1, const double *slo
                        NULL, k ? &more[k] : cross, 1};
         ok &= w[k].point && w[k].unsure;
     }
-    if (ok && spare) {
-        for (int k = 1; k < count; k++)
-            started[k] = pthread_create(&id[k], NULL, mark_share, &w[k]) == 0;
-        mark_share(&w[0]);
-        for (int k = 1; k < count; k++)
-            if (started[k])
-                pthread_join(id[k], NULL);
-            else
-                mark_share(&w[k]);
-    }
+    if (ok && spare)
+        in_parallel(count, mark_share, w);
     ok &= spare != NULL;
     for (int k = 0; k < count; k++)
         ok &= w[k].ok;

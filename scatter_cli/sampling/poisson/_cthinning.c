@@ -26,7 +26,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#include <pthread.h>
+#include "_cthreads.h"
 #include <stdio.h>
 
 /* Shared with the NumPy path: exported as module attributes, which tests/test_native.py
@@ -705,9 +705,10 @@ static int job_reserve(Job *job, int64_t more)
 
 /* The pairs whose earlier point is in the job's cells, with their crowding: each pair's
  * weight floor((1 - d / (2 radius)) * CROWD_SCALE) goes to both its ends. */
-static void *crowd_job(void *arg)
+static void crowd_job(void *jobs, int k, int count)
 {
-    Job *job = arg;
+    Job *job = (Job *)jobs + k;
+    (void)count;
     const Greedy *w = job->w;
     const Grid *g = w->g;
     double *restrict crowd = job->crowd;
@@ -746,13 +747,13 @@ static void *crowd_job(void *arg)
         }
     }
     scratch_free(&b);
-    return NULL;
 }
 
 /* The job's pairs into the backward rows of their later ends. */
-static void *fill_job(void *arg)
+static void fill_job(void *jobs, int k, int count)
 {
-    Job *job = arg;
+    Job *job = (Job *)jobs + k;
+    (void)count;
     const Grid *g = job->w->g;
     const int64_t *back = job->back;
     int64_t e = 0;
@@ -763,26 +764,6 @@ static void *fill_job(void *arg)
             job->bnbr[q] = (int32_t)s;
             job->blift[q] = job->lift[e];
         }
-    return NULL;
-}
-
-#define MAX_THREADS 16
-
-/* fn on each job, job 0 on this thread and the others on threads of their own (or here,
- * if a thread cannot be started). */
-static void run_jobs(void *(*fn)(void *), Job *jobs, int threads)
-{
-    pthread_t ids[MAX_THREADS];
-    int started[MAX_THREADS] = {0};
-    for (int k = 1; k < threads; k++)
-        started[k] = pthread_create(&ids[k], NULL, fn, &jobs[k]) == 0;
-    fn(&jobs[0]);
-    for (int k = 1; k < threads; k++) {
-        if (started[k])
-            pthread_join(ids[k], NULL);
-        else
-            fn(&jobs[k]);
-    }
 }
 
 /* The neighbours of every position s, in two rows: forward, the later[s] pairs it found,
@@ -875,7 +856,7 @@ static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
     }
     rows->jobs_start[threads] = a;
     if (ok)
-        run_jobs(crowd_job, jobs, threads);
+        in_parallel(threads, crowd_job, jobs);
     for (int k = 0; ok && k < threads; k++) {
         ok &= jobs[k].ok;
         rows->by_grid |= jobs[k].over;
@@ -907,7 +888,7 @@ static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
             jobs[k].blift = rows->blift;
         }
         if (ok)
-            run_jobs(fill_job, jobs, threads);
+            in_parallel(threads, fill_job, jobs);
     }
     for (int k = 0; k < threads; k++) {
         give(jobs[k].crowd);

@@ -1,7 +1,7 @@
 """Builders and checks shared by the hard-case tests (tests/) and benchmarks/hard_cases.py:
 meshes of separate triangles, the exact on-face test, the in-triangle chi-square (through scatter_cli.stats.chisquare).
 
-Here rather than in tests/ so that a benchmark never imports a test module."""
+Here, in testkit/, so that tests and benchmarks never import each other."""
 
 from __future__ import annotations
 
