@@ -5,7 +5,7 @@ times (516,096 faces), written as a binary STL (corners repeated per face, as CA
 them) and as an OBJ (welded, for Blender's importer). Measured, each in fresh processes,
 one warm-up then the median of back-to-back runs, interleaved round by round:
 
-- detection: ``EdgeTable`` of the loaded surface (face normals, edge edges_ by position,
+- detection: ``EdgeTable`` of the loaded surface (face normals, the edges by corner position,
   the angle test, the edges placed in world space), in-process, median of 5;
 - ``scatter sample MESH -n N -o out.ply`` plain, and with ``--edges 0.5``: their ratio;
 - the trimesh script (what Hunyuan3D-2.1's sampling does with trimesh): load the mesh,

@@ -103,7 +103,7 @@ def test_the_angle_threshold_is_the_option():
     assert (sharp.sharp_edges(v, f, n, 21.0).kind == 2).sum() == 0
 
 
-def test_boundary_and_non_manifold_slotsare_always_sharp():
+def test_boundary_and_non_manifold_edges_are_always_sharp():
     # a flat square (two coplanar triangles): its 4 boundary edges, not the diagonal
     v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
     f = np.array([[0, 1, 2], [0, 2, 3]], np.int64)
@@ -151,7 +151,7 @@ def random_meshes():
 
 
 @given(random_meshes())
-def test_the_kernel_finds_the_slotsnumpy_finds(mesh):
+def test_the_kernel_finds_the_edges_numpy_finds(mesh):
     coords, faces, valid = mesh
     v = np.array(coords, float)
     f = np.array(faces, np.int64) % len(v)
@@ -189,7 +189,7 @@ def test_edge_points_lie_on_the_edges(box_run):
     assert np.median(dist) > 0.1  # face points are spread over the faces
 
 
-def test_slotsare_chosen_by_length(box_run):
+def test_edges_are_chosen_by_length(box_run):
     which, _, _ = nearest_edge(box_run.points[box_run.sharp == 1])
     lengths = np.array([np.linalg.norm(b - a) for a, b in box_edges()])
     counts = np.bincount(which, minlength=12)
@@ -240,7 +240,8 @@ def test_face_points_are_uniform_by_area(box_run):
     assert chi2_gof(np.bincount(face, minlength=12), np.ones(12))[2] < LEVEL  # the broken variant
 
 
-def test_the_slotsdo_not_depend_on_vertex_numbering(tmp_path):
+@pytest.mark.slow
+def test_the_edges_do_not_depend_on_vertex_numbering(tmp_path):
     """A split STL, the welded PLY of its float32 coordinates and the same PLY with its
     vertices renumbered give the same bytes; ordering the edges by vertex number would not."""
     box = box_mesh()
@@ -302,6 +303,7 @@ def test_a_long_decimal_share_is_counted_exactly():
     assert mask.sum() == split.before(10**15 + 1000) - split.before(10**15)
 
 
+@pytest.mark.slow
 def test_chunks_threads_and_shards_give_the_same_bytes(tmp_path, monkeypatch):
     args = ["sample", box_mesh_file(tmp_path), "-n", "20000", "--edges", "0.37", "-a", "normal,sharp,bary"]
     whole = tmp_path / "whole.ply"
@@ -332,6 +334,7 @@ def test_the_face_part_is_the_plain_run_of_its_count():
     assert np.array_equal(mixed.points[mixed.sharp == 0], plain.points)
 
 
+@pytest.mark.slow
 def test_a_mesh_with_no_sharp_edge_warns_and_samples_its_faces(tmp_path):
     sphere = trimesh.creation.icosphere(subdivisions=3)
     sphere.export(tmp_path / "ball.ply")
@@ -384,6 +387,7 @@ def test_volume_points_are_sharp_only_near_edge_points():
     assert (run.sharp[same] == 0).all() and same.sum() > 0.25 * 5000
 
 
+@pytest.mark.slow
 # -- the command line ----------------------------------------------------------------------
 
 @pytest.mark.parametrize("args,words", [
@@ -438,6 +442,7 @@ def test_both_batch_engines_write_what_sample_writes(tmp_path):
         assert (tmp_path / "dask" / f"{name}.ply").read_bytes() == want
 
 
+@pytest.mark.slow
 def test_preview_colours_edge_points_apart(tmp_path):
     """A point file with a sharp column is drawn with its edge points in SHARP_RGB over the
     normal colours; inside/outside colours come first (the rule's order)."""
@@ -459,6 +464,7 @@ def test_preview_colours_edge_points_apart(tmp_path):
     assert (inside == render.INSIDE_RGB).all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("threads", ["1", "2", "3", "7", "16"])
 def test_the_kernel_finds_the_same_edges_on_any_thread_count(threads, monkeypatch):
     """The skull (100k faces) and its corners repeated per face: the NumPy twin's edges
