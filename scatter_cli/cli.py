@@ -90,6 +90,9 @@ def _declared(
     box_share: Annotated[Optional[float], typer.Option("--box-share", metavar="F", help="Share of the points uniform in the box, the rest near [default: 1 with --volume, 0 with --near].")] = D.box_share,
     padding: Annotated[float, typer.Option("--padding", metavar="P", help="The box: the surface's bounding box grown by P times its largest side.")] = D.padding,
     sign: Annotated[str, typer.Option("--sign", metavar="winding|parity", help="Inside when the generalized winding number is >= 0.5 (robust on open meshes), or by a majority of ray parities.")] = D.sign,
+    edges: Annotated[Optional[str], typer.Option("--edges", metavar="F", help="Share (0..1) of the surface points drawn on sharp edges instead of faces (with --near: of the near points' surface points).")] = None,
+    sharp_angle: Annotated[Optional[float], typer.Option("--sharp-angle", metavar="DEG", help="With --edges: an edge is sharp when its faces' normals are at least DEG degrees apart [default: 15]; boundary and non-manifold edges always are.")] = D.sharp_angle,
+    near_edges: Annotated[Optional[str], typer.Option("--near-edges", metavar="SIGMA[,SIGMA...]", help="With --edges and --near: the sigmas of the near points of edge points [default: the --near sigmas].")] = None,
 ):
     """Never called: its signature is the declaration, as typer reads a command's."""
 
@@ -171,12 +174,15 @@ def info(
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable JSON.")] = False,
     input_format: InputFormat = None,
     exterior: Annotated[bool, typer.Option("--exterior", help="Also the exterior area (estimate and standard error) and faces seen from outside (needs embreex).")] = False,
+    sharp_angle: Annotated[Optional[float], typer.Option("--sharp-angle", metavar="DEG", help="The angle of the sharp edges listed (what --edges samples) [default: 15].")] = None,
 ):
-    """Faces, vertices, area, bounding box, degenerate faces, attributes and objects of MESH."""
+    """Faces, vertices, area, bounding box, degenerate faces, attributes, sharp edges and objects of MESH."""
     lean_trimesh()
     from .commands.info import describe, format_text
 
-    report = describe(mesh, input_format=input_format, exterior=exterior)
+    if sharp_angle is not None and not 0 < sharp_angle <= 180:
+        raise ScatterUsageError(f"--sharp-angle must be a number of degrees in (0, 180], not {sharp_angle:g}")
+    report = describe(mesh, input_format=input_format, exterior=exterior, sharp_angle=sharp_angle)
     process.echo(json.dumps(report, indent=2) if as_json else format_text(report))
 
 
@@ -295,9 +301,9 @@ def merge(
 @app.command(no_args_is_help=True)
 @sample_options(
     "count", "density", "seed", "attributes", "weight", "objects", "poisson", "radius", "method", "exterior", "stable",
-    "normalize",
+    "normalize", "edges", "sharp_angle",
     count=Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", parser=_count, help="Points sampled per mesh [default: 20000].")],
-    attributes=Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help="Attributes sampled on meshes, which colour them [default: normal; inside with --volume].")],
+    attributes=Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help="Attributes sampled on meshes, which colour them [default: normal, and sharp with --edges].")],
 )
 def preview(
     inputs: Annotated[Optional[List[str]], typer.Argument(metavar="INPUT...", help="Point files, meshes and folders (searched recursively).", show_default=False)] = None,

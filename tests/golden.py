@@ -75,6 +75,13 @@ COMMANDS = {
                           "sdf,inside,closest,face,object", "-o", "OUT.ply"], None),
     "hemi-volume-parity": (["sample", HEMI, "--volume", "--sign", "parity", "-n", "2000", "-a", "inside,sdf,winding",
                             "--precision", "float64", "-o", "OUT.csv"], None),
+    "pediment-edges": (["sample", PED, "-n", "3000", "--edges", "0.5", "-a", "normal,face,sharp", "-o", "OUT.ply"],
+                       None),
+    "truck-edges-scene": (["sample", TRUCK, "-n", "2000", "--edges", "0.3", "--sharp-angle", "30", "-a",
+                           "object,orient,bary,sharp", "-o", "OUT.npy"], None),
+    "spot-near-edges": (["sample", SPOT, "--near", "0.01,0.002", "--edges", "0.25", "--near-edges", "0.001",
+                         "--box-share", "0.2", "-n", "2000", "-a", "sdf,sharp", "--precision", "float64", "-o",
+                         "OUT.npy"], None),
     "batch": (["batch", ICO, HEMI, NARROW, PED, "-o", "OUT/{stem}.ply", "-n", "300", "-a", "normal,face", "-j", "2",
                "-q"], None),
 }

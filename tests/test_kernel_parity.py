@@ -71,6 +71,7 @@ MESHES = {
     "textured": lambda: str(SAMPLES / "boxtextured.glb"),
     "koala": lambda: str(SAMPLES / "koala.obj"),
     "hemisphere": lambda: str(SAMPLES / "hemisphere.off"),
+    "pediment": lambda: str(SAMPLES / "pediment_join_plate_12.stl"),
 }
 
 
@@ -354,6 +355,13 @@ CASES = {
         "winding-order-1": winding_case("moebius-160-10.ply", order=1, accuracy=3.0),
         "sample-volume": lambda: sample_bytes("hemisphere", volume=True, count=2000, attributes="winding,inside"),
     },
+    "_cedges": {
+        "edges-pediment": lambda: sample_bytes("pediment", count=3000, edges=0.5, attributes="normal,face,sharp"),
+        "edges-truck": lambda: sample_bytes("truck", count=2000, edges="0.3", sharp_angle=30,
+                                            attributes="object,bary,sharp"),
+        "edges-near": lambda: sample_bytes("hemisphere", near=(0.02,), near_edges=(0.005,), edges=0.4, count=2000,
+                                           attributes="sdf,sharp"),
+    },
     "_cvolume": {
         **{f"distance-{n}": distance_case(n) for n in ("icosahedron_binary.stl", "narrow_triangles.obj", "scene")},
         "sample-near": lambda: sample_bytes("hemisphere", near=(0.02,), count=2000, sign="parity",
@@ -378,6 +386,7 @@ CALLED_BY = {
     "_cwinding": {f: "winding-icosahedron_binary.stl" for f in ("morton", "order", "subtree_sums", "moments",
                                                                 "radii", "winding")},
     "_cvolume": {f: "distance-icosahedron_binary.stl" for f in ("wide", "order", "visit", "closest", "crossings")},
+    "_cedges": {"edges": "edges-pediment"},
 }
 
 

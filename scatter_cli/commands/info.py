@@ -6,12 +6,13 @@ import numpy as np
 
 from ..loading.load import load_surface
 from ..surface.model import corners, doubled_areas
+from ..sampling.sharp import SHARP_ANGLE
 from ..surface.topology import edges
 
 
-def describe(mesh, input_format=None, exterior=False) -> dict:
+def describe(mesh, input_format=None, exterior=False, sharp_angle=None) -> dict:
     """A JSON-ready summary of ``mesh`` (path, trimesh object or Surface); ``exterior``
-    adds :func:`exterior_report`."""
+    adds :func:`exterior_report`; its sharp edges at ``sharp_angle`` degrees (default 15)."""
     surface = load_surface(mesh, input_format=input_format)
     areas, finite, lo, hi = [], [], np.full(3, np.inf), np.full(3, -np.inf)
     for inst in surface.instances:
@@ -47,6 +48,7 @@ def describe(mesh, input_format=None, exterior=False) -> dict:
         ],
     }
     report.update(closed)
+    report["sharp_edges"] = sharp_report(surface, report["objects"], SHARP_ANGLE if sharp_angle is None else sharp_angle)
     report["unsampled"] = [{"path": u.path, "reason": u.reason, "area": u.area} for u in surface.unsampled]
     if exterior:
         report["exterior"] = exterior_report(surface)
@@ -71,6 +73,20 @@ def closedness(surface, areas) -> dict:
     boundary_area = float(areas[np.concatenate(at_boundary)].sum()) if at_boundary else 0.0
     return {"closed": bool(not counts.any()), "boundary_edges": int(counts[0]), "non_manifold_edges": int(counts[1]),
             "inconsistent_edges": int(counts[2]), "boundary_area": boundary_area}
+
+
+def sharp_report(surface, objects, angle) -> dict:
+    """The sharp edges at ``angle`` degrees (:mod:`scatter_cli.sampling.sharp`) in total,
+    {angle, count, length} (world-space length), and the same in each record of
+    ``objects`` (one per instance, in order), in place."""
+    from ..sampling.edges import EdgeTable
+
+    table = EdgeTable(surface, angle)
+    count = np.bincount(table.instance, minlength=len(objects))
+    length = np.bincount(table.instance, weights=table.length, minlength=len(objects))
+    for k, record in enumerate(objects):
+        record["sharp_edges"] = {"angle": float(angle), "count": int(count[k]), "length": float(length[k])}
+    return {"angle": float(angle), "count": len(table), "length": table.total_length}
 
 
 # Uniform candidates behind the exterior-area estimate of ``scatter info --exterior``
@@ -171,6 +187,7 @@ def format_text(report) -> str:
         f"attributes     {', '.join(attrs) or 'none'}",
         f"objects        {report['instances']} instance(s) of {report['geometries']} geometry(ies)",
         _closed_line(report),
+        _sharp_line(report["sharp_edges"], "sharp edges    "),
     ]
     for u in report["unsampled"]:
         area = f", area {u['area']:.6g}" if u["area"] else ""
@@ -184,8 +201,15 @@ def format_text(report) -> str:
             f"{ext['faces_hidden']:,} none (4 probes a face); {ext['faces_enclosed']:,} enclosed in a closed shell",
         ]
     if report["instances"] > 1 or report["geometries"] > 1:
-        lines += [f"  [{o['index']}] {o['name']} ({o['geometry']}, {o['faces']:,} faces)" for o in report["objects"]]
+        lines += [f"  [{o['index']}] {o['name']} ({o['geometry']}, {o['faces']:,} faces; "
+                  f"{_sharp_line(o['sharp_edges'])})" for o in report["objects"]]
     return "\n".join(lines)
+
+
+def _sharp_line(sharp, label="") -> str:
+    """``N sharp edges at A degrees, length L`` (what --edges would draw points on)."""
+    return f"{label}{sharp['count']:,} at {sharp['angle']:g} degrees, length {sharp['length']:.6g}" if label else (
+        f"{sharp['count']:,} sharp edges, length {sharp['length']:.6g}")
 
 
 def _closed_line(report) -> str:

@@ -129,8 +129,9 @@ def check_options(output, size, columns, views, per_page):
 
 def mesh_options(options: dict):
     """The :class:`~scatter_cli.run.options.SampleOptions` of meshes sampled on the fly
-    (``count`` 20,000 and ``attributes`` normal, or inside for volume runs, unless
-    given), checked before any work: usage errors once, not once per mesh."""
+    (``count`` 20,000 and ``attributes`` normal, or inside for volume runs, and sharp
+    with ``--edges``, unless given), checked before any work: usage errors once, not
+    once per mesh."""
     from ..run.options import SampleOptions
 
     options = dict(options)
@@ -138,7 +139,8 @@ def mesh_options(options: dict):
         options["count"] = DEFAULT_COUNT
     o = SampleOptions(**options)  # an unknown option is a TypeError, as for a function
     if not o.attributes:
-        o = dataclasses.replace(o, attributes=("inside",) if o.volume_run else ("normal",))
+        wanted = ("inside",) if o.volume_run else ("normal",)
+        o = dataclasses.replace(o, attributes=wanted + (("sharp",) if o.edges not in (None, 0, "0") else ()))
     return o.check()
 
 

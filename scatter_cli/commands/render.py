@@ -31,6 +31,9 @@ SPLAT_FILL = 1.2  # disc radius as a fraction of size / sqrt(n): about the spaci
 # Colours of inside and outside points: vermillion and blue of the Okabe-Ito palette,
 # told apart with every common form of colour blindness.
 INSIDE_RGB, OUTSIDE_RGB = (213, 94, 0), (0, 114, 178)
+# Points on sharp edges (the column ``sharp``), over the normal or height colours: black,
+# which neither of those ramps comes near.
+SHARP_RGB = (0, 0, 0)
 EMPTY = np.uint64(np.iinfo(np.uint64).max)  # a depth-buffer pixel no disc covers
 DEPTH_STEPS = (1 << 24) - 1  # depth is quantised to this many steps over the bounding box
 HOLE_DEPTH, HOLE_NEIGHBOURS, HOLE_PASSES = 0.05, 5, 2  # see fill_holes
@@ -77,8 +80,9 @@ def splat_radius(n, size):
 
 def point_colors(points, attributes, up="Z"):
     """(n, 3) uint8 colours from the first the set has: ``color``, ``inside``/``sdf``
-    (inside points INSIDE_RGB, outside OUTSIDE_RGB), ``normal`` (x, y, z to r, g, b),
-    else the height along the up axis (HEIGHT_RAMP)."""
+    (inside points INSIDE_RGB, outside OUTSIDE_RGB), ``sharp`` (points on sharp edges
+    SHARP_RGB, the others by the next rule), ``normal`` (x, y, z to r, g, b), else the
+    height along the up axis (HEIGHT_RAMP)."""
     n = len(points)
     if "color" in attributes:
         return np.asarray(attributes["color"])[:, :3].astype(np.uint8)
@@ -87,6 +91,10 @@ def point_colors(points, attributes, up="Z"):
             values = np.asarray(attributes[name]).reshape(n)
             inside = values > 0.5 if name == "inside" else values < 0
             return np.where(inside[:, None], np.array(INSIDE_RGB, np.uint8), np.array(OUTSIDE_RGB, np.uint8))
+    if "sharp" in attributes:
+        colors = point_colors(points, {k: v for k, v in attributes.items() if k != "sharp"}, up)
+        colors[np.asarray(attributes["sharp"]).reshape(n) > 0] = SHARP_RGB
+        return colors
     if "normal" in attributes:
         normal = np.nan_to_num(np.asarray(attributes["normal"], dtype=np.float64))
         return np.clip(np.rint((normal + 1.0) * 127.5), 0, 255).astype(np.uint8)

@@ -24,6 +24,7 @@ class Kernel(NamedTuple):
 # tests/test_native.py checks that the modules looking a kernel up are exactly these.
 KERNELS = {
     "_csampling": Kernel("scatter_cli.sampling", ("plan", "normals")),
+    "_cedges": Kernel("scatter_cli.sampling", ("sharp",)),
     "_cthinning": Kernel("scatter_cli.sampling.poisson", ("pairs",)),
     "_cstable": Kernel("scatter_cli.sampling.stable", ("source", "faces", "order")),
     "_cenclosure": Kernel("scatter_cli.sampling.exterior", ("enclosure",)),

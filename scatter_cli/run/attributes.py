@@ -14,7 +14,7 @@ import numpy as np
 from ..errors import ScatterError
 from .columns import ATTRIBUTES
 from ..sampling.normals import face_normals
-from ..surface.model import Surface, cofactors
+from ..surface.model import Surface, normal_transforms
 from ..surface.data import color_source, interpolate, uv_table, vertex_normal_table
 
 
@@ -33,7 +33,7 @@ class AttributeMaker:
         # per instance: its geometry, whether it has a matrix, and the normal transform
         self._geometry = np.array([i.geometry for i in surface.instances], dtype=np.int64)
         self._moved = np.array([i.matrix is not None for i in surface.instances], dtype=bool)
-        self._cof = _normal_transforms([i.matrix for i in surface.instances])
+        self._cof = normal_transforms([i.matrix for i in surface.instances])
         for name in self.names:
             getattr(self, "_prepare_" + name.replace("-", "_"), lambda: None)()
 
@@ -105,6 +105,12 @@ class AttributeMaker:
     def _make_bary(self, raw, real_dtype, groups):
         return raw.bary.astype(real_dtype)
 
+    def _make_sharp(self, raw, real_dtype, groups):
+        """1 for the points drawn on sharp edges (``--edges``), else 0."""
+        if raw.sharp is None:
+            return np.zeros(len(raw.face), dtype=np.uint8)
+        return raw.sharp.astype(np.uint8)
+
     # -- normal: the geometric face normal --------------------------------------------
 
     def _prepare_normal(self):
@@ -121,8 +127,14 @@ class AttributeMaker:
         return self._face_normals(raw, groups)
 
     def _face_normals(self, raw, groups):
+        """(n, 3) float64 world-space unit normals of the points' faces; an edge point
+        (``--edges``) gets its edge's normal instead."""
         n = self._per_geometry(raw, groups, lambda gi, face, bary: np.take(self._tables["normal", gi], face, axis=0), 3)
-        return self._to_world(raw.instance, n, np.flatnonzero(self._moved[raw.instance]))
+        n = self._to_world(raw.instance, n, np.flatnonzero(self._moved[raw.instance]))
+        if raw.sharp is not None:
+            on_edge = np.flatnonzero(raw.sharp)
+            n[on_edge] = raw.normal[on_edge]
+        return n
 
     # -- orient: +Z onto the normal, then a spin about it from the seed ------------------
 
@@ -188,19 +200,6 @@ class AttributeMaker:
 
         c = self._per_geometry(raw, groups, compute, 4)
         return np.rint(np.clip(c, 0.0, 255.0)).astype(np.uint8)
-
-
-def _normal_transforms(matrices):
-    """(K, 3, 3) float64 normal transform of each instance's (4, 4) matrix (rows of None
-    matrices are left zero): cof(A) = det(A) inv(A)^T, times sign(det A), which is
-    |det| inv(A)^T, the transform that keeps normals outward under mirrors (glTF flips
-    winding then)."""
-    out = np.zeros((len(matrices), 3, 3))
-    moved = [k for k, m in enumerate(matrices) if m is not None]
-    if moved:
-        a = np.stack([matrices[k][:3, :3] for k in moved])
-        out[moved] = cofactors(a) * np.where(np.linalg.det(a) < 0, -1.0, 1.0)[:, None, None]
-    return out
 
 
 def _row_by_row(m, v):

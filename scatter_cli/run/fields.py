@@ -20,6 +20,8 @@ ATTRIBUTES = {
     "inside": ("inside", ("inside",), "u1"),
     "winding": ("winding", ("winding",), "<f8"),
     "closest": ("closest", ("cx", "cy", "cz"), "real"),
+    "sharp": ("sharp", ("sharp",), "u1"),
 }
 # Columns always come in this order, whatever the order of -a.
-KEY_ORDER = ("normal", "orient", "sdf", "inside", "winding", "closest", "face", "bary", "color", "uv", "object")
+KEY_ORDER = ("normal", "orient", "sdf", "inside", "winding", "closest", "face", "bary", "color", "uv", "object",
+             "sharp")

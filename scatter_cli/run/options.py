@@ -14,6 +14,7 @@ Standard library only: the command line imports this module for its defaults and
 from __future__ import annotations
 
 import dataclasses
+import fractions
 import math
 import numbers
 from dataclasses import dataclass
@@ -64,6 +65,9 @@ class SampleOptions:
     padding: float = 0.1
     sign: str = "winding"
     normalize: str = "none"
+    edges: float | str = 0.0
+    sharp_angle: float | None = None
+    near_edges: tuple | None = None
 
     def __post_init__(self):
         def set_(name, value):
@@ -76,6 +80,8 @@ class SampleOptions:
             set_("shard", _shard_pair(self.shard))
         if self.near is not None:
             set_("near", _numbers(self.near))
+        if self.near_edges is not None:
+            set_("near_edges", _numbers(self.near_edges))
 
     @classmethod
     def of(cls, values: dict) -> "SampleOptions":
@@ -95,6 +101,19 @@ class SampleOptions:
         """Points in space (``--volume``, or ``--near`` which implies it)."""
         return self.volume or self.near is not None
 
+    @property
+    def edge_fraction(self) -> fractions.Fraction:
+        """``--edges`` as the exact decimal it is written as (0.29 is 29/100); ValueError
+        when it is not a number."""
+        return edge_share(self.edges)
+
+    @property
+    def angle(self) -> float:
+        """``--sharp-angle`` in degrees (15 when not given)."""
+        from ..sampling.sharp import SHARP_ANGLE
+
+        return SHARP_ANGLE if self.sharp_angle is None else float(self.sharp_angle)
+
     def check(self) -> "SampleOptions":
         """Raise ScatterUsageError for any option, or combination, that is wrong whatever
         the mesh; returns ``self``. (Checked once: a batch worker runs one set of options
@@ -108,6 +127,7 @@ class SampleOptions:
 
             parse_weight(self.weight)
         _check_combinations(self)
+        _check_edges(self)
         if self.volume_run:
             _check_volume(self)
         if self.count is not None:
@@ -175,6 +195,52 @@ def _check_volume(o: SampleOptions):
     if not (_is_real(o.padding) and o.padding >= 0):
         raise ScatterUsageError(f"--padding must be a number >= 0, not {o.padding!r}")
     _choice("sign", o.sign, SIGNS)
+
+
+def _check_edges(o: SampleOptions):
+    try:
+        share = o.edge_fraction
+    except ValueError:
+        share = None
+    if share is None or not 0 <= share <= 1:
+        raise ScatterUsageError(f"--edges must be a share from 0 to 1, not {o.edges!r}")
+    if o.sharp_angle is not None and not (_is_real(o.sharp_angle) and 0 < o.sharp_angle <= 180):
+        raise ScatterUsageError(f"--sharp-angle must be a number of degrees in (0, 180], not {o.sharp_angle!r}")
+    if o.near_edges is not None and (isinstance(o.near_edges, str) or not o.near_edges
+                                     or not all(_is_real(s) and s > 0 for s in o.near_edges)):
+        text = o.near_edges if isinstance(o.near_edges, str) else ",".join(map(str, o.near_edges))
+        raise ScatterUsageError(f"--near-edges must be a comma list of positive standard deviations, not {text!r}")
+    if not share:
+        given = [n for n, on in (("--sharp-angle", o.sharp_angle is not None), ("--near-edges", o.near_edges is not None))
+                 if on]
+        if given:
+            raise ScatterUsageError(f"{' and '.join(given)} needs --edges F (the share of points on sharp edges)")
+        return
+    others = [n for n, on in (("--poisson", o.poisson), ("--radius", o.radius is not None), ("--stable", o.stable),
+                              ("--exterior", o.exterior), (f"--method {o.method}", o.method != "random")) if on]
+    if others:
+        raise ScatterUsageError(f"--edges does not combine with {', '.join(others)}")
+    if o.volume_run and o.near is None:
+        raise ScatterUsageError("--edges with --volume needs --near (edge points are the surface points of near points)")
+    if o.near_edges is not None and o.near is None:
+        raise ScatterUsageError("--near-edges needs --near")
+
+
+def edge_share(value) -> fractions.Fraction:
+    """``--edges`` as the exact decimal it is written as: ``"0.29"`` or 0.29 -> 29/100 (a
+    float stands for its shortest decimal form; None for 0). ValueError for what is not
+    a number."""
+    import decimal
+
+    if value is None:
+        return fractions.Fraction(0)
+    if isinstance(value, bool) or not isinstance(value, (str, numbers.Real)):
+        raise ValueError(f"{value!r} is not a number")
+    text = repr(value) if isinstance(value, float) else str(value).strip()
+    try:
+        return fractions.Fraction(decimal.Decimal(text))
+    except (decimal.InvalidOperation, ValueError, OverflowError):
+        raise ValueError(f"{value!r} is not a number") from None
 
 
 def check_attributes(names, volume=False):

@@ -39,8 +39,10 @@ def volume_source(surface, o: SampleOptions, info: dict, warn=None):
     count = DEFAULT_COUNT if o.count is None else o.count
     if o.density is not None:
         count = int(round(o.density * float(np.prod(box[1] - box[0])) * scale**3))
-    near = make_source(plan, count, o.seed, False, weighting=weighting, area=area)
-    source = VolumeSource(near, count, o.seed, box, [s / scale for s in o.near or ()], share)
+    near = with_edges(surface, o, count, lambda n: make_source(plan, n, o.seed, False, weighting=weighting, area=area),
+                      False, info, warn)
+    edge_sigmas = None if o.near_edges is None else [s / scale for s in o.near_edges]
+    source = VolumeSource(near, count, o.seed, box, [s / scale for s in o.near or ()], share, edge_sigmas)
     labels = VolumeLabels(triangles, instance, face, o.attributes, o.sign, frame)
     info.update(source=surface.source, count=count, area=area, faces=surface.face_count, faces_used=len(triangles),
                 seed=o.seed, volume={"box": box.tolist(), "box_share": share, "near": list(o.near or ()),
@@ -54,6 +56,8 @@ def surface_source(surface, o: SampleOptions, want_bary: bool, info: dict, warn=
     reports (count, area, faces, exterior statistics, thinning, timings)."""
     base = StableBase(surface, o, want_bary, info, warn) if o.stable else MethodBase(surface, o, want_bary, info, warn)
     stage = ExteriorStage(base, surface, o, info) if o.exterior else base
+    if o.edge_fraction:  # (not with --stable, --exterior or thinning)
+        return with_edges(surface, o, base.count, base.source_of, want_bary, info, warn), base.plan
     if not o.thinned:
         return stage.natural(), base.plan
     from ..sampling.poisson.thinning import candidate_count, dart_thrown, thinned  # (a plain run does not load the thinning)
@@ -173,6 +177,29 @@ class ExteriorStage:
         self.info["timings"]["exterior"] = time.perf_counter() - t
         self.info["timings"]["enclosure"] = source.enclosure_seconds
         return source
+
+
+def with_edges(surface, o: SampleOptions, count, faces, want_bary, info, warn=None):
+    """The surface source of ``count`` points with ``--edges``: its edge points on the
+    sharp edges of ``surface`` (:mod:`scatter_cli.sampling.edges`), its face points from
+    ``faces(n)``, a face source of ``n`` points; without ``--edges``, or when the surface
+    has no sharp edge (a warning), ``faces(count)``."""
+    share = o.edge_fraction
+    if not share:
+        return faces(count)
+    from ..sampling.edges import EdgeMixSource, EdgeTable, Interleaving
+
+    t = time.perf_counter()
+    table = EdgeTable(surface, o.angle)
+    info["timings"]["edges"] = time.perf_counter() - t
+    info["edges"] = {"share": float(share), "angle": o.angle, "count": len(table), "length": table.total_length}
+    if not table.total_length > 0:
+        if warn:
+            warn(f"{surface.source}: no sharp edge at {o.angle:g} degrees: every point is a face point")
+        return faces(count)
+    split = Interleaving(share)
+    info["edges"]["points"] = split.before(count)
+    return EdgeMixSource(faces(count - split.before(count)), table, count, split, o.seed, want_bary)
 
 
 def plan_surface(surface, weight=None, warn=None):

@@ -55,6 +55,8 @@ class RawChunk:
 
     points: (n, 3) float64 world space; face: (n,) int64 index in the geometry;
     instance: (n,) int64; bary: (n, 3) float64 weights of the face's vertices 0, 1, 2.
+    With ``--edges``: sharp (n,) bool, the points drawn on sharp edges, and normal (n, 3)
+    float64, their edges' world-space unit normals (rows of face points unused).
     """
 
     start: int
@@ -62,25 +64,30 @@ class RawChunk:
     face: np.ndarray
     instance: np.ndarray
     bary: np.ndarray
+    sharp: np.ndarray | None = None
+    normal: np.ndarray | None = None
+
+    OPTIONAL = ("bary", "sharp", "normal")  # the fields that may be None
 
     def take(self, index):
         """The rows ``index`` (k,) int as a new chunk starting at 0."""
-        rows = (lambda a: np.take(a, index, axis=0))  # noqa: E731 (take copies rows of 3 faster than a[index])
+        rows = (lambda a: None if a is None else np.take(a, index, axis=0))  # noqa: E731 (take copies rows of 3 faster than a[index])
         return RawChunk(0, rows(self.points), self.face[index], self.instance[index],
-                        None if self.bary is None else rows(self.bary))
+                        *(rows(getattr(self, f)) for f in self.OPTIONAL))
 
     @staticmethod
     def join(chunks):
         """One chunk, starting at 0, of ``chunks`` end to end."""
         if len(chunks) == 1:
             return chunks[0]
-        bary = None if chunks[0].bary is None else np.concatenate([c.bary for c in chunks])
         return RawChunk(0, *(np.concatenate([getattr(c, f) for c in chunks]) for f in ("points", "face", "instance")),
-                        bary)
+                        *(None if getattr(chunks[0], f) is None else np.concatenate([getattr(c, f) for c in chunks])
+                          for f in RawChunk.OPTIONAL))
 
     def slice(self, start, stop):
-        bary = None if self.bary is None else self.bary[start:stop]
-        return RawChunk(start, self.points[start:stop], self.face[start:stop], self.instance[start:stop], bary)
+        part = (lambda a: None if a is None else a[start:stop])  # noqa: E731
+        return RawChunk(start, self.points[start:stop], self.face[start:stop], self.instance[start:stop],
+                        *(part(getattr(self, f)) for f in self.OPTIONAL))
 
 
 class SamplePlan:
@@ -115,32 +122,9 @@ class SamplePlan:
         return LARGE_MESH_CHUNK if self.in_face_order else DEFAULT_CHUNK
 
     def select(self, u):
-        """Index into the used-face list for each ``u`` (n,) in [0, 1): P(k) = area_k / total.
-
-        Same result as ``searchsorted(cdf, u * total, 'right')`` clipped to the last
-        face, so a draw that rounds up to the total never indexes past the end and a
-        face whose CDF step is zero is never chosen. The guide table answers most draws
-        outright; the others start their search at the right face and end in a step or two.
-        """
-        if _kernel is not None:
-            face = np.empty(len(u), dtype=np.int64)
-            _kernel.select(self.cdf, self.guide, np.ascontiguousarray(u, dtype=np.float64), 1, 0, face)
-            return face
-        cdf, last = self.cdf, len(self.cdf) - 1
-        face = self.guide[(u * len(self.guide)).astype(np.int64)]
-        todo = np.flatnonzero(face < 0)
-        i = -1 - face[todo]
-        x = u[todo] * cdf[-1]
-        for _ in range(4):
-            step = (cdf[i] <= x) & (i < last)
-            if not step.any():
-                break
-            i += step
-        else:
-            more = (cdf[i] <= x) & (i < last)
-            i[more] = np.minimum(np.searchsorted(cdf, x[more], side="right"), last)
-        face[todo] = i
-        return face
+        """Index into the used-face list for each ``u`` (n,) in [0, 1): P(k) = area_k / total
+        (:func:`select`)."""
+        return select(self.cdf, self.guide, u)
 
     def draw(self, start: int, stop: int, seed: int, want_bary: bool = False) -> RawChunk:
         """Points ``start`` to ``stop`` of the random sequence for ``seed`` (the random
@@ -229,6 +213,36 @@ class SamplePlan:
             bary[:, 1:] = b
             bary[:, 0] = 1.0 - b[:, 0] - b[:, 1]  # >= 0 exactly: the warp keeps b1 + b2 <= 1
         return RawChunk(start, points, face, instance, bary)
+
+
+def select(cdf, guide, u):
+    """Index into ``cdf`` (m,) float64 for each ``u`` (n,) in [0, 1), by its
+    :func:`_guide_table` ``guide``: P(k) = (cdf[k] - cdf[k - 1]) / cdf[-1].
+
+    Same result as ``searchsorted(cdf, u * total, 'right')`` clipped to the last entry,
+    so a draw that rounds up to the total never indexes past the end and an entry whose
+    CDF step is zero is never chosen. The guide table answers most draws outright; the
+    others start their search at the right entry and end in a step or two.
+    """
+    if _kernel is not None:
+        index = np.empty(len(u), dtype=np.int64)
+        _kernel.select(cdf, guide, np.ascontiguousarray(u, dtype=np.float64), 1, 0, index)
+        return index
+    last = len(cdf) - 1
+    index = guide[(u * len(guide)).astype(np.int64)]
+    todo = np.flatnonzero(index < 0)
+    i = -1 - index[todo]
+    x = u[todo] * cdf[-1]
+    for _ in range(4):
+        step = (cdf[i] <= x) & (i < last)
+        if not step.any():
+            break
+        i += step
+    else:
+        more = (cdf[i] <= x) & (i < last)
+        i[more] = np.minimum(np.searchsorted(cdf, x[more], side="right"), last)
+    index[todo] = i
+    return index
 
 
 def _corner_points(tri, rows, b, points):

@@ -196,6 +196,19 @@ def cofactors(a):
     return out
 
 
+def normal_transforms(matrices):
+    """(K, 3, 3) float64 normal transform of each (4, 4) matrix or None (rows of None
+    matrices are left zero): cof(A) = det(A) inv(A)^T, times sign(det A), which is
+    |det| inv(A)^T, the transform that keeps normals outward under mirrors (glTF flips
+    winding then)."""
+    out = np.zeros((len(matrices), 3, 3))
+    moved = [k for k, m in enumerate(matrices) if m is not None]
+    if moved:
+        a = np.stack([matrices[k][:3, :3] for k in moved])
+        out[moved] = cofactors(a) * np.where(np.linalg.det(a) < 0, -1.0, 1.0)[:, None, None]
+    return out
+
+
 def transformed_columns(m, v):
     """The columns of ``v @ m[k, :3, :3].T (+ m[k, :3, 3])`` for every matrix of a stack:
     m (k, 3, 3) or (k, 3|4, 4), v (n, 3) -> [x, y, z], each (k, n) float64, with the

@@ -25,7 +25,7 @@ from ..sampling.plan import RawChunk, SamplePlan, apply_matrix
 
 VOLUME_DRAWS = 8  # part, 3 box coordinates, 4 uniforms for 3 Gaussians (Box-Muller)
 STREAM_KEY = 0x766F6C756D65  # "volume": keys the volume stream apart from the surface one
-LABELS = ("sdf", "inside", "winding", "closest", "face", "object")
+LABELS = ("sdf", "inside", "winding", "closest", "face", "object", "sharp")
 PARITY_RAYS = 5  # rays a point for --sign parity: the majority outvotes two grazing rays
 
 
@@ -87,13 +87,16 @@ class VolumeSource:
     """Points in the sampling box and near the surface (see the module docstring).
 
     surface: the run's surface source (its point ``i`` is the surface point of a near
-    point ``i``); box (2, 3) and sigmas in world units."""
+    point ``i``); box (2, 3) and sigmas in world units; edge_sigmas: the sigmas of the near
+    points whose surface point is on a sharp edge (``--near-edges``; default: ``sigmas``),
+    shared as ``sigmas`` are."""
 
-    def __init__(self, surface, count: int, seed: int, box, sigmas=(), box_share: float = 1.0):
+    def __init__(self, surface, count: int, seed: int, box, sigmas=(), box_share: float = 1.0, edge_sigmas=None):
         self.surface, self.count, self.seed = surface, int(count), seed
         self.area = surface.area
         self.box = np.asarray(box, dtype=np.float64)
         self.sigmas = np.asarray(sigmas, dtype=np.float64)
+        self.edge_sigmas = None if edge_sigmas is None else np.asarray(edge_sigmas, dtype=np.float64)
         self.box_share = float(box_share) if len(self.sigmas) else 1.0
         self.kept = None  # not a thinned source
         self.stats = None
@@ -104,11 +107,20 @@ class VolumeSource:
         lo, hi = self.box
         points = lo + u[:, 1:4] * (hi - lo)
         near = np.flatnonzero(part >= 0)
-        if len(near):
-            base = self.surface.draw(start, stop).points[near]
-            points[near] = base + gaussians(u[near, 4:8]) * self.sigmas[part[near]][:, None]
         n = stop - start
-        return RawChunk(start, points, np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64), None)
+        sharp = None
+        if len(near):
+            surface = self.surface.draw(start, stop)
+            sigma = self.sigmas[part[near]]
+            if surface.sharp is not None:  # --edges: the near points of edge points are sharp
+                sharp = np.zeros(n, dtype=bool)
+                sharp[near] = surface.sharp[near]
+                if self.edge_sigmas is not None:
+                    on_edge = np.flatnonzero(sharp[near])
+                    sigma[on_edge] = self.edge_sigmas[parts_of(u[near[on_edge], 0], self.box_share,
+                                                               len(self.edge_sigmas))]
+            points[near] = surface.points[near] + gaussians(u[near, 4:8]) * sigma[:, None]
+        return RawChunk(start, points, np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64), None, sharp)
 
 
 class VolumeLabels:
@@ -170,6 +182,8 @@ class VolumeLabels:
                 out["face"] = self.face[face].astype(np.int32)
             elif name == "object":
                 out["object"] = self.instance[face].astype(np.int32)
+            elif name == "sharp":
+                out["sharp"] = np.zeros(len(p), np.uint8) if raw.sharp is None else raw.sharp.astype(np.uint8)
             else:
                 raise ScatterError(f"attribute '{name}' is not a volume attribute")
         return out

@@ -135,7 +135,7 @@ def reason(exc) -> str:
 @dataclasses.dataclass
 class PointSet:
     """``points`` (m, 3) float64, ``attributes`` name -> (m, k) or (m,) array (``color``
-    (m, 3) uint8, ``normal`` (m, 3), ``inside`` (m,), ``sdf`` (m,)), ``total``: the points
+    (m, 3) uint8, ``normal`` (m, 3), ``inside`` (m,), ``sdf`` (m,), ``sharp`` (m,)), ``total``: the points
     in the file (m <= total when decimated), ``up_axis``: "Z" or "Y"."""
 
     points: np.ndarray
@@ -162,7 +162,7 @@ def from_columns(path, columns, total, up_axis="Z"):
         attributes["normal"] = np.stack([np.asarray(columns[n], dtype=np.float64) for n in NORMAL_NAMES], axis=1)
     if all(n in columns for n in COLOR_NAMES):
         attributes["color"] = np.stack([np.asarray(columns[n]) for n in COLOR_NAMES], axis=1).astype(np.uint8)
-    for name in ("inside", "sdf"):
+    for name in ("inside", "sdf", "sharp"):
         if name in columns:
             attributes[name] = np.asarray(columns[name], dtype=np.float64)
     return PointSet(points, attributes, total, up_axis)
