@@ -150,18 +150,22 @@ def random_meshes():
                      st.lists(st.booleans(), min_size=30, max_size=30))
 
 
-@given(random_meshes())
-def test_the_kernel_finds_the_edges_numpy_finds(mesh):
+@given(random_meshes(), st.sampled_from(["1", "3", "7"]))
+def test_the_kernel_finds_the_edges_numpy_finds(mesh, threads):
+    """Fuzzed triangle lists, on several thread counts (more threads than vertices too):
+    the kernel's arrays are its NumPy twin's."""
     coords, faces, valid = mesh
     v = np.array(coords, float)
     f = np.array(faces, np.int64) % len(v)
     ok = np.array(valid[: len(f)], bool)
     normals = face_normals(v, f)
-    for limit in (np.inf, 0.9):
-        kernel = sharp.edge_slots(v, f, ok, normals, limit)
-        twin = sharp._numpy_edge_slots(v, f, ok, normals, limit)
-        for field in ("head", "second", "count", "rest"):
-            assert np.array_equal(getattr(kernel, field), getattr(twin, field)), (field, limit)
+    with pytest.MonkeyPatch.context() as m:
+        m.setenv("SCATTER_THREADS", threads)
+        for limit in (np.inf, 0.9):
+            kernel = sharp.edge_slots(v, f, ok, normals, limit)
+            twin = sharp._numpy_edge_slots(v, f, ok, normals, limit)
+            for field in ("head", "second", "count", "rest"):
+                assert np.array_equal(getattr(kernel, field), getattr(twin, field)), (field, limit)
 
 
 def test_the_kernel_refuses_an_index_out_of_range():
