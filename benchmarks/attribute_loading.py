@@ -16,17 +16,16 @@ after a warm-up, `load_surface(path, plain=True, smooth=True, color|uv=True)` ag
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+from testkit.benchargs import options, work_folder  # noqa: E402
 
 ATTRS = {"ply": "color,smooth-normal", "obj": "uv,smooth-normal"}
 
@@ -98,17 +97,11 @@ def loads(paths, runs):
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--subdivisions", type=int, default=8)
-    ap.add_argument("--dir", default=None, help="keep the generated meshes here (default: a temporary directory)")
-    args = ap.parse_args()
-    with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(args.dir or tmp)
-        folder.mkdir(parents=True, exist_ok=True)
+    args = options(runs=5, subdivisions=8, dir=None)
+    with work_folder(args.dir) as (folder, tmp):
         paths = build(folder, args.subdivisions)
         print(f"load average before: {open('/proc/loadavg').read().split()[:3]}")
-        whole_commands(paths, args.runs, Path(tmp))
+        whole_commands(paths, args.runs, tmp)
         loads(paths, args.runs)
         print(f"load average after: {open('/proc/loadavg').read().split()[:3]}")
 

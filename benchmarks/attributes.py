@@ -14,7 +14,6 @@ Times are medians of back-to-back warm runs (alternating the variants being comp
 
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import subprocess
@@ -26,6 +25,7 @@ import tracemalloc
 os.environ["NUMPY_MADVISE_HUGEPAGE"] = "0"
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
+from testkit.benchargs import options  # noqa: E402
 
 import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
@@ -77,11 +77,7 @@ def traced(fn):
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--count", type=int, default=1_000_000)
-    ap.add_argument("--instances", type=int, default=40)
-    a = ap.parse_args()
+    a = options(runs=5, count=1_000_000, instances=40)
     n = str(a.count)
     tmp = tempfile.mkdtemp(prefix="scatter-bench-")
     out = os.path.join(tmp, "out.npy")

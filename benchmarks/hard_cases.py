@@ -10,7 +10,6 @@
    on the first; exact rational check of a subset plus a float64 bound on the second).
 """
 
-import argparse
 import os
 import sys
 import time
@@ -18,6 +17,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from testkit.benchargs import options  # noqa: E402
 
 from scatter_cli.sampling.plan import SamplePlan  # noqa: E402
 from scatter_cli.loading.load import load_surface  # noqa: E402
@@ -100,11 +100,7 @@ def draws(n):
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--faces", type=int, default=10_000_000)
-    ap.add_argument("--points", type=int, default=100_000_000)
-    ap.add_argument("--draws", type=int, default=100_000_000)
-    args = ap.parse_args()
+    args = options(faces=10_000_000, points=100_000_000, draws=100_000_000)
     wide(args.faces, args.points)
     draws(args.draws)
 

@@ -18,18 +18,17 @@ the baseline), CloudCompare and part 3 left out.
 
 from __future__ import annotations
 
-import argparse
 import os
 import shutil
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+from testkit.benchargs import options, work_folder  # noqa: E402
 
 FORMATS = [  # (label, suffix, trimesh export options)
     ("binary PLY", "ply", {}),
@@ -175,18 +174,12 @@ def part_small_files(paths, runs):
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--runs", type=int, default=5)
-    ap.add_argument("--small", type=int, default=300)
-    ap.add_argument("--dir", default=None, help="keep the generated meshes here (default: a temporary directory)")
-    ap.add_argument("--no-cloudcompare", action="store_true")
-    ap.add_argument("--formats", help="comma-separated labels, e.g. 'ASCII STL,binary STL'")
-    args = ap.parse_args()
+    args = options(runs=5, small=300, dir=None, no_cloudcompare=False,
+                   formats=(None, "comma-separated labels, e.g. 'ASCII STL,binary STL'"))
     chosen = None if args.formats is None else {"binary PLY", *(f.strip() for f in args.formats.split(","))}
     if chosen and chosen - {label for label, _, _ in FORMATS}:
-        ap.error(f"unknown formats: {', '.join(sorted(chosen - {label for label, _, _ in FORMATS}))}")
-    with tempfile.TemporaryDirectory() as work:
-        folder = Path(args.dir or work)
+        sys.exit(f"unknown formats: {', '.join(sorted(chosen - {label for label, _, _ in FORMATS}))}")
+    with work_folder(args.dir) as (folder, work):
         cc = not args.no_cloudcompare and not chosen and shutil.which("CloudCompare") is not None
         paths = {k: p for k, p in big_files(folder / "big").items() if not chosen or k in chosen}
         part_whole_commands(paths, args.runs, cc, work)

@@ -87,7 +87,7 @@ def markdown_report(report):
              f"- date: {report['date']}",
              f"- command: `{report['command']}`",
              f"- machine: {report['machine']}",
-             f"- all figures from this one run; medians of back-to-back warm runs after one "
+             "- all figures from this one run; medians of back-to-back warm runs after one "
              "warm-up run (\"first run\" is the warm-up)", ""]
     lines += ["## Tools", "", "| tool | available | version | note |", "|---|---|---|---|"]
     for name, tool in report["tools"].items():

@@ -25,18 +25,17 @@ triangle meshes (icospheres), a quad mesh (the polygon path) and the instancer:
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+from testkit.benchargs import options, work_folder  # noqa: E402
 
 PROTO_SUBDIVISIONS = 2  # 320 faces
 
@@ -205,16 +204,8 @@ def part_memory(folder):
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--instances", type=int, default=10000)
-    ap.add_argument("--dir", default=None, help="keep the generated files here (default: a temporary directory)")
-    ap.add_argument("--skip-speed", action="store_true")
-    ap.add_argument("--skip-memory", action="store_true")
-    args = ap.parse_args()
-    with tempfile.TemporaryDirectory() as work:
-        folder = Path(args.dir or work)
-        folder.mkdir(parents=True, exist_ok=True)
+    args = options(runs=3, instances=10000, dir=None, skip_speed=False, skip_memory=False)
+    with work_folder(args.dir) as (folder, work):
         print(f"load average at start: {os.getloadavg()[0]:.1f}")
         if not args.skip_speed:
             part_speed(folder, args.instances, args.runs, work)

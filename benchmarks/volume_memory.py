@@ -10,7 +10,6 @@ memory (ru_maxrss) and time, and the ratio of the peaks. Target: the peak at 2*1
 
 import argparse
 import os
-import resource
 import subprocess
 import sys
 import tempfile

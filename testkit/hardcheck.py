@@ -118,6 +118,18 @@ def triangles_mesh(tri):
     return trimesh.Trimesh(tri.reshape(-1, 3), np.arange(len(tri) * 3).reshape(-1, 3), process=False)
 
 
+def awkward_mesh(seed):
+    """(vertices (n, 3), faces (m, 3)): random faces with repeated corners, collinear
+    corners, huge and tiny coordinates and non-finite vertices."""
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(400, 3)) * rng.choice([1e-300, 1.0, 1e150, 1e300], (400, 1))
+    v[:3] = [[0, 0, 0], [1, 1, 1], [2, 2, 2]]
+    v[5], v[6] = np.nan, [np.inf, 0, 0]
+    f = rng.integers(0, len(v), (3000, 3))
+    f[:4] = [[0, 1, 2], [3, 3, 4], [5, 7, 8], [6, 9, 10]]
+    return v, f
+
+
 def spread_triangles(exponents):
     """Right triangles with areas 10**e, one per exponent, each in its own plane z = index.
 

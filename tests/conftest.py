@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from hypothesis import settings
 
-from testkit.hardcheck import spread_triangles, triangles_mesh  # noqa: F401 (the tests' mesh builders)
+from testkit.hardcheck import awkward_mesh, spread_triangles, triangles_mesh  # noqa: F401 (the tests' mesh builders)
 
 # Property tests explore a fixed sequence of examples: a CI run is reproducible.
 settings.register_profile("scatter", derandomize=True, database=None, deadline=None)

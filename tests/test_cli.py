@@ -5,7 +5,7 @@ import re
 import numpy as np
 import pytest
 
-from .conftest import popen_user, run_scatter, run_user, scatter_command, spread_triangles, triangles_mesh
+from .conftest import popen_user, run_scatter, run_user, scatter_command
 
 
 def assert_one_line_error(proc, code, *words):

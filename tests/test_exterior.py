@@ -2,7 +2,6 @@
 an independent winding-number check, determinism, the missing extra)."""
 
 import json
-import sys
 
 import numpy as np
 import pytest

@@ -29,7 +29,7 @@ from scatter_cli.loading.load import load_surface
 from scatter_cli.surface.model import Geometry, Instance, Surface
 
 from . import exterior_scenes as es
-from .conftest import SAMPLES, spread_triangles, triangles_mesh
+from .conftest import SAMPLES, awkward_mesh, spread_triangles, triangles_mesh
 
 REQUIRED = os.environ.get("SCATTER_REQUIRE_KERNELS", "") not in ("", "0")
 
@@ -105,18 +105,6 @@ def face_order_case(name):
             f + "-parts": np.concatenate([getattr(p, f) for p in parts]).tobytes() for f in fields}
 
     return run
-
-
-def awkward_mesh(seed):
-    """(vertices (n, 3), faces (m, 3)): random faces with repeated corners, collinear
-    corners, huge and tiny coordinates and non-finite vertices."""
-    rng = np.random.default_rng(seed)
-    v = rng.normal(size=(400, 3)) * rng.choice([1e-300, 1.0, 1e150, 1e300], (400, 1))
-    v[:3] = [[0, 0, 0], [1, 1, 1], [2, 2, 2]]
-    v[5], v[6] = np.nan, [np.inf, 0, 0]
-    f = rng.integers(0, len(v), (3000, 3))
-    f[:4] = [[0, 1, 2], [3, 3, 4], [5, 7, 8], [6, 9, 10]]
-    return v, f
 
 
 def normals_case(seed, center):

@@ -26,7 +26,7 @@ def write_ply(path, vertices, faces, order="<", vertex_type="f4", index_type="i4
     names = {"f4": "float", "f8": "double", "i4": "int", "u4": "uint", "u1": "uchar", "i2": "short", "u2": "ushort"}
     fmt = fmt or {"<": "binary_little_endian", ">": "binary_big_endian"}[order]
     vprops = [("x", vertex_type), ("y", vertex_type), ("z", vertex_type)] + list(extra_vertex)
-    header = [f"ply", f"format {fmt} 1.0", "comment made by test_plyread", f"element vertex {len(vertices)}"]
+    header = ["ply", f"format {fmt} 1.0", "comment made by test_plyread", f"element vertex {len(vertices)}"]
     header += [f"property {names[t]} {n}" for n, t in vprops]
     before = [(n, t) for n, t, first, *_ in face_props if first]
     after = [(n, t) for n, t, first, *_ in face_props if not first]

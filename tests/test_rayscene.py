@@ -18,7 +18,7 @@ from scatter_cli.sampling.exterior import rayscene
 from scatter_cli.loading.load import load_surface
 
 from . import exterior_scenes as es
-from .conftest import run_scatter
+from .conftest import awkward_mesh, run_scatter
 
 pytest.importorskip("embreex")
 REQUIRED = os.environ.get("SCATTER_REQUIRE_KERNELS", "") not in ("", "0")
@@ -102,18 +102,6 @@ def test_exterior_output_is_the_same_without_the_kernels(tmp_path):
         run_scatter("sample", path, "--exterior", "-n", "20000", "-a", "normal,face", "-o", out, check=True, env=env)
         outs.append(out.read_bytes())
     assert outs[0] == outs[1]
-
-
-def awkward_mesh(seed):
-    """(vertices (n, 3), faces (m, 3)): random faces with repeated corners, collinear
-    corners, huge and tiny coordinates and non-finite vertices."""
-    rng = np.random.default_rng(seed)
-    v = rng.normal(size=(400, 3)) * rng.choice([1e-300, 1.0, 1e150, 1e300], (400, 1))
-    v[:3] = [[0, 0, 0], [1, 1, 1], [2, 2, 2]]
-    v[5], v[6] = np.nan, [np.inf, 0, 0]
-    f = rng.integers(0, len(v), (3000, 3))
-    f[:4] = [[0, 1, 2], [3, 3, 4], [5, 7, 8], [6, 9, 10]]
-    return v, f
 
 
 def numpy_normals(v, f):

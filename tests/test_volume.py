@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 import scatter_cli
-from scatter_cli.volume.source import VolumeSource, gaussians, parts_of, sampling_box, volume_uniforms, world_triangles
+from scatter_cli.volume.source import gaussians, parts_of, sampling_box, volume_uniforms, world_triangles
 from scatter_cli.sampling.plan import SamplePlan
 from scatter_cli.loading.load import load_surface
 from scatter_cli.stats.chisquare import chi2_gof
