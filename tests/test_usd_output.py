@@ -14,8 +14,8 @@ pxr = pytest.importorskip("pxr")
 from pxr import Usd, UsdGeom  # noqa: E402
 
 
-def write(path, attributes, n=400, precision="auto", mesh=SAMPLES / "boxtextured.glb"):
-    run = api.prepare(mesh, n, attributes=attributes, seed=9, precision=precision)
+def write(path, attributes, n=400, precision="auto", mesh=SAMPLES / "boxtextured.glb", **options):
+    run = api.prepare(mesh, n, attributes=attributes, seed=9, precision=precision, **options)
     report = write_samples(run.chunks(), path, "usd", run.layout, run.count, spacing=0.05)
     return run.collect(), report
 
@@ -93,6 +93,47 @@ def test_float64_points_sit_under_a_double_translate(tmp_path):
     local = np.asarray(UsdGeom.Points(stage.GetPrimAtPath("/Scatter/Points")).GetPointsAttr().Get(), np.float64)
     error = np.abs(local + world[3, :3] - s.points).max()
     assert error < 1e-3 < np.abs(s.points.astype(np.float32) - s.points).max()
+
+
+# the labels of volume runs and sharp: key -> (primvar, its USD type)
+LABELS = {"sdf": ("sdf", "double[]"), "inside": ("inside", "uchar[]"), "winding": ("winding", "double[]"),
+          "closest": ("closest", "point3f[]"), "face": ("face_index", "int[]"), "object": ("object_index", "int[]"),
+          "sharp": ("sharp", "uchar[]")}
+
+
+def check_labels(path, s):
+    """Every label of ``s`` is a vertex primvar of its own in the stage at ``path``, with
+    ``s``'s values (``closest`` as float32 points in the space of ``points``)."""
+    stage = Usd.Stage.Open(str(path))
+    prim = stage.GetPrimAtPath("/Scatter/Points")
+    translate = np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(0))[3, :3]
+    for key, (name, type_name) in LABELS.items():
+        primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
+        assert primvar and primvar.GetInterpolation() == "vertex" and str(primvar.GetTypeName()) == type_name, name
+        values = np.asarray(primvar.Get())
+        if key == "closest":
+            local = s.closest - translate
+            assert np.abs(values + translate - s.closest).max() <= np.spacing(np.abs(local).max().astype(np.float32))
+        else:
+            np.testing.assert_array_equal(values, s.attributes[key], err_msg=name)
+    assert validation_errors(stage) == []
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_volume_labels_and_sharp_are_primvars(tmp_path, precision):
+    s, _ = write(tmp_path / "v.usda", ",".join(LABELS), near=(0.05,), box_share=0.2, edges=0.5, precision=precision)
+    assert s.inside.any() and not s.inside.all() and s.sharp.any()  # the values tell points apart
+    check_labels(tmp_path / "v.usda", s)
+
+
+@pytest.mark.parametrize("key", LABELS)
+def test_a_stage_without_one_label_fails_that_check(tmp_path, monkeypatch, key):
+    import scatter_cli.writers.usd as usdwrite
+
+    monkeypatch.setattr(usdwrite, "PRIMVARS", {k: v for k, v in usdwrite.PRIMVARS.items() if k != key})
+    s, _ = write(tmp_path / "v.usda", ",".join(LABELS), near=(0.05,), box_share=0.2, edges=0.5)
+    with pytest.raises(AssertionError):
+        check_labels(tmp_path / "v.usda", s)
 
 
 def test_a_count_beyond_memory_is_refused_and_leaves_no_file(tmp_path, monkeypatch):

@@ -24,25 +24,30 @@ def _segment_distance(p, a, b):
     return np.sqrt(((a + t[..., None] * ab - p) ** 2).sum(-1))
 
 
+def triangle_distance(points, triangles):
+    """Distance from points (..., 3) to triangles (..., 3, 3), broadcast against each
+    other: (...) float64."""
+    a, b, c = triangles[..., 0, :], triangles[..., 1, :], triangles[..., 2, :]
+    n = np.cross(b - a, c - a)
+    n /= np.sqrt((n * n).sum(-1))[..., None]
+    h = ((points - a) * n).sum(-1)
+    q = points - h[..., None] * n
+    # inside the triangle when q is on the inner side of all three edges
+    inside = np.ones(h.shape, dtype=bool)
+    for u, v in ((a, b), (b, c), (c, a)):
+        inside &= (np.cross(v - u, q - u) * n).sum(-1) >= 0
+    edges = np.minimum(np.minimum(_segment_distance(points, a, b), _segment_distance(points, b, c)),
+                       _segment_distance(points, c, a))
+    return np.where(inside, np.abs(h), edges)
+
+
 def exact_distance(triangles, points, block=128):
     """(n,) float64 distance from each point to the nearest triangle, and (n,) its index
     (the lowest among ties within 1e-12 of the distance)."""
     dist = np.empty(len(points))
     face = np.empty(len(points), dtype=np.int64)
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    n = np.cross(b - a, c - a)
-    n /= np.sqrt((n * n).sum(-1))[:, None]
     for s in range(0, len(points), block):
-        p = points[s : s + block, None, :]
-        h = ((p - a) * n).sum(-1)
-        q = p - h[..., None] * n
-        # inside the triangle when q is on the inner side of all three edges
-        inside = np.ones(h.shape, dtype=bool)
-        for u, v in ((a, b), (b, c), (c, a)):
-            inside &= (np.cross(v - u, q - u) * n).sum(-1) >= 0
-        edges = np.minimum(np.minimum(_segment_distance(p, a, b), _segment_distance(p, b, c)),
-                           _segment_distance(p, c, a))
-        d = np.where(inside, np.abs(h), edges)
+        d = triangle_distance(points[s : s + block, None, :], triangles)
         best = d.min(axis=1)
         dist[s : s + block] = best
         face[s : s + block] = (d <= best[:, None] * (1 + 1e-12) + 1e-300).argmax(axis=1)

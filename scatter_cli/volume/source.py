@@ -147,9 +147,21 @@ class VolumeLabels:
 
             self._winding_tree = WindingTree(triangles)
 
+    def stored_points(self, points, real_dtype):
+        """The world points (n, 3) float64 that the labels of ``points`` (n, 3), world
+        points, belong to: the points as written. In float32, those the run writes,
+        ``((points - offset) * scale).astype(float32)``, mapped back to world space."""
+        if np.dtype(real_dtype) != np.float32:
+            return points
+        if self.frame is None:
+            return points.astype(np.float32).astype(np.float64)
+        offset, scale = self.frame
+        return ((points - offset) * scale).astype(np.float32).astype(np.float64) / scale + offset
+
     def make(self, raw: RawChunk, real_dtype) -> dict:
-        """dict key -> array for the asked-for names; ``raw.points`` are world points."""
-        p = raw.points
+        """dict key -> array for the asked-for names; ``raw.points`` are world points,
+        labelled as written (:meth:`stored_points`)."""
+        p = self.stored_points(raw.points, real_dtype)
         out = {}
         distance = closest = face = winding = inside = None
         if self.needs_distance:

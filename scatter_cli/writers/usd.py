@@ -8,7 +8,9 @@ centre of the sampled box) so large coordinates keep their precision.
 
 Layout under the default prim ``/Scatter`` (an Xform):
 - ``Points``: ``points``, primvars ``normals``, ``displayColor``/``displayOpacity``, ``st``,
-  ``face_index``, ``bary``, ``object_index`` (vertex interpolation), ``extent``;
+  and every other column under its own name (``face_index``, ``bary``, ``object_index``,
+  ``sharp``; volume labels ``sdf``, ``inside``, ``winding``, and ``closest``, a point3f
+  array in the space of ``points``), all of vertex interpolation; ``extent``;
 - with orient, ``Instancer``: ``positions``, ``orientations`` (quath, what every reader
   knows) and ``orientationsf`` (quatf, full precision), ``protoIndices`` all 0, the same
   primvars per instance, and ``prototypes`` -> ``Instancer/Prototypes/Placeholder``, a
@@ -30,15 +32,25 @@ from .pointfiles import COLOR_NAMES, NORMAL_NAMES, IsMesh, reason, stride
 # Bytes per point of each value as the stage holds it (float32 values, colour as rgb and
 # opacity, orient as quatf, quath and a protoIndices int), once as a Vt array and once
 # serialised; the gathered NumPy arrays come on top (see check_fits).
-USD_BYTES = {"points": 12, "normal": 12, "color": 16, "uv": 8, "face": 4, "bary": 12, "object": 4, "orient": 28}
+USD_BYTES = {"points": 12, "normal": 12, "color": 16, "uv": 8, "face": 4, "bary": 12, "object": 4, "orient": 28,
+             "closest": 12}
 DEFAULT_UP_AXIS, DEFAULT_METERS_PER_UNIT = "Y", 1.0
-PRIMVARS = {  # key -> (primvar name, Sdf value type name, columns taken)
-    "normal": ("normals", "Normal3fArray", slice(0, 3)),
-    "bary": ("bary", "Float3Array", slice(0, 3)),
-    "uv": ("st", "TexCoord2fArray", slice(0, 2)),
-    "face": ("face_index", "IntArray", None),
-    "object": ("object_index", "IntArray", None),
+# key -> (primvar name, Sdf value type name, NumPy type of its values): every column but
+# the points, the colour and orient. Values are float32 as USD's points are, but for the
+# labels computed in float64 whatever the points' precision (sdf, winding).
+PRIMVARS = {
+    "normal": ("normals", "Normal3fArray", np.float32),
+    "bary": ("bary", "Float3Array", np.float32),
+    "uv": ("st", "TexCoord2fArray", np.float32),
+    "face": ("face_index", "IntArray", np.int32),
+    "object": ("object_index", "IntArray", np.int32),
+    "sdf": ("sdf", "DoubleArray", np.float64),
+    "inside": ("inside", "UCharArray", np.uint8),
+    "winding": ("winding", "DoubleArray", np.float64),
+    "closest": ("closest", "Point3fArray", np.float32),  # in the points' space: under their translate
+    "sharp": ("sharp", "UCharArray", np.uint8),
 }
+POSITIONS = ("points", "closest")  # float64 ones are stored relative to the translate
 
 
 def _pxr(doing="USD output"):
@@ -67,7 +79,7 @@ def bytes_per_point(layout):
     total = 0
     for key, cols, dt in layout:
         gathered = dt.itemsize * len(cols)
-        total += gathered * (2 if key == "points" and dt == np.float64 else 1) + 2 * USD_BYTES.get(key, gathered)
+        total += gathered * (2 if key in POSITIONS and dt == np.float64 else 1) + 2 * USD_BYTES.get(key, gathered)
     return total
 
 
@@ -119,12 +131,12 @@ class UsdWriter(Writer):
         root = UsdGeom.Xform.Define(stage, "/Scatter")
         stage.SetDefaultPrim(root.GetPrim())
         points = self.data["points"]
+        centre = None
         if points.dtype == np.float64 and len(points):
             lo, hi = points.min(axis=0), points.max(axis=0)
             centre = 0.5 * (lo + hi)
             root.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*centre.tolist()))
-            points = points - centre
-        local = np.ascontiguousarray(points, dtype=np.float32)
+        local = self._local("points", centre)
         extent = Vt.Vec3fArray.FromNumpy(np.stack([local.min(axis=0), local.max(axis=0)]) if len(local)
                                          else np.zeros((2, 3), np.float32))
         if "orient" in self.data:
@@ -133,8 +145,13 @@ class UsdWriter(Writer):
             prim = UsdGeom.Points.Define(stage, "/Scatter/Points")
             prim.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(local))
             prim.CreateExtentAttr(extent)
-        self._primvars(prim)
+        self._primvars(prim, centre)
         return stage
+
+    def _local(self, key, centre):
+        """(n, 3) float32 positions of the column ``key`` under the root's translate ``centre`` (or None)."""
+        values = self.data[key]
+        return np.ascontiguousarray(values if centre is None else values - centre, dtype=np.float32)
 
     def _instancer(self, stage, local, extent):
         Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
@@ -157,19 +174,16 @@ class UsdWriter(Writer):
         inst.CreatePrototypesRel().SetTargets([cone.GetPath()])
         return inst
 
-    def _primvars(self, prim):
+    def _primvars(self, prim, centre):
         Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
         api = UsdGeom.PrimvarsAPI(prim)
         vertex = UsdGeom.Tokens.vertex
-        for key, (name, type_name, cols) in PRIMVARS.items():
+        for key, (name, type_name, kind) in PRIMVARS.items():
             if key not in self.data:
                 continue
-            values = self.data[key] if cols is None else self.data[key][:, cols]
+            values = self._local(key, centre) if key in POSITIONS else self.data[key]
+            values = np.ascontiguousarray(values[:, 0] if values.shape[1] == 1 else values, dtype=kind)
             value_type = getattr(Sdf.ValueTypeNames, type_name)
-            if cols is None:
-                values = np.ascontiguousarray(values[:, 0], dtype=np.int32)
-            else:
-                values = np.ascontiguousarray(values, dtype=np.float32)
             api.CreatePrimvar(name, value_type, vertex).Set(value_type.type.pythonClass.FromNumpy(values))
         if "color" in self.data:
             c = self.data["color"].astype(np.float32) / 255.0
