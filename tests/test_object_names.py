@@ -75,8 +75,7 @@ def test_a_name_listed_by_one_run_selects_in_the_next():
     import json
 
     listed = json.loads(run_scatter("info", TRUCK, "--json", check=True).stdout)["objects"]
-    second = json.loads(run_scatter("info", TRUCK, "--json", check=True).stdout)["objects"]
-    assert [o["name"] for o in listed] == [o["name"] for o in second]
+    assert [o["name"] for o in listed] == [o["name"] for o in describe(str(TRUCK))["objects"]]
     proc = run_scatter("sample", TRUCK, "-n", 20, "--object", listed[1]["name"], "-a", "object", check=True)
     rows = proc.stdout.decode().splitlines()[1:]
     assert {int(r.rsplit(",", 1)[1]) for r in rows} == {listed[1]["index"]}
