@@ -12,6 +12,7 @@ from scatter_cli.loading import load
 from scatter_cli.loading.load import load_surface
 from testkit.gltfwrite import GLB
 
+from .batchtools import sample_in_process
 from .conftest import SAMPLES, run_scatter
 
 TRUCK = SAMPLES / "cesiummilktruck.glb"  # node 0 places a mesh of three primitives; nodes 2 and 4 are unnamed
@@ -70,14 +71,15 @@ def test_info_object_and_object_index_agree(scene):
 
 
 @pytest.mark.slow
-def test_a_name_listed_by_one_run_selects_in_the_next():
-    """What the issue saw: `scatter info` in one process, `--object` in another."""
+def test_a_name_listed_by_one_run_selects_in_the_next(tmp_path):
+    """What the issue saw: `scatter info` in one process, `--object` in another (this one)."""
     import json
 
     listed = json.loads(run_scatter("info", TRUCK, "--json", check=True).stdout)["objects"]
     assert [o["name"] for o in listed] == [o["name"] for o in describe(str(TRUCK))["objects"]]
-    proc = run_scatter("sample", TRUCK, "-n", 20, "--object", listed[1]["name"], "-a", "object", check=True)
-    rows = proc.stdout.decode().splitlines()[1:]
+    out = tmp_path / "one.csv"
+    sample_in_process(["sample", str(TRUCK), "-n", "20", "--object", listed[1]["name"], "-a", "object", "-o", str(out)])
+    rows = out.read_text().splitlines()[1:]
     assert {int(r.rsplit(",", 1)[1]) for r in rows} == {listed[1]["index"]}
 
 
