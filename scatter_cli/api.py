@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from .errors import ScatterError
 from .run.attributes import AttributeMaker
 from .run.bounds import choose_precision, in_frame, normal_frame, sampled_bounds
 from .run.options import SampleOptions
@@ -105,7 +106,7 @@ class Run:
     def collect(self) -> Samples:
         """All the points of the run's span in one :class:`Samples` (memory grows with the count)."""
         n = self.size
-        points = np.empty((n, 3), dtype=self.dtype)
+        points = _hold(n, (n, 3), self.dtype)
         attributes = {}
         # Preallocated arrays filled chunk by chunk: no concatenation copy at the end
         # (docs/sampling.md: collecting).
@@ -115,13 +116,24 @@ class Run:
             points[pos : pos + k] = chunk.points
             for key, arr in chunk.attributes.items():
                 if key not in attributes:
-                    attributes[key] = np.empty((n,) + arr.shape[1:], dtype=arr.dtype)
+                    attributes[key] = _hold(n, (n,) + arr.shape[1:], arr.dtype)
                 attributes[key][pos : pos + k] = arr
             pos += k
         for key, cols, dt in self.layout[1:]:  # count 0: no chunk, but every asked-for array
             if key not in attributes:
                 attributes[key] = np.empty((n, len(cols)) if len(cols) > 1 else (n,), dtype=dt)
         return Samples(points, attributes, self.info)
+
+
+def _hold(count, shape, dtype):
+    """An empty array of ``shape`` for the ``count`` points of a run; one that memory
+    cannot hold is a ScatterError that says what to do instead."""
+    try:
+        return np.empty(shape, dtype)
+    except (MemoryError, ValueError):  # ValueError: more bytes than an array can have
+        size = np.prod(shape, dtype=float) * np.dtype(dtype).itemsize
+        raise ScatterError(f"{count:,} points do not fit in memory ({size / 1e9:,.0f} GB for one of their arrays): "
+                           "write them to a file (scatter_cli.write) or sample fewer") from None
 
 
 def prepare(mesh, count=None, *, options: SampleOptions | None = None, warn=None, **keywords) -> Run:

@@ -14,7 +14,7 @@ import typer
 from .core import process
 from .errors import ScatterUsageError
 from .loading.formats import INPUT_FORMATS
-from .run.options import DEFAULT_COUNT, SampleOptions, whole_number
+from .run.options import DEFAULT_COUNT, PADDING, SIGNS, SampleOptions, whole_number
 from .run.fields import ATTRIBUTES
 from .writers.formats import ASCII_FORMATS, FORMATS
 
@@ -71,7 +71,7 @@ def _declared(
     fmt: Annotated[Optional[str], typer.Option("-f", "--format", metavar="FORMAT", help=f"{'|'.join(FORMATS)} [default: from the suffix of the output; CSV on standard output].")] = None,
     ascii: Annotated[bool, typer.Option("--ascii", help=f"ASCII instead of binary ({' or '.join(f.upper() for f in ASCII_FORMATS)}).")] = False,
     seed: Annotated[int, typer.Option("--seed", metavar="S", help="Random seed: same input, options and seed give the same bytes.")] = D.seed,
-    attributes: Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help=f"Comma list of extra columns: {', '.join(ATTRIBUTES)}.")] = None,
+    attributes: Annotated[Optional[List[str]], typer.Option("-a", "--attributes", metavar="LIST", help=f"Comma list of extra columns: {', '.join(ATTRIBUTES)} (repeated -a add up).")] = None,
     weight: Annotated[Optional[str], typer.Option("--weight", metavar="SOURCE", help="Density proportional to area times vertex-color:r|g|b|a or texture:r|g|b|a.")] = D.weight,
     objects: Annotated[Optional[List[str]], typer.Option("--object", metavar="NAME", help="Sample only this scene object (repeatable); for a USD stage, a prim path: the meshes at or below it.")] = D.objects,
     poisson: Annotated[bool, typer.Option("--poisson", help="Thin to a Poisson-disk set of exactly N points with the largest spacing reached.")] = D.poisson,
@@ -88,8 +88,8 @@ def _declared(
     volume: Annotated[bool, typer.Option("--volume", help="Points in space around the mesh, not on it: uniform in the padded box (labels: -a sdf,inside,winding,closest).")] = D.volume,
     near: Annotated[Optional[str], typer.Option("--near", metavar="SIGMA[,SIGMA...]", help="Near-surface points: a surface point plus a Gaussian offset of standard deviation SIGMA (implies --volume).")] = None,
     box_share: Annotated[Optional[float], typer.Option("--box-share", metavar="F", help="Share of the points uniform in the box, the rest near [default: 1 with --volume, 0 with --near].")] = D.box_share,
-    padding: Annotated[float, typer.Option("--padding", metavar="P", help="The box: the surface's bounding box grown by P times its largest side.")] = D.padding,
-    sign: Annotated[str, typer.Option("--sign", metavar="winding|parity", help="Inside when the generalized winding number is >= 0.5 (robust on open meshes), or by a majority of ray parities.")] = D.sign,
+    padding: Annotated[Optional[float], typer.Option("--padding", metavar="P", help=f"The box: the surface's bounding box grown by P times its largest side [default: {PADDING}].")] = D.padding,
+    sign: Annotated[Optional[str], typer.Option("--sign", metavar="winding|parity", help=f"Inside when the generalized winding number is >= 0.5 (robust on open meshes), or by a majority of ray parities [default: {SIGNS[0]}].")] = D.sign,
     edges: Annotated[Optional[str], typer.Option("--edges", metavar="F", help="Share (0..1) of the surface points drawn on sharp edges instead of faces (with --near: of the near points' surface points).")] = None,
     sharp_angle: Annotated[Optional[float], typer.Option("--sharp-angle", metavar="DEG", help="With --edges: an edge is sharp when its faces' normals are at least DEG degrees apart [default: 15]; boundary and non-manifold edges always are.")] = D.sharp_angle,
     near_edges: Annotated[Optional[str], typer.Option("--near-edges", metavar="SIGMA[,SIGMA...]", help="With --edges and --near: the sigmas of the near points of edge points [default: the --near sigmas].")] = None,
@@ -189,7 +189,7 @@ def info(
 @app.command()
 def check(
     mesh: Annotated[str, typer.Argument(metavar="MESH", help="Mesh file.")],
-    count: Annotated[int, typer.Option("-n", "--count", metavar="N", help="Points per sampler.")] = 100000,
+    count: Annotated[int, typer.Option("-n", "--count", metavar="N", parser=_count, help="Points per sampler.")] = 100000,
     seed: Annotated[int, typer.Option("--seed", metavar="S", help="Random seed.")] = 0,
     poisson: Annotated[bool, typer.Option("--poisson", help="Compare Poisson-disk sets of exactly N points.")] = False,
     radius: Annotated[Optional[float], typer.Option("--radius", metavar="R", help="Compare Poisson-disk sets of minimum distance R.")] = None,
@@ -303,7 +303,7 @@ def merge(
     "count", "density", "seed", "attributes", "weight", "objects", "poisson", "radius", "method", "exterior", "stable",
     "normalize", "edges", "sharp_angle",
     count=Annotated[Optional[int], typer.Option("-n", "--count", metavar="N", parser=_count, help="Points sampled per mesh [default: 20000].")],
-    attributes=Annotated[Optional[str], typer.Option("-a", "--attributes", metavar="LIST", help="Attributes sampled on meshes, which colour them [default: normal, and sharp with --edges].")],
+    attributes=Annotated[Optional[List[str]], typer.Option("-a", "--attributes", metavar="LIST", help="Attributes sampled on meshes, which colour them (repeated -a add up) [default: normal, and sharp with --edges].")],
 )
 def preview(
     inputs: Annotated[Optional[List[str]], typer.Argument(metavar="INPUT...", help="Point files, meshes and folders (searched recursively).", show_default=False)] = None,

@@ -47,11 +47,17 @@ def reference(tmp_path, paths, *extra):
 
 
 def sample_in_process(argv):
+    assert command_in_process(argv) == 0, argv
+
+
+def command_in_process(argv):
+    """``scatter ARGV`` through the command's entry point in this process: its exit code
+    (the signal handlers it installs are put back)."""
     from scatter_cli.cli import main
 
     handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
-        assert main(argv) == 0, argv
+        return main(argv)
     finally:
         for s, h in handlers.items():
             signal.signal(s, h)

@@ -208,3 +208,29 @@ def test_the_job_queued_behind_a_killed_one_goes_to_the_next_worker(tmp_path, me
     assert "SIGKILL" in records[1]["error"]
     assert outputs(out) == ref
     assert no_temporary_files(tmp_path)
+
+
+class Killed:
+    """A child process that ended by SIGKILL."""
+
+    def wait(self, timeout=None):
+        return -9
+
+
+@pytest.mark.parametrize("broken", [False, True])
+def test_out_of_memory_is_guessed_only_when_the_kernel_killed_for_memory(monkeypatch, broken):
+    """A SIGKILL says "(out of memory?)" only when the kernel's OOM kills went up while the
+    child ran (a kill by hand is no such sign); the broken variant, the old rule, says it
+    for every SIGKILL."""
+    if broken:
+        monkeypatch.setattr(worker.WorkerProcess, "memory_likely", lambda self: True)
+    kills = [7]
+    monkeypatch.setattr(worker, "oom_kills", lambda: kills[0])
+    child = worker.WorkerProcess.__new__(worker.WorkerProcess)
+    child.proc, child.killed_for, child.oom_kills = Killed(), None, worker.oom_kills()
+    by_hand = child._lost()
+    kills[0] += 1
+    by_the_kernel = child._lost()
+    assert str(by_the_kernel) == "its worker was killed by SIGKILL (out of memory?)" and by_the_kernel.crashed
+    assert (str(by_hand) == "its worker was killed by SIGKILL") != broken
+

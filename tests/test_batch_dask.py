@@ -10,15 +10,16 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 
 import pytest
 
 import scatter_cli
-from scatter_cli.engines import dask_engine
+from scatter_cli.engines import dask_engine, worker
 
 from .conftest import ROOT, SAMPLES, popen_user, scatter_command
 from .batchtools import (HANG, Feeder, alive, collection, outputs, parent_of, reference, run_elsewhere,
-                         sample_warnings, warning_lines, warning_meshes)
+                         sample_in_process, sample_warnings, warning_lines, warning_meshes)
 
 distributed = pytest.importorskip("distributed")
 
@@ -73,10 +74,10 @@ def cluster(tmp_path_factory):
     home = tmp_path_factory.mktemp("dask-worker-home")
     client, address, workers, procs = start_cluster(2, home=home)
     try:
-        yield client, address, workers, home
+        yield client, address, workers, home  # a test may add workers to ``workers``
     finally:
         client.close()
-        stop(procs)
+        stop(procs + [w for w in workers if w not in procs])
 
 
 @pytest.fixture(scope="module")
@@ -345,3 +346,112 @@ def test_warnings_name_their_mesh_on_both_engines(tmp_path, cluster):
     quiet = run_elsewhere(tmp_path, "batch", "in", "-o", "quiet/{stem}.ply", *options, "--engine", "dask",
                           "--scheduler", address, "-q")
     assert quiet.returncode == 0 and quiet.stderr == b""
+
+
+def temporary_files(folder):
+    return sorted(p.name for p in folder.rglob("*.part"))
+
+
+@pytest.mark.slow
+def test_a_worker_killed_while_writing_leaves_no_temporary_file(tmp_path, cluster, monkeypatch):
+    """A Dask worker killed while its sampling process writes a mesh's output: the task
+    runs again on another worker and writes it, and the temporary file the killed one left
+    is removed when the batch ends. The first reader of the FIFO gets a large triangle
+    (tens of millions of points at the density asked, so the kill comes mid-write), the
+    second the small mesh. The broken variant is the batch's state just before its end
+    removes the temporary files: the killed worker's is there, and nothing else removes it."""
+    client, address, workers, home = cluster
+    fifo = tmp_path / "in" / "fifo.npy.obj"
+    fifo.parent.mkdir()
+    os.mkfifo(fifo)
+    out = tmp_path / "out"
+    density = ["--density", "18000"]  # about 300 points on narrow_triangles.obj
+    sample_in_process(["sample", str(SAMPLES / "narrow_triangles.obj"), *density, "-o", str(tmp_path / "ref.npy")])
+    at_end = []
+    clear = dask_engine.BatchOutputs.clear_temps
+    monkeypatch.setattr(dask_engine.BatchOutputs, "clear_temps",
+                        lambda self: at_end.append(temporary_files(out)) or clear(self))
+    result = {}
+    thread = threading.Thread(target=lambda: result.update(records=scatter_cli.batch(
+        [fifo], str(out / "{stem}"), client=client, density=18000)))
+    thread.start()
+    feeder = Feeder(fifo, over=lambda: not thread.is_alive())
+    try:
+        killed = parent_of(feeder.next_reader())
+        feeder.feed(b"v 0 0 0\nv 47 0 0\nv 0 47 0\nf 1 2 3\n")
+        while not temporary_files(out):
+            assert thread.is_alive()
+            time.sleep(0.02)
+        if sum(map(alive, (w.pid for w in workers))) < 2:  # an earlier test killed the other
+            workers.append(start_worker(address, home))
+        os.kill(killed, signal.SIGKILL)
+        again = feeder.next_reader()
+        assert parent_of(again) != killed and alive(parent_of(again))
+        feeder.feed((SAMPLES / "narrow_triangles.obj").read_bytes())
+    finally:
+        feeder.close()
+    thread.join(HANG)
+    assert [r["status"] for r in result["records"]] == ["written"]
+    assert outputs(out) == {"fifo.npy": (tmp_path / "ref.npy").read_bytes()}
+    [left] = at_end  # the files there when the batch's end clears them: the killed worker's
+    assert len(left) == 1 and left[0].startswith(".fifo.npy.") and left[0].endswith(".part"), left
+    assert temporary_files(tmp_path) == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("broken", [False, True])
+def test_a_killed_sampling_process_is_retried_as_allowed_failures_says(tmp_path, cluster, meshes, monkeypatch,
+                                                                      broken):
+    """The sampling process of a Dask worker killed by hand: the task runs again (Dask's
+    allowed-failures, 3 here) and the mesh is written. The broken variant, no retry, fails
+    the mesh at once, and its message does not guess memory (a kill by hand)."""
+    client, address, workers, home = cluster
+    base, paths, ref = meshes
+    if broken:
+        monkeypatch.setattr(dask_engine, "allowed_failures", lambda client: 0)
+    fifo = tmp_path / "in" / "fifo.npy.obj"
+    fifo.parent.mkdir()
+    os.mkfifo(fifo)
+    thread, result = batch_in_thread(client, [fifo], tmp_path / "out")
+    feeder = Feeder(fifo, over=lambda: not thread.is_alive())
+    try:
+        os.kill(feeder.next_reader(), signal.SIGKILL)
+        if not broken:
+            feeder.next_reader()
+            feeder.feed((SAMPLES / "narrow_triangles.obj").read_bytes())
+    finally:
+        feeder.close()
+    thread.join(HANG)
+    [record] = result["records"]
+    if broken:
+        assert (record["status"], record["error"]) == \
+            ("failed", f"{fifo}: its worker was killed by SIGKILL, 1 time (Dask's allowed-failures)")
+        return
+    assert record["status"] == "written" and dask_engine.allowed_failures(client) == 3
+    assert outputs(tmp_path / "out") == {"fifo.npy": ref["narrow_triangles.npy"]}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("broken", [False, True])
+@pytest.mark.parametrize("engine", ["dask", "local"])
+def test_a_rerun_of_either_engine_removes_what_a_killed_run_left(tmp_path, cluster, meshes, monkeypatch, engine,
+                                                                  broken):
+    """Outputs complete, and beside two of them the temporary files of a killed run: a
+    rerun with --skip-existing skips every mesh and removes those files. The broken
+    variants: the Dask batch's end clearing nothing, the local lanes clearing nothing."""
+    client, address, workers, home = cluster
+    base, paths, ref = meshes
+    out = tmp_path / "out"
+    out.mkdir()
+    for name, data in ref.items():
+        (out / name).write_bytes(data)
+    left = [f".{name}.k1ll3d00.part" for name in sorted(ref)[:2]]
+    for name in left:
+        (out / name).write_bytes(b"half")
+    if broken:
+        target = dask_engine.BatchOutputs if engine == "dask" else worker.StaleTemps
+        monkeypatch.setattr(target, "clear_temps" if engine == "dask" else "clear", lambda *a: None)
+    where = {"client": client} if engine == "dask" else {"jobs": 1}
+    records = scatter_cli.batch(paths, str(out / "{stem}"), skip_existing=True, count=300, **where)
+    assert [r["status"] for r in records] == ["skipped"] * len(paths)
+    assert outputs(out) == dict(ref, **({name: b"half" for name in left} if broken else {}))

@@ -13,11 +13,12 @@ import time
 
 import numpy as np
 
-from ..errors import ScatterError
+from ..errors import ScatterError, ScatterUsageError
 from ..loading.load import load_surface
 from ..surface.model import Surface, corners, doubled_areas
 
 ALPHA = 1e-3
+MIN_COUNT = 2  # the fewest points a comparison takes
 INSTALL_HINT = "scatter check needs pymeshlab and scipy: pip install pymeshlab scipy"
 
 
@@ -77,6 +78,8 @@ def run_check(mesh, count=100_000, seed=0, poisson=False, radius=None, sampler=N
     a line on standard error when it is a terminal.
     """
     out = out or (lambda line: print(line, file=sys.stdout))
+    if count < MIN_COUNT:
+        raise ScatterUsageError(f"-n must be at least {MIN_COUNT} (points of each sampler to compare), not {count}")
     try:
         import pymeshlab  # noqa: F401
         import scipy  # noqa: F401

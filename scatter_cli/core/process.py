@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import io
 import os
 import sys
 
@@ -78,11 +79,25 @@ def _malloc_tuned(env) -> bool:
     return "MALLOC_MMAP_THRESHOLD_" in env or "MALLOC_TRIM_THRESHOLD_" in env or "malloc" in env.get("GLIBC_TUNABLES", "")
 
 
+def whole_writes():
+    """Give standard output a buffered binary layer when it has none (``python -u``,
+    PYTHONUNBUFFERED). An unbuffered one hands each write to the OS once: when the
+    reader leaves in the middle of a large write, the OS takes part of it without an
+    error, the rest is dropped, and a last write ends the run with exit 0 instead of
+    141. A buffered one writes the rest and meets the broken pipe."""
+    stream = sys.stdout
+    if not isinstance(getattr(stream, "buffer", None), io.RawIOBase):
+        return
+    binary = open(stream.fileno(), "wb", closefd=False)  # fd 1 stays open with the original
+    sys.stdout = io.TextIOWrapper(binary, encoding=stream.encoding, errors=stream.errors, line_buffering=True)
+
+
 def run_command(command, argv):
     """Run the click ``command`` on ``argv``; returns the exit code (never raises)."""
     single_threaded_blas()
     install_signal_handlers()
     keep_freed_memory()
+    whole_writes()
     usage_error, click_error = _click_error_types()
     options = Options()
     try:

@@ -143,7 +143,7 @@ def _same_output(a, b):
     return os.path.normpath(os.path.abspath(a)) == os.path.normpath(os.path.abspath(b))
 
 
-def _check_batch_options(jobs, timeout, max_memory, engine):
+def _check_batch_options(jobs, timeout, max_memory, engine, scheduler):
     if jobs is not None and (not isinstance(jobs, int) or jobs < 1):
         raise ScatterUsageError(f"--jobs must be a positive integer, not {jobs!r}")
     if timeout is not None and not timeout > 0:
@@ -152,6 +152,8 @@ def _check_batch_options(jobs, timeout, max_memory, engine):
         raise ScatterUsageError(f"--max-memory must be a positive number of MB, not {max_memory!r}")
     if engine not in ENGINES:
         raise ScatterUsageError(f"unknown engine '{engine}' (choose from: {', '.join(ENGINES)})")
+    if scheduler is not None and engine != "dask":
+        raise ScatterUsageError("--scheduler needs --engine dask (the local engine has no scheduler)")
 
 
 def batch(inputs, output, *, jobs=None, skip_existing=False, timeout=None, max_memory=None, report=None,
@@ -187,7 +189,7 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
     started = time.monotonic()
     if client is not None:
         engine = "dask"
-    _check_batch_options(jobs, timeout, max_memory, engine)
+    _check_batch_options(jobs, timeout, max_memory, engine, scheduler)
     options = (options or SampleOptions()).check()
     if fmt is not None:
         fmt = infer_format(None, fmt)

@@ -4,17 +4,21 @@ A task is a pure function of its meshes' (input path, output path, format, skip)
 options: it samples each mesh to its output on the worker, atomically, and returns their
 report records, so Dask running it again after losing a worker writes the same bytes.
 Each Dask worker thread keeps a :class:`scatter_cli.engines.worker.Lane`, a long-lived child
-process, so a mesh that crashes it, runs past ``--timeout`` or past ``--max-memory``
-fails alone (a record with status ``failed``, which Dask does not retry) and the Dask
-worker lives on. Dask itself reruns the tasks of a worker that was lost, up to its
-``allowed-failures``; past that the task's meshes are run again one a task, and the one
-that still loses its workers is reported failed.
+process, so a mesh that runs past ``--timeout`` or past ``--max-memory`` fails alone (a
+record with status ``failed``, which Dask does not retry) and the Dask worker lives on.
+Dask itself reruns the tasks of a worker that was lost, up to its ``allowed-failures``,
+and a task whose child process was lost (killed from outside, or crashed) as many times;
+past that the task's meshes are run again one a task, and the one that still loses its
+workers is reported failed. Once every task is done, the command removes the temporary
+files beside the batch's outputs (what lost workers or earlier runs left): the workers'
+lanes live from batch to batch, so a listing of theirs would miss what came later.
 
 Dask is imported here only: the optional extra ``dask``.
 """
 
 from __future__ import annotations
 
+import array
 import itertools
 import os
 import threading
@@ -78,19 +82,21 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
     tasks = {}  # future -> its jobs [(index, input, output, fmt, skip)], until its records are in
     given = {}  # index -> (input, output) as given, for the jobs in flight
     size = GroupSize()
+    outputs = BatchOutputs()
     try:
         threads = max(1, sum(client.nthreads().values()))
         window = WINDOW_PER_THREAD * threads
+        retries = allowed_failures(client)
         pending = distributed.as_completed(loop=client.loop)
-        jobs = _task_jobs(jobs_iter, fmt, skip_existing, given)
+        jobs = _task_jobs(jobs_iter, fmt, skip_existing, given, outputs)
 
         def finish(job, rec):
             done(job[0], as_given(rec, *given.pop(job[0])))
 
         def submit(groups, keys):
             if groups:
-                futures = client.map(sample_group, groups, key=keys, pure=False, setup=setup, timeout=timeout,
-                                     max_memory=max_memory)
+                futures = client.map(sample_group, groups, key=keys, pure=False, retries=retries, setup=setup,
+                                     timeout=timeout, max_memory=max_memory)
                 tasks.update(zip(futures, groups))
                 pending.update(futures)
 
@@ -116,11 +122,12 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
                     elif len(group) > 1:
                         alone.extend([job] for job in group)
                     else:
-                        finish(group[0], _lost(got, group[0][1], group[0][2], distributed))
+                        finish(group[0], _lost(got, group[0][1], group[0][2], retries, distributed))
                 submit(alone, [f"scatter-{batch_id}-{g[0][0]}-alone" for g in alone])
                 ready = []
             if pending.count() <= window // 2:
                 refill()
+        outputs.clear_temps()  # (every task is done: none of this batch's is still writing)
     except BaseException:
         client.cancel(list(tasks))
         raise
@@ -129,14 +136,16 @@ def run_dask(jobs_iter, setup, fmt, *, client=None, scheduler=None, timeout=None
             client.close()
 
 
-def _task_jobs(jobs_iter, fmt, skip_existing, given):
+def _task_jobs(jobs_iter, fmt, skip_existing, given, outputs):
     """The jobs as tasks take them: ``(index, input, output, format, skip)``, the paths
-    absolute; ``given[index]`` keeps the paths as ``jobs_iter`` spelled them."""
+    absolute; ``given[index]`` keeps the paths as ``jobs_iter`` spelled them, ``outputs``
+    (:class:`BatchOutputs`) each output."""
     from ..writers import infer_format
 
     for index, input, output in jobs_iter:
         given[index] = (input, output)
         target = os.path.abspath(output)
+        outputs.add(target)
         yield index, os.path.abspath(input), target, infer_format(output, fmt), skip_existing and os.path.isfile(target)
 
 
@@ -156,6 +165,39 @@ def as_given(rec, input, output):
     if rec.get("warnings"):
         rec["warnings"] = [respell(w) for w in rec["warnings"]]
     return rec
+
+
+class BatchOutputs:
+    """The outputs of a batch, one hash each, and their folders: where its end looks for
+    the temporary files of lost workers."""
+
+    def __init__(self):
+        self.folders = set()
+        self.hashes = array.array("q")
+
+    def add(self, path):
+        self.folders.add(os.path.dirname(path))
+        self.hashes.append(hash(path))
+
+    def __contains__(self, path):
+        return hash(path) in self.hashes  # a scan: asked only of the temporary files found
+
+    def clear_temps(self):
+        from .worker import remove_temps_of
+
+        remove_temps_of(self.folders, self.__contains__)
+
+
+def allowed_failures(client) -> int:
+    """The scheduler's ``allowed-failures``: how many times a task is run again after its
+    worker was lost, and so after its child process was (this client's setting where the
+    scheduler does not answer)."""
+    import dask
+
+    try:
+        return int(client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.allowed_failures))
+    except Exception:  # a scheduler that runs no function sent to it
+        return int(dask.config.get("distributed.scheduler.allowed-failures"))
 
 
 class GroupSize:
@@ -189,13 +231,15 @@ def _exception(future, distributed):
     return distributed.CancelledError(future.key)
 
 
-def _lost(exc, input, output, distributed):
-    """The failure record of a task that gave no record: its workers were lost, or it
-    could not run there."""
-    from .worker import name_the_file, record
+def _lost(exc, input, output, retries, distributed):
+    """The failure record of a task that gave no record: its workers or its child
+    processes were lost (the child's: ``retries`` + 1 times), or it could not run there."""
+    from .worker import WorkerLost, name_the_file, record
 
     if isinstance(exc, distributed.KilledWorker):
         why = f"the Dask worker sampling it was lost {exc.allowed_failures + 1} times (Dask's allowed-failures)"
+    elif isinstance(exc, WorkerLost):
+        why = f"{exc}, {retries + 1} time{'s' if retries else ''} (Dask's allowed-failures)"
     else:
         why = f"the Dask task failed: {type(exc).__name__}: {exc}"
     return record(input, output, "failed", name_the_file(why, input))
@@ -204,14 +248,14 @@ def _lost(exc, input, output, distributed):
 def sample_group(jobs, *, setup, timeout, max_memory):
     """The report records of the meshes ``jobs`` [(index, input, output, format, skip)], sampled
     one after another on this Dask worker (see :mod:`scatter_cli.engines.worker`)."""
-    from .worker import Lane
+    from .worker import KeptTemps, Lane
 
     lane = getattr(_local, "lane", None)
     key = (repr(setup), timeout, max_memory)
     if lane is None or lane.key != key:
         if lane is not None:
             lane.close()
-        lane = Lane(setup, None, timeout, max_memory)
+        lane = Lane(setup, None, timeout, max_memory, stale=KeptTemps(), crash_raises=True)
         lane.key = key
         _local.lane = lane
     records = []

@@ -44,7 +44,13 @@ _PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
 
 class WorkerLost(Exception):
-    """The child stopped before answering: the message says why (one line)."""
+    """The child stopped before answering: the message says why (one line). ``crashed``:
+    it died of itself or was killed from outside, not by its lane (a timeout, the memory
+    limit, an interrupted batch)."""
+
+    def __init__(self, message, crashed=False):
+        super().__init__(message)
+        self.crashed = crashed
 
 
 # ---------------------------------------------------------------- the child ----
@@ -165,6 +171,7 @@ class WorkerProcess:
                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0,
             )
         self.proc.stdin.write((json.dumps(setup) + "\n").encode())
+        self.oom_kills = oom_kills()  # the kernel's count when the child started
         self.ready = False
         self.killed_for = None
         self.unread = b""  # what the child answered past the last line read
@@ -181,7 +188,7 @@ class WorkerProcess:
         try:
             self.proc.stdin.write((json.dumps({"input": input, "output": output, "format": fmt}) + "\n").encode())
         except OSError:
-            raise WorkerLost(self._death()) from None
+            raise self._lost() from None
 
     def receive(self, timeout=None, max_memory=None, started=None):
         """The answer to the oldest job sent, which began at ``started`` (time.monotonic())."""
@@ -199,19 +206,19 @@ class WorkerProcess:
             if ready:
                 block = os.read(out.fileno(), 65536)
                 if not block:
-                    raise WorkerLost(self._death())
+                    raise self._lost()
                 self.unread += block
                 continue
             if self.killed_for:
-                raise WorkerLost(self._death())
+                raise self._lost()
             if timeout is not None and time.monotonic() - started > timeout:
                 self.kill(f"timed out after {timeout:g} s")
-                raise WorkerLost(self._death())
+                raise self._lost()
             if max_memory is not None:
                 rss = resident_bytes(self.proc.pid, private=True)
                 if rss > max_memory * 2**20:
                     self.kill(f"exceeded --max-memory {max_memory:g} MB (resident {rss / 2**20:.0f} MB)")
-                    raise WorkerLost(self._death())
+                    raise self._lost()
 
     def kill(self, reason="stopped"):
         self.killed_for = self.killed_for or reason
@@ -220,18 +227,25 @@ class WorkerProcess:
         except OSError:
             pass
 
-    def _death(self):
+    def _lost(self):
+        """The WorkerLost of the child's end, once it has ended."""
         code = self.proc.wait()
         if self.killed_for:
-            return self.killed_for
+            return WorkerLost(self.killed_for)
         if code < 0:
             try:
                 name = signal.Signals(-code).name
             except ValueError:
                 name = f"signal {-code}"
-            hint = " (out of memory?)" if -code == signal.SIGKILL else ""
-            return f"its worker was killed by {name}{hint}"
-        return f"its worker exited with status {code}"
+            hint = " (out of memory?)" if -code == signal.SIGKILL and self.memory_likely() else ""
+            return WorkerLost(f"its worker was killed by {name}{hint}", crashed=True)
+        return WorkerLost(f"its worker exited with status {code}", crashed=True)
+
+    def memory_likely(self):
+        """Whether memory is the likely cause of a SIGKILL: the kernel's OOM killer has
+        killed a process since the child started (a kill by hand is no such sign)."""
+        now = oom_kills()
+        return now is not None and self.oom_kills is not None and now > self.oom_kills
 
     def close(self):
         try:
@@ -350,6 +364,19 @@ def _close_files_from(low):
                 pass
 
 
+def oom_kills():
+    """How many processes the kernel's OOM killer has killed since boot (``oom_kill`` in
+    /proc/vmstat, a cgroup's limit included), or None where the system does not say."""
+    try:
+        with open("/proc/vmstat") as f:
+            for line in f:
+                if line.startswith("oom_kill "):
+                    return int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
 def resident_bytes(pid, private=False) -> int:
     """Resident memory of process ``pid`` in bytes; ``private``: only the pages it does not
     share (not libraries, nor what a forked worker still shares with the process that
@@ -401,20 +428,18 @@ class StaleTemps:
         folder, base = os.path.split(os.path.abspath(output))
         with self.lock:
             if folder not in self.folders:
-                self.folders[folder] = self._scan(folder)
+                self.folders[folder] = self.scan(folder)
             names = self.folders[folder].pop(base, ())
-        for name in names:
-            try:
-                os.unlink(os.path.join(folder, name))
-            except OSError:
-                pass
+        _unlink_all(folder, names)
 
-    def _scan(self, folder):
+    @classmethod
+    def scan(cls, folder):
+        """{output name: [its temporary files]} in ``folder``."""
         found = {}
         try:
             with os.scandir(folder) as it:
                 for entry in it:
-                    m = self.PATTERN.match(entry.name)
+                    m = cls.PATTERN.match(entry.name)
                     if m:
                         found.setdefault(m.group(1), []).append(entry.name)
         except OSError:
@@ -422,13 +447,45 @@ class StaleTemps:
         return found
 
 
+class KeptTemps:
+    """No clearing: the Dask engine's lanes, which live from batch to batch (a listing
+    taken in one batch misses what a lost worker left later); the command clears its
+    batch's temporary files once every task is done (:func:`remove_temps_of`)."""
+
+    def clear(self, output):
+        pass
+
+
+def _unlink_all(folder, names):
+    for name in names:
+        try:
+            os.unlink(os.path.join(folder, name))
+        except OSError:
+            pass
+
+
+def remove_temps_of(folders, ours):
+    """Delete the temporary files in ``folders`` of the outputs for which ``ours(path)``
+    is true: what a batch's workers left (a worker lost while writing) once its jobs are
+    done, one listing of each folder."""
+    for folder in folders:
+        for base, names in StaleTemps.scan(folder).items():
+            if ours(os.path.join(folder, base)):
+                _unlink_all(folder, names)
+
+
 class Lane:
     """Runs jobs one after another in a child, replacing it when a job kills it."""
 
-    def __init__(self, setup, env=None, timeout=None, max_memory=None, skip_existing=False, stale=None, worker=None):
+    def __init__(self, setup, env=None, timeout=None, max_memory=None, skip_existing=False, stale=None, worker=None,
+                 crash_raises=False):
         """``worker``: a :class:`WorkerProcess` to start with (later ones, after a job
-        killed its child, are started with ``python -m scatter_cli.engines.worker``)."""
+        killed its child, are started with ``python -m scatter_cli.engines.worker``).
+        ``crash_raises``: a child that crashed (:class:`WorkerLost`'s ``crashed``) raises
+        its WorkerLost from :meth:`run`, the jobs not yet answered dropped, instead of
+        failing its job (the Dask engine: Dask runs the task again)."""
         self.setup, self.env = setup, env
+        self.crash_raises = crash_raises
         self.timeout, self.max_memory = timeout, max_memory
         self.skip_existing = skip_existing
         self.stale = stale if stale is not None else StaleTemps()
@@ -503,6 +560,9 @@ class Lane:
             self.worker = None
             remove_temps(job[2])
             if self.stopped:
+                raise
+            if lost.crashed and self.crash_raises:
+                self.sent.clear()
                 raise
             for k, (queued, _) in enumerate(list(self.sent)[1:], 1):
                 self.sent[k] = (queued, self._send(queued))

@@ -13,6 +13,7 @@ words the error. The rules are in docs/loading.md.
 from __future__ import annotations
 
 import json
+import re
 import struct
 from collections import deque
 
@@ -232,10 +233,10 @@ class _Scene:
             prims = self.primitives[_index(child["mesh"], len(self.primitives))]
             if len(prims) == 1:
                 edges.append((frm, frames[b], matrix, prims[0]))
-            elif prims:  # the node, then one identity child per primitive (trimesh names them randomly)
+            elif prims:  # the node, then one identity child per primitive
                 edges.append((frm, frames[b], matrix, None))
                 for k, p in enumerate(prims):
-                    frame = f"{frames[b]}_{k}"
+                    frame = primitive_frame(frames[b], k)
                     if frame in names:
                         raise _Unsure
                     edges.append((frames[b], frame, _EYE, p))
@@ -315,6 +316,34 @@ def _fix_rigid(matrix, max_deviance=1e-5):
             raise _Unsure  # trimesh's assertion fails
         return repaired
     return matrix
+
+
+def primitive_frame(node, k):
+    """The frame of primitive ``k`` of the node named ``node`` whose mesh has several
+    primitives: named by its place in the file. (trimesh names it ``node_`` and six
+    random hex digits, another name on every load.)"""
+    return f"{node}_{k}"
+
+
+_TRIMESH_SUFFIX = re.compile(r"_[0-9a-f]{6}")  # what trimesh appends to a primitive's frame
+
+
+def primitive_frames(graph) -> dict:
+    """{frame: name} for the primitive frames of a glTF scene that trimesh loaded
+    (``graph``: its SceneGraph), named as this reader names them (:func:`primitive_frame`):
+    the children trimesh hangs under a node without geometry, one per primitive of the
+    node's mesh, numbered in the order it placed them."""
+    data = graph.transforms.node_data
+    taken, counts, renamed = set(data), {}, {}
+    for node, children in graph.transforms.children.items():
+        if "geometry" in data.get(node, {}):
+            continue
+        frames = [c for c in children if c.startswith(node) and _TRIMESH_SUFFIX.fullmatch(c[len(node):])
+                  and "geometry" in data[c]]
+        for k, frame in enumerate(frames):
+            renamed[frame] = unique_name(primitive_frame(node, k), taken, counts)
+            taken.add(renamed[frame])
+    return renamed
 
 
 def unique_name(start, contains, counts):

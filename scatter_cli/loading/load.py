@@ -27,6 +27,8 @@ from .formats import INPUT_FORMATS, STDIN_FORMATS, TABLE
 from .sourcefile import check_readable, stream_bytes
 from ..surface.model import Geometry, Instance, Surface, Unsampled, select_objects
 
+GLTF_FORMATS = ("glb", "gltf")
+
 # Called before trimesh is first imported, when set: the command line imports it with
 # SciPy hidden (lean_trimesh). Nothing imports trimesh before a mesh needs it.
 import_trimesh = None
@@ -170,8 +172,15 @@ def _plain_surface(path, parts):
 
 
 def _trimesh_surface(job):
-    """Any format trimesh loads, read whole (attributes, materials, scene graph)."""
-    return _finished(_from_trimesh(_trimesh_file(job), job.name), job.name, job.objects)
+    """Any format trimesh loads, read whole (attributes, materials, scene graph); the
+    frames trimesh names at random in a glTF scene renamed by their place in the file."""
+    loaded = _trimesh_file(job)
+    frames = None
+    if job.format in GLTF_FORMATS and hasattr(loaded, "graph"):
+        from .gltf import primitive_frames
+
+        frames = primitive_frames(loaded.graph)
+    return _finished(_from_trimesh(loaded, job.name, frames), job.name, job.objects)
 
 
 def _obj_surface(job):
@@ -218,7 +227,7 @@ def _trimesh_file(job):
             file_obj = io.BytesIO(stream_bytes(path, f"{path}: no data in the pipe"))
     if file_type not in trimesh.available_formats():
         raise ScatterUsageError(f"{path}: unknown mesh format '{file_type}' (try one of: {', '.join(INPUT_FORMATS)})")
-    if file_type in ("glb", "gltf"):
+    if file_type in GLTF_FORMATS:
         from .draco import check_decoder
 
         file_type = _gltf_kind(file_obj, file_type)
@@ -271,12 +280,13 @@ def _check_self_contained(name, file_obj):
                            "standard input cannot carry: pass the .gltf's path, or a .glb")
 
 
-def _from_trimesh(loaded, name) -> Surface:
+def _from_trimesh(loaded, name, frames=None) -> Surface:
+    """The Surface of a trimesh object; ``frames``: {frame: name} renaming scene nodes."""
     trimesh = _import_trimesh()
     if isinstance(loaded, trimesh.Trimesh):
         return Surface([_geometry(name, loaded, name)], [Instance(os.path.basename(name), 0)], name)
     if isinstance(loaded, trimesh.Scene):
-        return _from_scene(loaded, name)
+        return _from_scene(loaded, name, frames or {})
     raise ScatterError(f"{name}: not a surface mesh (trimesh loaded a {type(loaded).__name__})")
 
 
@@ -305,24 +315,25 @@ def checked_geometry(name, vertices, faces, source, mesh=None) -> Geometry:
     return Geometry(name, vertices, faces, mesh)
 
 
-def _from_scene(scene, source) -> Surface:
+def _from_scene(scene, source, frames) -> Surface:
     import trimesh
 
     geometries, index, instances, unsampled = [], {}, [], []
     for node in scene.graph.nodes_geometry:
+        name = frames.get(node, str(node))
         try:
             matrix, geom_name = scene.graph[node]
         except (ValueError, KeyError, AssertionError) as exc:  # a graph trimesh cannot walk, e.g. a cycle
             raise ScatterError(f"{source}: malformed scene graph at node '{node}' ({str(exc).strip()[:200]})") from None
         mesh = scene.geometry.get(geom_name)
         if not isinstance(mesh, trimesh.Trimesh):  # points, lines: no surface
-            unsampled.append(Unsampled(str(node), f"a {type(mesh).__name__}, not a mesh"))
+            unsampled.append(Unsampled(name, f"a {type(mesh).__name__}, not a mesh"))
             continue
         if geom_name not in index:
             index[geom_name] = len(geometries)
             geometries.append(_geometry(geom_name, mesh, source))
         matrix = np.asarray(matrix, dtype=np.float64)
-        instances.append(Instance(str(node), index[geom_name], None if np.array_equal(matrix, np.eye(4)) else matrix))
+        instances.append(Instance(name, index[geom_name], None if np.array_equal(matrix, np.eye(4)) else matrix))
     return Surface(geometries, instances, source, is_scene=True, unsampled=unsampled)
 
 

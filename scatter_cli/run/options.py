@@ -27,6 +27,7 @@ PRECISIONS = ("auto", "float32", "float64")
 SIGNS = ("winding", "parity")
 NORMALIZATIONS = ("none", "unit-cube", "unit-sphere")
 DEFAULT_COUNT = 10_000
+PADDING = 0.1  # --padding when not given
 # attributes that only a surface point has (usage errors with --volume)
 SURFACE_ONLY = ("normal", "smooth-normal", "bary", "color", "uv", "orient")
 # attributes that only a volume point has (usage errors without --volume)
@@ -62,8 +63,8 @@ class SampleOptions:
     volume: bool = False
     near: tuple | None = None
     box_share: float | None = None
-    padding: float = 0.1
-    sign: str = "winding"
+    padding: float | None = None  # None: PADDING
+    sign: str | None = None  # None: SIGNS[0], the winding number
     normalize: str = "none"
     edges: float | str = 0.0
     sharp_angle: float | None = None
@@ -74,6 +75,7 @@ class SampleOptions:
             object.__setattr__(self, name, value)
 
         set_("attributes", attribute_names(self.attributes))
+        set_("count", whole_count(self.count))
         if self.objects is not None:  # one name, or a sequence of them
             set_("objects", (self.objects,) if isinstance(self.objects, str) else tuple(self.objects) or None)
         if self.shard is not None:
@@ -100,6 +102,16 @@ class SampleOptions:
     def volume_run(self) -> bool:
         """Points in space (``--volume``, or ``--near`` which implies it)."""
         return self.volume or self.near is not None
+
+    @property
+    def box_padding(self) -> float:
+        """``--padding`` (PADDING when not given)."""
+        return PADDING if self.padding is None else self.padding
+
+    @property
+    def sign_mode(self) -> str:
+        """``--sign`` (the winding number when not given)."""
+        return SIGNS[0] if self.sign is None else self.sign
 
     @property
     def edge_fraction(self) -> fractions.Fraction:
@@ -130,6 +142,8 @@ class SampleOptions:
         _check_edges(self)
         if self.volume_run:
             _check_volume(self)
+        else:
+            _check_surface(self)
         if self.count is not None:
             check_sobol_count(self.method, self.count)
             if self.poisson:
@@ -192,9 +206,18 @@ def _check_volume(o: SampleOptions):
         raise ScatterUsageError(f"--near must be a comma list of positive standard deviations, not {text!r}")
     if o.box_share is not None and not (_is_real(o.box_share) and 0 <= o.box_share <= 1):
         raise ScatterUsageError(f"--box-share must be a number from 0 to 1, not {o.box_share!r}")
-    if not (_is_real(o.padding) and o.padding >= 0):
+    if not (_is_real(o.box_padding) and o.box_padding >= 0):
         raise ScatterUsageError(f"--padding must be a number >= 0, not {o.padding!r}")
-    _choice("sign", o.sign, SIGNS)
+    _choice("sign", o.sign_mode, SIGNS)
+
+
+def _check_surface(o: SampleOptions):
+    """The options of a volume run, given to a surface run: they would be ignored."""
+    given = [n for n, value in (("--box-share", o.box_share), ("--padding", o.padding), ("--sign", o.sign))
+             if value is not None]
+    if given:
+        raise ScatterUsageError(f"{' and '.join(given)} {'is' if len(given) == 1 else 'are'} for volume runs only: "
+                                "add --volume or --near")
 
 
 def _check_edges(o: SampleOptions):
@@ -270,11 +293,21 @@ def check_sobol_count(method, count, error=ScatterUsageError):
 
 
 def attribute_names(text_or_list) -> tuple:
-    """``"normal,face"`` or a sequence -> the names, stripped, lower case, first occurrence kept."""
+    """``"normal,face"`` or a sequence of names or of such lists (``-a`` repeated) -> the
+    names, stripped, lower case, first occurrence kept."""
     if not text_or_list:
         return ()
-    items = text_or_list.split(",") if isinstance(text_or_list, str) else list(text_or_list)
-    return tuple(dict.fromkeys(str(s).strip().lower() for s in items if str(s).strip()))
+    lists = [text_or_list] if isinstance(text_or_list, str) else list(text_or_list)
+    items = [name for text in lists for name in str(text).split(",")]
+    return tuple(dict.fromkeys(s.strip().lower() for s in items if s.strip()))
+
+
+def whole_count(value):
+    """A count as the Python API takes it: a float that is a whole number (``1e6``, as the
+    command line takes it) as that integer; anything else as given (check() refuses it)."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
 
 
 def whole_number(text: str) -> int:
@@ -302,8 +335,10 @@ def _shard_pair(shard):
 
 
 def _numbers(values):
-    """``"0.1,0.02"`` or a sequence -> tuple of floats; a text that is not stays as given."""
+    """``"0.1,0.02"``, a sequence or one number -> tuple of floats; a text that is not stays as given."""
     items = values.split(",") if isinstance(values, str) else values
+    if isinstance(items, numbers.Real):  # one sigma
+        items = (items,)
     try:
         return tuple(float(v) for v in items)
     except (TypeError, ValueError):

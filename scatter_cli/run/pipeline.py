@@ -25,7 +25,7 @@ def volume_source(surface, o: SampleOptions, info: dict, warn=None):
     (:mod:`scatter_cli.volume.source`): near points from the surface source of ``o`` (its faces,
     weight and objects), box points in the padded box, labelled against the unweighted
     sampled surface; sigmas, padding and density in the output's frame."""
-    from .bounds import normal_frame
+    from .bounds import in_frame, normal_frame
     from ..volume.source import VolumeLabels, VolumeSource, sampling_box, world_triangles
 
     t = time.perf_counter()
@@ -34,7 +34,7 @@ def volume_source(surface, o: SampleOptions, info: dict, warn=None):
     triangles, instance, face = world_triangles(shape)
     frame = normal_frame(shape, o.normalize)
     scale = 1.0 if frame is None else frame[1]
-    box = sampling_box(triangles, o.padding)
+    box = sampling_box(triangles, o.box_padding)
     share = (0.0 if o.near else 1.0) if o.box_share is None else o.box_share
     count = DEFAULT_COUNT if o.count is None else o.count
     if o.density is not None:
@@ -43,10 +43,10 @@ def volume_source(surface, o: SampleOptions, info: dict, warn=None):
                       False, info, warn)
     edge_sigmas = None if o.near_edges is None else [s / scale for s in o.near_edges]
     source = VolumeSource(near, count, o.seed, box, [s / scale for s in o.near or ()], share, edge_sigmas)
-    labels = VolumeLabels(triangles, instance, face, o.attributes, o.sign, frame)
+    labels = VolumeLabels(triangles, instance, face, o.attributes, o.sign_mode, frame)
     info.update(source=surface.source, count=count, area=area, faces=surface.face_count, faces_used=len(triangles),
-                seed=o.seed, volume={"box": box.tolist(), "box_share": share, "near": list(o.near or ()),
-                                     "sign": o.sign})
+                seed=o.seed, volume={"box": in_frame(box, frame).tolist(), "box_share": share, "near": list(o.near or ()),
+                                     "sign": o.sign_mode})
     info["timings"]["plan"] = time.perf_counter() - t
     return source, labels, plan, frame, box
 

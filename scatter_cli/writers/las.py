@@ -151,12 +151,7 @@ class LasWriter(Writer):
 
     def header(self):
         laspy = _laspy()
-        try:
-            seekable = self.stream.seekable()
-        except (AttributeError, OSError):
-            seekable = False
-        if not seekable:
-            raise ScatterError("LAS/LAZ output needs a file (-o PATH): its header is completed at the end")
+        need_seekable(self.stream)
         backend = laspy.LazBackend.LazrsParallel if self.compress else None
         self._las = laspy.open(self.stream, mode="w", header=self.header_, do_compress=self.compress,
                                laz_backend=backend, closefd=False)
@@ -320,6 +315,17 @@ def rgb_257(color, rg, bb, words):
     np.multiply(high, 257, out=bb, casting="unsafe")
 
 
+def need_seekable(stream):
+    """Refuse a stream that cannot seek (standard output, a pipe): laspy completes the
+    header at the end."""
+    try:
+        seekable = stream.seekable()
+    except (AttributeError, OSError):
+        seekable = False
+    if not seekable:
+        raise ScatterError("LAS/LAZ output needs a file (-o PATH): its header is completed at the end")
+
+
 def file_descriptor(stream):
     """The file descriptor behind ``stream``, its buffer flushed, or None (an in-memory stream)."""
     try:
@@ -443,6 +449,7 @@ def write_joined(paths, first, stream, compress, chunk=1 << 20):
     header.system_identifier = first.system_identifier
     set_crs(header, crs_of(first))
     _no_extra_statistics(header)
+    need_seekable(stream)
     backend = laspy.LazBackend.LazrsParallel if compress else None
     with laspy.open(stream, mode="w", header=header, do_compress=compress, laz_backend=backend,
                     closefd=False) as writer:
