@@ -39,6 +39,7 @@ def describe(mesh, input_format=None, exterior=False, sharp_angle=None) -> dict:
         "non_finite_faces": int(np.sum(~good)),
         "area_ratio": float(positive.max() / positive.min()) if len(positive) else None,
         "attributes": _attributes(surface),
+        "needs_pillow": _unread_texture(surface),
         "geometries": len(surface.geometries),
         "instances": len(surface.instances),
         "objects": [
@@ -193,9 +194,20 @@ def _attributes(surface) -> dict:
     return has
 
 
+def _unread_texture(surface) -> bool:
+    """Whether the file names a texture that could not be read for want of Pillow."""
+    from ..loading.textures import named_textures, pillow_missing
+
+    return pillow_missing() and bool(named_textures(surface.source))
+
+
 def format_text(report) -> str:
     lo, hi = report["bounds"] or [[float("nan")] * 3] * 2
     attrs = [k for k, v in report["attributes"].items() if v]
+    if report["needs_pillow"]:
+        from ..loading.textures import INSTALL
+
+        attrs = [a for a in attrs if a != "texture"] + [f"texture (reading it needs Pillow: {INSTALL})"]
     lines = [
         f"file           {report['file']}",
         f"faces          {report['faces']:,}",
