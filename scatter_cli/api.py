@@ -124,7 +124,7 @@ class Run:
         points = np.empty((n, 3), dtype=self.dtype)
         attributes = {}
         # Preallocated arrays filled chunk by chunk: no concatenation copy at the end
-        # (docs/sampling.md: collecting).
+        # (docs/how-it-samples.md: collecting).
         pos = 0
         for chunk in self.chunks():
             k = len(chunk)
