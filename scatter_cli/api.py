@@ -38,7 +38,7 @@ class Run:
     """
 
     def __init__(self, source: Source, maker: AttributeMaker, dtype, chunk_size: int, info: dict, plan,
-                 shard=None, frame=None, box=None):
+                 shard=None, frame=None, box=None, warn=None):
         self.source = source
         self.maker = maker
         self.dtype = np.dtype(dtype)
@@ -50,6 +50,7 @@ class Run:
         self.shard = shard  # (K, M): the run writes only that part of its points
         self.frame = frame  # (offset (3,), scale): points written as (p - offset) * scale (--normalize)
         self.box = box  # (2, 3) world-space box of the points: the used faces' vertices, or the sampling box
+        self.warn = warn
 
     @property
     def bounds(self):
@@ -96,6 +97,21 @@ class Run:
         if not 0 <= start <= stop <= self.count:
             raise ValueError(f"points {start}..{stop} are outside the run's 0..{self.count}")
         yield from run_chunks(self._job, chunk_ranges(stop, self.chunk_size, start), threads)
+        self._count_signs()
+
+    def _count_signs(self):
+        """Once the points are labelled: the share of the signs that rest on a winding
+        number near 1/2 (``info["volume"]["near_half"]``), and a warning when many do."""
+        tally = getattr(self.maker, "tally", None)
+        if tally is None:
+            return
+        from .volume.signs import sign_warning
+
+        points, near_half = tally.take()
+        self.info["volume"]["near_half"] = near_half / points if points else 0.0
+        message = sign_warning(self.surface.source, points, near_half)
+        if message and self.warn:
+            self.warn(message)
 
     def spacing(self):
         """d_min, mean nearest-neighbour distance and rho of the output (thinning runs)."""
@@ -109,7 +125,7 @@ class Run:
         points = _hold(n, (n, 3), self.dtype)
         attributes = {}
         # Preallocated arrays filled chunk by chunk: no concatenation copy at the end
-        # (docs/sampling.md: collecting).
+        # (docs/how-it-samples.md: collecting).
         pos = 0
         for chunk in self.chunks():
             k = len(chunk)
@@ -173,7 +189,7 @@ def prepare(mesh, count=None, *, options: SampleOptions | None = None, warn=None
     info["precision"] = dtype.name
     if o.shard is not None:
         info["shard"] = list(o.shard)
-    return Run(source, maker, dtype, o.chunk_size or plan.default_chunk, info, plan, o.shard, frame, box)
+    return Run(source, maker, dtype, o.chunk_size or plan.default_chunk, info, plan, o.shard, frame, box, warn)
 
 
 def sample(mesh, count=None, **options) -> Samples:

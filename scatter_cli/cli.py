@@ -16,10 +16,10 @@ from .errors import ScatterUsageError
 from .loading.formats import INPUT_FORMATS
 from .run.options import DEFAULT_COUNT, PADDING, SIGNS, SampleOptions, whole_number
 from .run.fields import ATTRIBUTES
-from .writers.formats import ASCII_FORMATS, FORMATS
+from .writers.formats import ASCII_FORMATS, FORMATS, MERGEABLE
 
 app = typer.Typer(
-    add_completion=False,
+    add_completion=True,  # --install-completion, --show-completion [bash|zsh|fish|powershell]
     invoke_without_command=True,  # `scatter` alone: the usage line and a hint (_root)
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
@@ -141,7 +141,7 @@ def sample(
 
       scatter sample terrain.ply -n 1e9 --shard 3/8 -o part-3.ply
 
-      scatter sample chair.obj --normalize unit-sphere --near 0.0707,0.0224 --box-share 0.06 -a sdf -o chair.npy
+      scatter sample chair.obj --normalize unit-sphere --near 0.0707,0.0224 --box-share 0.06 -n 250000 -a sdf -o chair.npy
     """
     lean_trimesh()
     from . import api
@@ -283,7 +283,7 @@ def batch(
 def merge(
     parts: Annotated[List[str], typer.Argument(metavar="PART...", help="Point files of one format and column layout, in order.")],
     output: Annotated[str, typer.Option("-o", "--output", metavar="OUTPUT", help="The joined file ('-': standard output).")],
-    fmt: Annotated[Optional[str], typer.Option("-f", "--format", metavar="FORMAT", help="Format of the parts and output [default: from the suffixes].")] = None,
+    fmt: Annotated[Optional[str], typer.Option("-f", "--format", metavar="FORMAT", help=f"Format of the parts and output ({', '.join(MERGEABLE)}) [default: from the suffixes].")] = None,
 ):
     """Join point files (such as the shards of one run) into one, in the order given.
 
@@ -365,19 +365,67 @@ def _root(
 
 def command():
     """The click command of ``scatter``, with usage lines as a user reads them: a required
-    argument is written ``MESH``, not ``{MESH}``."""
+    argument is written ``MESH``, not ``{MESH}``; the examples of ``--help`` as written
+    (one command a line, not wrapped); completion options that take the shell."""
     root = typer.main.get_command(app)
     for cmd in [root, *getattr(root, "commands", {}).values()]:
+        cmd.help = examples_kept(cmd.help)
         for param in cmd.params:
             if param.param_type_name == "argument" and param.required and param.metavar:
                 param.get_usage_pieces = lambda ctx, name=param.metavar: [name]
+    root.params = [completion_option(p) if p.name in COMPLETION else p for p in root.params]
     return root
+
+
+def examples_kept(text):
+    """``text`` (a command's help) with each indented paragraph, an example command, marked
+    for click to print as it is ("\\b"), not re-wrapped to the terminal's width."""
+    if not text:
+        return text
+    paragraphs = inspect.cleandoc(text).split("\n\n")
+    return "\n\n".join("\b\n" + p if p.startswith("  ") else p for p in paragraphs)
+
+
+SHELLS = ("bash", "zsh", "fish", "powershell", "pwsh")
+COMPLETION = {"install_completion": "Install completion for SHELL [default: the current shell].",
+              "show_completion": "Print the completion script for SHELL [default: the current shell], to copy it "
+                                 "or customize the installation."}
+
+
+def completion_option(typer_option):
+    """typer's ``--install-completion`` or ``--show-completion`` (a flag: the shell it
+    detects) taking the shell as a value, ``--show-completion zsh``; given alone, the
+    value is "" (:func:`shell_named`): the shell detected."""
+
+    def done(ctx, param, value):
+        if value is None or ctx.resilient_parsing:
+            return
+        if value and value not in SHELLS:
+            raise typer.BadParameter(f"'{value}' is not a shell completion is made for (choose from: {', '.join(SHELLS)})",
+                                     ctx, param)
+        try:
+            typer_option.callback(ctx, param, value or True)  # prints or installs, then exits
+        except SystemExit as exc:
+            raise typer.Exit(exc.code or 0) from None
+
+    return type(typer_option)(param_decls=typer_option.opts, is_flag=False, expose_value=False, is_eager=True,
+                              callback=done, metavar="[SHELL]", help=COMPLETION[typer_option.name])
+
+
+def shell_named(argv):
+    """``argv`` with "" after a completion option given without its shell."""
+    options = {"--" + name.replace("_", "-") for name in COMPLETION}
+    argv = list(argv)
+    for i in reversed(range(len(argv))):
+        if argv[i] in options and (i + 1 == len(argv) or argv[i + 1].startswith("-")):
+            argv.insert(i + 1, "")
+    return argv
 
 
 def main(argv=None) -> int:
     """Run ``scatter`` on ``argv`` (default: the process's arguments); returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    return process.run_command(command(), argv)
+    return process.run_command(command(), shell_named(argv))
 
 
 def run():

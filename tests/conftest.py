@@ -93,3 +93,16 @@ def scaled_scene():
     box_at[:3, 3] = [0, -4, 1]
     scene.add_geometry(box, geom_name="slab", node_name="slab", transform=box_at)
     return scene
+
+
+def terrain(n=48, size=100.0, relief=5.0):
+    """A trimesh.Trimesh: an open height field, as a terrain TIN is: an n x n grid of
+    ``size`` on a side, rolling hills of ``relief``, faces turned up (+Z)."""
+    import trimesh
+
+    x, y = np.meshgrid(np.linspace(0.0, size, n), np.linspace(0.0, size, n))
+    z = relief * np.sin(x / 10.0) * np.cos(y / 13.0)
+    grid = np.arange(n * n).reshape(n, n)
+    a, b, c, d = grid[:-1, :-1].ravel(), grid[:-1, 1:].ravel(), grid[1:, :-1].ravel(), grid[1:, 1:].ravel()
+    faces = np.concatenate([np.stack([a, b, d], axis=1), np.stack([a, d, c], axis=1)])
+    return trimesh.Trimesh(np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1), faces, process=False)

@@ -116,7 +116,7 @@ def test_room_is_checked_to_the_byte(tmp_path, monkeypatch):
     from scatter_cli.writers import open_output
 
     class Fs:
-        f_bavail, f_frsize = 1000, 4096
+        f_blocks, f_bavail, f_frsize = 5000, 1000, 4096
 
     monkeypatch.setattr(os, "statvfs", lambda path: Fs)
     with open_output(tmp_path / "fits.ply", 4_096_000):  # exactly the room left

@@ -171,7 +171,7 @@ def test_preview_cuts_open_files_with_inside_or_sdf(tmp_path):
     volume = rng.uniform(-1, 1, (20000, 3))
     sdf = np.linalg.norm(volume, axis=1) - 0.6
     np.savetxt(tmp_path / "v.csv", np.column_stack([volume, sdf]), delimiter=",", header="x,y,z,sdf", comments="")
-    tile, _ = PREVIEW.draw_input(str(tmp_path / "v.csv"), ("front",), 96, {})
+    tile, _, _ = PREVIEW.draw_input(str(tmp_path / "v.csv"), ("front",), 96, {})
     centre = tile[40:56, 40:56].reshape(-1, 3).astype(int)
     assert np.mean(centre[:, 0] > centre[:, 2]) > 0.9  # vermillion (inside), not blue
 
@@ -377,13 +377,13 @@ def test_captions_name_and_count(tmp_path):
     g = PREVIEW.GAP
     for slot in ((g, g), (2 * g + 96, g)):
         assert caption_ink(image, slot, 96, 0) > 30 and caption_ink(image, slot, 96, 1) > 30
-    tile, lines = PREVIEW.draw_input(str(src / "p00.ply"), ("iso",), 32, {})
+    tile, lines, _ = PREVIEW.draw_input(str(src / "p00.ply"), ("iso",), 32, {})
     assert lines == ["500 points"] and tile.shape == (32, 32, 3)
     assert PREVIEW.shorten("collection/chairs/0042/model.ply", 16) == "...042/model.ply"
 
 
 def test_meshes_are_sampled_and_the_count_shown(tmp_path):
-    _, lines = PREVIEW.draw_input(str(SAMPLES / "icosahedron_binary.stl"), ("iso",), 32,
+    _, lines, _ = PREVIEW.draw_input(str(SAMPLES / "icosahedron_binary.stl"), ("iso",), 32,
                                   PREVIEW.mesh_options({"count": 1234}))
     assert lines == ["1,234 points sampled"]
     pts, _, up, _ = PREVIEW.load(str(SAMPLES / "boxtextured.glb"), PREVIEW.mesh_options({"count": 100}))
@@ -420,7 +420,7 @@ def test_bad_inputs_are_crossed_out_and_the_sheet_written(tmp_path):
     for col in (1, 2):  # columns = ceil(sqrt(3)) = 2: cells 1 and 2 are (0, 1) and (1, 0)
         x, y = g + (col % 2) * (64 + g), g + (col // 2) * (64 + PREVIEW.CAPTION + g)
         cell = image[y : y + 64, x : x + 64]
-        diagonal = cell[np.arange(4, 60), np.arange(4, 60)]
+        diagonal = cell[np.arange(36, 60), np.arange(36, 60)]  # (its error in the top half)
         assert (diagonal == PREVIEW.CROSS_RGB).all(axis=1).mean() > 0.9  # crossed out
         assert (cell == PREVIEW.FAILED_RGB).all(axis=2).mean() > 0.5
     good = image[g : g + 64, g : g + 64]
@@ -448,7 +448,7 @@ def test_non_finite_points_are_counted_and_a_missing_folder_is_an_error_before_w
     points = sphere(400)
     points[:3] = np.nan
     write_ply(tmp_path / "nan.ply", points)
-    _, lines = PREVIEW.draw_input(str(tmp_path / "nan.ply"), ("iso",), 32, {})
+    _, lines, _ = PREVIEW.draw_input(str(tmp_path / "nan.ply"), ("iso",), 32, {})
     assert lines == ["400 points, 3 not finite (not drawn)"]
     proc = run_scatter("preview", tmp_path / "nan.ply", "-o", tmp_path / "no" / "s.png")
     assert proc.returncode == 1
@@ -482,3 +482,166 @@ def test_help_imports_neither_numpy_nor_pillow():
     proc = run_user([sys.executable, "-c", code])
     out = proc.stdout.decode().strip().splitlines()
     assert "Usage:" in out[0] and out[-1] == "0 []"
+
+
+# ---- pinholes, legends, errors and terrains ----
+
+ONE_HOT = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 0], [255, 0, 255], [0, 255, 255]], np.uint8)
+
+
+def cube_faces(n, seed=0):
+    """(n, 3) points uniform on the cube [-1, 1]^3, and (n,) the face of each (0..5:
+    axis + 3 for the + side)."""
+    points, normals = cube(n, seed)
+    axis = np.argmax(np.abs(normals), axis=1)
+    return points, axis + 3 * (normals[np.arange(n), axis] > 0)
+
+
+def face_interiors(view, size, inset):
+    """(6, size, size) bool: the pixels of a thumbnail of the cube [-1, 1]^3 inside the
+    picture of each face that ``view`` sees (its normal toward the viewer), at least
+    ``inset`` pixels from the face's edges; nothing for the faces it does not see."""
+    corners = render.box_corners(np.array([[-1.0] * 3, [1.0] * 3]))
+    x, y, _, _ = render.project(corners, view, "Z", size)
+    toward = render.camera(view)[2]
+    yy, xx = np.mgrid[:size, :size] + 0.5
+    masks = np.zeros((6, size, size), bool)
+    for face in range(6):
+        axis, side = face % 3, 1.0 if face >= 3 else -1.0
+        if side * toward[axis] < 1e-9:
+            continue
+        quad = np.flatnonzero(corners[:, axis] == side)
+        centre = np.array([x[quad].mean(), y[quad].mean()])
+        order = quad[np.argsort(np.arctan2(y[quad] - centre[1], x[quad] - centre[0]))]
+        inside = np.ones((size, size), bool)
+        for a, b in zip(order, np.roll(order, -1)):  # inset from each edge of the convex quad
+            edge = np.array([x[b] - x[a], y[b] - y[a]])
+            normal = np.array([-edge[1], edge[0]]) / np.hypot(*edge)
+            if normal @ (centre - [x[a], y[a]]) < 0:
+                normal = -normal
+            inside &= (xx - x[a]) * normal[0] + (yy - y[a]) * normal[1] >= inset
+        masks[face] = inside
+    return masks
+
+
+def assert_faces_closed(size=128, n=20_000, seed=0):
+    """Seen from every view, a cube of n points shows in the inner part of each visible
+    face the colour of that face only: no pinhole onto the background or the back."""
+    points, face = cube_faces(n, seed)
+    for view in render.VIEWS:
+        image = render.thumbnail(points, ONE_HOT[face], view, "Z", size)
+        lit = image > 0  # depth shading keeps the channels a face's colour lights
+        for k, mask in enumerate(face_interiors(view, size, render.MAX_SPLAT + 1)):
+            if mask.any():
+                assert (lit[mask] == (ONE_HOT[k] > 0)).all(axis=1).all(), (view, k)
+
+
+@pytest.mark.parametrize("size,n,seed", [(256, 20_000, 0), (128, 5_000, 1), (200, 30_000, 2), (128, 20_000, 3)])
+def test_no_pinholes_on_the_faces_of_a_cube_in_any_view(size, n, seed, monkeypatch):
+    """Sets dense enough for discs of MAX_SPLAT pixels: preview's default (20,000 points
+    at 256 pixels), the same density smaller, denser ones; the broken variant, one disc size
+    from the count, leaves holes in each."""
+    assert_faces_closed(size, n, seed)
+
+    def one_radius(x, y, depth, depth_pixels, size):  # the broken variant: one disc size from the count
+        return np.full(len(x), np.clip(1.2 * size / np.sqrt(len(x)), 1.0, render.MAX_SPLAT))
+
+    monkeypatch.setattr(render, "splat_radii", one_radius)
+    with pytest.raises(AssertionError):
+        assert_faces_closed(size, n, seed)
+
+
+def assert_wrapped_clear_of_the_cross(sheet, message):
+    """The error's lines break between words and, drawn, no stroke of the cross is in
+    the box behind them."""
+    lines = [t for _, _, t, rgb in sheet.texts if rgb == PREVIEW.CROSS_RGB]
+    assert " ".join(lines) == message
+    words = message.split()
+    assert sum(len(line.split()) for line in lines) == len(words)  # no word cut in two
+    path = sheet.written
+    image = np.asarray(Image.open(path).convert("RGB"))
+    x0, y0, x1, y1 = sheet.boxes[0]
+    box = image[y0 : y1 + 1, x0 : x1 + 1]
+    text = np.zeros(box.shape[:2], bool)
+    for x, y, t, _ in sheet.texts:  # the glyphs' cells: 6 x 12 pixels a character
+        if y0 <= y <= y1:
+            text[y - y0 : y - y0 + PREVIEW.LINE, x - x0 : x - x0 + PREVIEW.CHAR * len(t)] = True
+    red = (box == PREVIEW.CROSS_RGB).all(axis=2)
+    assert not (red & ~text).any()
+
+
+def failed_sheet(tmp_path, message):
+    sheet = PREVIEW.Sheet(1, 1, 256, 1)
+    sheet.failed(0, "bad.obj", message)
+    sheet.written = tmp_path / "s.png"
+    sheet.write(sheet.written)
+    return sheet
+
+
+def test_an_error_wraps_between_words_clear_of_the_cross(tmp_path, monkeypatch):
+    message = ("bad.obj: truncated: the file ends at byte 100,000, at vertex 8,301 of 49,999 (of the 49,999 "
+               "vertex and 100,002 face rows its header declares)")
+    assert_wrapped_clear_of_the_cross(failed_sheet(tmp_path, message), message)
+    chop = lambda text, chars, rows: [text[i : i + chars] for i in range(0, len(text), chars)][:rows]
+    monkeypatch.setattr(PREVIEW, "wrap_lines", chop)  # the broken variant: lines cut at a fixed width
+    with pytest.raises(AssertionError):
+        assert_wrapped_clear_of_the_cross(failed_sheet(tmp_path, message), message)
+    monkeypatch.undo()
+    sheet = failed_sheet(tmp_path, message)
+    box = sheet.boxes.pop()  # the other broken variant: the cross drawn over the text
+    sheet.write(sheet.written)
+    sheet.boxes.append(box)
+    with pytest.raises(AssertionError):
+        assert_wrapped_clear_of_the_cross(sheet, message)
+
+
+def legend_of(path, tmp_path):
+    """The legend's labels and the colours of its swatches, as drawn on a sheet of ``path``."""
+    tile, lines, legend = PREVIEW.draw_input(str(path), ("iso",), 128, {})
+    sheet = PREVIEW.Sheet(1, 1, 128, 1)
+    sheet.put(0, tile, [str(path), *lines], legend)
+    x, y = sheet.origin(0)
+    labels = [t for tx, ty, t, _ in sheet.texts if ty < y + 128]
+    swatches = [tuple(sheet.canvas[y + 4 + i * PREVIEW.LINE + 4, x + 8]) for i in range(len(labels))]
+    return dict(zip(labels, swatches))
+
+
+def test_inside_and_outside_colours_have_a_legend(tmp_path, monkeypatch):
+    rng = np.random.default_rng(6)
+    volume = rng.uniform(-1, 1, (5000, 3))
+    sdf = np.linalg.norm(volume, axis=1) - 0.6
+    np.savetxt(tmp_path / "v.csv", np.column_stack([volume, sdf]), delimiter=",", header="x,y,z,sdf", comments="")
+    write_ply(tmp_path / "s.ply", sphere(5000), normals=sphere(5000))
+    assert legend_of(tmp_path / "v.csv", tmp_path) == {"inside": render.INSIDE_RGB, "outside": render.OUTSIDE_RGB}
+    assert legend_of(tmp_path / "s.ply", tmp_path) == {}  # normals need no legend
+    monkeypatch.setattr(render, "legend", lambda attributes: [])  # the broken variant
+    assert legend_of(tmp_path / "v.csv", tmp_path) == {}
+
+
+def relief_order(points, normals):
+    """Spearman's correlation of the height of each point with the place of its hue on
+    the height ramp (its nearest ramp colour, brightness aside)."""
+    colors = render.point_colors(points, {"normal": normals}).astype(float)
+    ramp = render.HEIGHT_RAMP / np.linalg.norm(render.HEIGHT_RAMP, axis=1, keepdims=True)
+    hue = colors / np.maximum(np.linalg.norm(colors, axis=1, keepdims=True), 1)
+    place = np.argmax(hue @ ramp.T, axis=1)
+    rank = lambda v: np.argsort(np.argsort(v, kind="stable"), kind="stable")
+    return np.corrcoef(rank(points[:, 2]), rank(place))[0, 1]
+
+
+def test_a_terrain_is_drawn_as_a_relief_map(monkeypatch):
+    from .conftest import terrain
+
+    import scatter_cli
+
+    land = scatter_cli.sample(terrain(), 20_000, attributes=("normal",), precision="float64")
+    assert relief_order(land.points, land.normal) > 0.9  # height reads as the ramp: hills yellow, valleys violet
+    ball = sphere(5000)
+    assert (render.point_colors(ball, {"normal": ball}) == np.rint((ball + 1) * 127.5)).all()  # not a height field
+    # lit from the north-west: a slope facing it is brighter than one facing away
+    pair = np.array([[0, 0, 0], [0, 0, 0.0]])
+    slopes = np.array([[-0.5, 0.5, 0.707], [0.5, -0.5, 0.707]])
+    lit = render.point_colors(pair, {"normal": slopes}).astype(int).sum(axis=1)
+    assert lit[0] > lit[1]
+    monkeypatch.setattr(render, "HEIGHT_FIELD", 1.01)  # the broken variant: a terrain in normal colours
+    assert relief_order(land.points, land.normal) < 0.5

@@ -39,6 +39,7 @@ def describe(mesh, input_format=None, exterior=False, sharp_angle=None) -> dict:
         "non_finite_faces": int(np.sum(~good)),
         "area_ratio": float(positive.max() / positive.min()) if len(positive) else None,
         "attributes": _attributes(surface),
+        "needs_pillow": _unread_texture(surface),
         "geometries": len(surface.geometries),
         "instances": len(surface.instances),
         "objects": [
@@ -48,6 +49,7 @@ def describe(mesh, input_format=None, exterior=False, sharp_angle=None) -> dict:
         ],
     }
     report.update(closed)
+    report["unclear_inside"] = None if closed["closed"] or not len(positive) else unclear_inside(surface, lo, hi)
     report["sharp_edges"] = sharp_report(surface, report["objects"], SHARP_ANGLE if sharp_angle is None else sharp_angle)
     report["unsampled"] = [{"path": u.path, "reason": u.reason, "area": u.area} for u in surface.unsampled]
     if exterior:
@@ -73,6 +75,27 @@ def closedness(surface, areas) -> dict:
     boundary_area = float(areas[np.concatenate(at_boundary)].sum()) if at_boundary else 0.0
     return {"closed": bool(not counts.any()), "boundary_edges": int(counts[0]), "non_manifold_edges": int(counts[1]),
             "inconsistent_edges": int(counts[2]), "boundary_area": boundary_area}
+
+
+# The probe run behind ``unclear_inside``: its points, half of them uniform in the box a
+# --volume run samples and half near the surface, at a deviation of SIGN_SIGMA times the
+# bounding box's diagonal (standard error of the share at most 0.5 / sqrt(SIGN_PROBES));
+# a surface is much open when more than OPEN_SHARE of them have no clear side.
+SIGN_PROBES = 10_000
+SIGN_SIGMA = 0.01
+OPEN_SHARE = 0.05
+
+
+def unclear_inside(surface, lo, hi) -> float:
+    """The share of the points around ``surface`` (its bounding box ``lo``, ``hi`` (3,))
+    whose inside or outside is close to a coin flip: their winding numbers within
+    :data:`~scatter_cli.volume.signs.NEAR_HALF` of 1/2 (see SIGN_PROBES)."""
+    from ..api import prepare
+    from ..volume.signs import unclear
+
+    sigma = SIGN_SIGMA * float(np.linalg.norm(hi - lo))
+    run = prepare(surface, SIGN_PROBES, near=(sigma,), box_share=0.5, attributes=("winding",), precision="float64")
+    return float(np.mean(unclear(run.collect().winding)))
 
 
 def sharp_report(surface, objects, angle) -> dict:
@@ -171,9 +194,20 @@ def _attributes(surface) -> dict:
     return has
 
 
+def _unread_texture(surface) -> bool:
+    """Whether the file names a texture that could not be read for want of Pillow."""
+    from ..loading.textures import named_textures, pillow_missing
+
+    return pillow_missing() and bool(named_textures(surface.source))
+
+
 def format_text(report) -> str:
     lo, hi = report["bounds"] or [[float("nan")] * 3] * 2
     attrs = [k for k, v in report["attributes"].items() if v]
+    if report["needs_pillow"]:
+        from ..loading.textures import INSTALL
+
+        attrs = [a for a in attrs if a != "texture"] + [f"texture (reading it needs Pillow: {INSTALL})"]
     lines = [
         f"file           {report['file']}",
         f"faces          {report['faces']:,}",
@@ -187,6 +221,7 @@ def format_text(report) -> str:
         f"attributes     {', '.join(attrs) or 'none'}",
         f"objects        {report['instances']} instance(s) of {report['geometries']} geometry(ies)",
         _closed_line(report),
+        *_inside_line(report),
         _sharp_line(report["sharp_edges"], "sharp edges    "),
     ]
     for u in report["unsampled"]:
@@ -218,4 +253,17 @@ def _closed_line(report) -> str:
     share = report["boundary_area"] / report["area"] if report["area"] else 0.0
     return (f"closed         no: {report['boundary_edges']:,} boundary, {report['non_manifold_edges']:,} non-manifold, "
             f"{report['inconsistent_edges']:,} inconsistently oriented edges; {report['boundary_area']:.6g} of the "
-            f"area ({100 * share:.3g} %) on faces at the boundary: --sign winding is the one to trust")
+            f"area ({100 * share:.3g} %) on faces at the boundary")
+
+
+def _inside_line(report) -> list:
+    """How far an open surface has an inside, and which --sign to trust (none when much of it is open)."""
+    share = report["unclear_inside"]
+    if share is None:
+        return []
+    from ..volume.signs import NEAR_HALF, percent
+
+    verdict = ("much of it is open, as a terrain or a sheet is: no --sign mode gives inside a meaning"
+               if share > OPEN_SHARE else "--sign winding is the one to trust")
+    return [f"inside         unclear at {percent(share)} of the points around it (winding number within {NEAR_HALF:g} "
+            f"of 0.5): {verdict}"]

@@ -16,6 +16,7 @@ import io
 import math
 import numbers
 import os
+import textwrap
 from concurrent.futures import ThreadPoolExecutor
 
 from ..engines.batch import Inputs
@@ -36,6 +37,7 @@ GAP = 8  # pixels between cells and around the sheet
 LINE = 12  # caption line height (Pillow's default bitmap font is 11 px high)
 CAPTION = 2 * LINE + 4  # under each thumbnail: the name, then the point count
 CHAR = 6  # width of a character of the default bitmap font
+SWATCH = 8  # side of a legend's colour square
 PNG_OPTIONS = {"format": "PNG", "compress_level": 3, "optimize": False}  # fixed: same bytes every run
 TEXT_RGB, NOTE_RGB, FAILED_RGB, CROSS_RGB = (20, 20, 20), (90, 90, 90), (236, 236, 236), (200, 30, 30)
 
@@ -97,14 +99,14 @@ def draw_page(paths, columns, size, views, sample_options, failed, warn):
     sheet = Sheet(len(paths), columns, size, len(views))
     for slot, path in enumerate(paths):
         try:
-            tile, lines = draw_input(path, views, size, sample_options)
+            tile, lines, legend = draw_input(path, views, size, sample_options)
         except ScatterError as exc:
             sheet.failed(slot, path, str(exc))
             failed.append((path, str(exc)))
             if warn:
                 warn(str(exc))
         else:
-            sheet.put(slot, tile, [path, *lines])
+            sheet.put(slot, tile, [path, *lines], legend)
     return sheet
 
 
@@ -214,11 +216,12 @@ def sample_mesh(path, options):
 
 
 def draw_input(path, views, size, sample_options):
-    """((size, size * len(views), 3) uint8 picture, [caption line]) of one input."""
+    """((size, size * len(views), 3) uint8 picture, [caption line], legend) of one input
+    (legend: [(label, rgb)] of the colours that say something, such as inside and outside)."""
     import numpy as np
 
     from ..writers.pointfiles import reason
-    from .render import point_colors, thumbnail
+    from .render import legend, point_colors, thumbnail
 
     try:
         points, attributes, up, note = load(path, sample_options)
@@ -237,7 +240,7 @@ def draw_input(path, views, size, sample_options):
     colors = point_colors(points, attributes, up)
     cut = "color" not in attributes and ("inside" in attributes or "sdf" in attributes)
     tile = np.concatenate([thumbnail(points, colors, v, up, size, cut=cut) for v in views], axis=1)
-    return tile, [note]
+    return tile, [note], legend(attributes)
 
 
 # ---- the sheet ----
@@ -260,22 +263,39 @@ class Sheet:
         self.canvas = np.full((height, width, 3), BACKGROUND, dtype=np.uint8)
         self.texts = []  # (x, y, text, rgb)
         self.crosses = []  # (x0, y0, x1, y1)
+        self.boxes = []  # (x0, y0, x1, y1) kept clear of the crosses, for the text over them
 
     def origin(self, slot):
         row, col = divmod(slot, self.columns)
         return GAP + col * (self.cell_w + GAP), GAP + row * (self.cell_h + GAP)
 
-    def put(self, slot, tile, lines):
+    def put(self, slot, tile, lines, legend=()):
         x, y = self.origin(slot)
         self.canvas[y : y + self.size, x : x + self.cell_w] = tile
         self.caption(x, y + self.size, lines)
+        self.key(x, y, legend)
+
+    def key(self, x, y, legend):
+        """The legend [(label, rgb)] in the thumbnail's top-left corner, on a box of the
+        background: a swatch and a label an entry."""
+        if not legend:
+            return
+        from .render import BACKGROUND
+
+        width = min(3 * 4 + SWATCH + CHAR * max(len(label) for label, _ in legend), self.cell_w)
+        self.canvas[y : y + min(4 + LINE * len(legend), self.size), x : x + width] = BACKGROUND
+        for i, (label, rgb) in enumerate(legend):
+            top = y + 4 + i * LINE
+            self.canvas[top + 2 : top + 2 + SWATCH, x + 4 : x + 4 + SWATCH] = rgb
+            self.texts.append((x + 8 + SWATCH, top, label, TEXT_RGB))
 
     def failed(self, slot, path, message):
         x, y = self.origin(slot)
         self.canvas[y : y + self.size, x : x + self.cell_w] = FAILED_RGB
         self.crosses.append((x, y, x + self.cell_w - 1, y + self.size - 1))
-        chars = max(1, (self.cell_w - 8) // CHAR)
-        wrapped = [message[i : i + chars] for i in range(0, len(message), chars)][: (self.size - 8) // LINE]
+        # the message in the top half, clear of the cross, which shows below it
+        wrapped = wrap_lines(message, max(1, (self.cell_w - 8) // CHAR), max(1, (self.size // 2 - 4) // LINE))
+        self.boxes.append((x, y, x + 5 + CHAR * max(map(len, wrapped)), y + 5 + LINE * len(wrapped)))
         for i, text in enumerate(wrapped):
             self.texts.append((x + 4, y + 4 + i * LINE, text, CROSS_RGB))
         self.caption(x, y + self.size, [path, "failed"])
@@ -297,12 +317,25 @@ class Sheet:
         for x0, y0, x1, y1 in self.crosses:
             draw.line((x0, y0, x1, y1), fill=CROSS_RGB, width=3)
             draw.line((x0, y1, x1, y0), fill=CROSS_RGB, width=3)
+        for box in self.boxes:
+            draw.rectangle(box, fill=FAILED_RGB)
         for x, y, text, rgb in self.texts:
             draw.text((x, y), latin1(text), fill=rgb, font=font)
         buffer = io.BytesIO()
         picture.save(buffer, **PNG_OPTIONS)
         with open_output(path) as stream:
             stream.write(buffer.getvalue())
+
+
+def wrap_lines(message, chars, rows):
+    """``message`` in lines of at most ``chars`` characters broken between words (a word
+    longer than a line, such as a path, is cut), at most ``rows`` of them: the last ends
+    in "..." when the message goes on."""
+    lines = textwrap.wrap(message, chars, break_on_hyphens=False) or [""]
+    if len(lines) > rows:
+        lines = lines[:rows]
+        lines[-1] = lines[-1][: max(0, chars - 3)] + "..."
+    return lines
 
 
 def shorten(text, chars):

@@ -26,8 +26,10 @@ VIEWS = ("iso", "front", "side", "top")
 BACKGROUND = 255
 MARGIN = 0.06  # of the side, left empty around the box
 NEAR_SHADE, FAR_SHADE = 1.0, 0.45  # brightness of the nearest and the farthest point
-MAX_SPLAT = 6.0  # largest disc radius in pixels (sparse sets are dots, not blobs)
-SPLAT_FILL = 1.2  # disc radius as a fraction of size / sqrt(n): about the spacing of the visible points of a surface
+MAX_SPLAT = 8.0  # largest disc radius in pixels (sparse sets are dots, not blobs)
+SPLAT_FILL = 1.7  # disc radius over the spacing of the visible points about it (random points: 0.01 % of pixels uncovered)
+DENSITY_CELL = 8  # pixels a side of the cells in which the visible points are counted
+SURFACE_DEPTH = 4.0  # pixels of depth behind a cell's nearest point that count as its surface
 # Colours of inside and outside points: vermillion and blue of the Okabe-Ito palette,
 # told apart with every common form of colour blindness.
 INSIDE_RGB, OUTSIDE_RGB = (213, 94, 0), (0, 114, 178)
@@ -36,10 +38,15 @@ INSIDE_RGB, OUTSIDE_RGB = (213, 94, 0), (0, 114, 178)
 SHARP_RGB = (0, 0, 0)
 EMPTY = np.uint64(np.iinfo(np.uint64).max)  # a depth-buffer pixel no disc covers
 DEPTH_STEPS = (1 << 24) - 1  # depth is quantised to this many steps over the bounding box
-HOLE_DEPTH, HOLE_NEIGHBOURS, HOLE_PASSES = 0.05, 5, 2  # see fill_holes
+HOLE_DEPTH, HOLE_NEIGHBOURS, HOLE_PASSES = 0.05, 5, 3  # see fill_holes
 HOLE_STEP = np.uint64(HOLE_DEPTH * DEPTH_STEPS)
 # Height colour ramp (low to high): viridis at five stops.
 HEIGHT_RAMP = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], dtype=np.float64)
+# A height field (a terrain: nearly every normal on one side of the up axis) is coloured
+# by height and lit as a relief map is: from the north-west, 45 degrees up (Z up).
+HEIGHT_FIELD = 0.99
+LIGHT = np.array([-1.0, 1.0, np.sqrt(2.0)]) / 2.0
+AMBIENT = 0.35  # the brightness of a slope turned away from the light
 
 # Camera rows (right, screen up, toward the viewer) for Z-up points.
 _Z_UP = {
@@ -72,17 +79,39 @@ def splat_offsets(radius):
     return offsets[np.argsort(np.abs(offsets).sum(axis=1), kind="stable")]
 
 
-def splat_radius(n, size):
-    """Disc radius in pixels for ``n`` points in a ``size`` thumbnail: about the
-    spacing of the visible points of a surface (so the discs close up), 1 to MAX_SPLAT."""
-    return float(np.clip(SPLAT_FILL * size / np.sqrt(max(n, 1)), 1.0, MAX_SPLAT))
+def splat_radii(x, y, depth, depth_pixels, size):
+    """(n,) float64 disc radius of each point at pixel ``x``, ``y`` (n,) and ``depth``
+    (n,) in a ``size`` square (``depth_pixels``: the depth range in pixels): SPLAT_FILL
+    times the spacing of the visible points about it, 1 to MAX_SPLAT. So the discs of a
+    surface close up wherever it is, seen face on or at a slant, sparse or dense.
+
+    Visible points are counted in cells of DENSITY_CELL pixels: those within
+    SURFACE_DEPTH pixels of the nearest point of their cell (a surface's front, not its
+    back). A point's spacing is from the mean count of the cells about it (its own and
+    the eight around, those with points), so that a cell a surface only partly covers,
+    at its edges, takes about the density of the surface, and its discs spill little
+    over the edge."""
+    cols = size // DENSITY_CELL + 1
+    row, col = ((np.clip(v, 0, size - 1) // DENSITY_CELL).astype(np.int64) for v in (y, x))
+    cell = row * cols + col
+    nearest = np.full(cols * cols, np.inf)
+    np.minimum.at(nearest, cell, depth)
+    band = SURFACE_DEPTH / depth_pixels if depth_pixels > 0 else np.inf
+    front = depth <= nearest[cell] + band
+    visible = np.pad(np.bincount(cell[front], minlength=cols * cols).reshape(cols, cols), 1)
+    around = np.stack([visible[1 + dy : 1 + dy + cols, 1 + dx : 1 + dx + cols]
+                       for dy in (-1, 0, 1) for dx in (-1, 0, 1)])
+    mean = (around.sum(axis=0) / np.maximum((around > 0).sum(axis=0), 1)).reshape(-1)
+    spacing = DENSITY_CELL / np.sqrt(mean[cell])
+    return np.clip(SPLAT_FILL * spacing, 1.0, MAX_SPLAT)
 
 
 def point_colors(points, attributes, up="Z"):
     """(n, 3) uint8 colours from the first the set has: ``color``, ``inside``/``sdf``
     (inside points INSIDE_RGB, outside OUTSIDE_RGB), ``sharp`` (points on sharp edges
-    SHARP_RGB, the others by the next rule), ``normal`` (x, y, z to r, g, b), else the
-    height along the up axis (HEIGHT_RAMP)."""
+    SHARP_RGB, the others by the next rule), ``normal`` (x, y, z to r, g, b; for a height
+    field, a relief map: :func:`relief_colors`), else the height along the up axis
+    (HEIGHT_RAMP)."""
     n = len(points)
     if "color" in attributes:
         return np.asarray(attributes["color"])[:, :3].astype(np.uint8)
@@ -97,7 +126,32 @@ def point_colors(points, attributes, up="Z"):
         return colors
     if "normal" in attributes:
         normal = np.nan_to_num(np.asarray(attributes["normal"], dtype=np.float64))
+        upward = normal[:, 2 if up == "Z" else 1]
+        if n and max(np.mean(upward > 0), np.mean(upward < 0)) >= HEIGHT_FIELD:
+            return relief_colors(points, normal * np.sign(upward.sum()), up)
         return np.clip(np.rint((normal + 1.0) * 127.5), 0, 255).astype(np.uint8)
+    return height_colors(points, up)
+
+
+def legend(attributes):
+    """[(label, rgb)] of the colours :func:`point_colors` gives a set with ``attributes``
+    that a reader needs told: inside and outside; [] for the others."""
+    if "color" not in attributes and ("inside" in attributes or "sdf" in attributes):
+        return [("inside", INSIDE_RGB), ("outside", OUTSIDE_RGB)]
+    return []
+
+
+def relief_colors(points, normal, up="Z"):
+    """(n, 3) uint8: a height field's colours, HEIGHT_RAMP by height, lit by LIGHT on its
+    ``normal`` (n, 3) turned up (a relief map)."""
+    light = LIGHT if up == "Z" else _Z_TO_Y @ LIGHT
+    lit = AMBIENT + (1.0 - AMBIENT) * np.clip(normal @ light, 0.0, 1.0)
+    return np.rint(height_colors(points, up) * lit[:, None]).astype(np.uint8)
+
+
+def height_colors(points, up="Z"):
+    """(n, 3) uint8: HEIGHT_RAMP by the height of ``points`` (n, 3) along the up axis."""
+    n = len(points)
     height = points[:, 2 if up == "Z" else 1] if n else np.empty(0)
     lo, hi = (height.min(), height.max()) if n else (0.0, 0.0)
     t = (height - lo) / (hi - lo) if hi > lo else np.full(n, 0.5)
@@ -115,8 +169,9 @@ def box_corners(points):
 
 
 def project(points, view, up, size):
-    """(x, y, depth) of ``points`` (n, 3) seen from ``view`` in a ``size`` square: pixel
-    coordinates (y down) and depth in [0, 1] (0 nearest), framed on the bounding box."""
+    """(x, y, depth, depth range in pixels) of ``points`` (n, 3) seen from ``view`` in a
+    ``size`` square: pixel coordinates (y down) and depth in [0, 1] (0 nearest), framed
+    on the bounding box."""
     rows = camera(view, up)
     corners = box_corners(points) @ rows.T
     lo, hi = corners.min(axis=0), corners.max(axis=0)
@@ -128,7 +183,7 @@ def project(points, view, up, size):
     y = size / 2 - screen[:, 1] * scale
     depth_span = hi[2] - lo[2]
     depth = (hi[2] - centre[2] - screen[:, 2]) / depth_span if depth_span > 0 else np.zeros(len(points))
-    return x, y, depth
+    return x, y, depth, depth_span * scale
 
 
 def fill_holes(keys):
@@ -167,15 +222,16 @@ def thumbnail(points, colors, view="iso", up="Z", size=256, depth_test=True, cut
     points, colors = points[finite], colors[finite]
     if len(points) == 0:
         return np.full((size, size, 3), BACKGROUND, dtype=np.uint8)
-    x, y, depth = project(points, view, up, size)
+    x, y, depth, depth_pixels = project(points, view, up, size)
     if cut:
         far = depth >= 0.5
         x, y, depth, colors = x[far], y[far], 2 * depth[far] - 1, colors[far]  # shaded over the far half
+        depth_pixels /= 2
     n = len(x)
     if n == 0:
         return np.full((size, size, 3), BACKGROUND, dtype=np.uint8)
-    radius = splat_radius(n, size)
-    pad = int(np.floor(radius)) + 1
+    radius = splat_radii(x, y, depth, depth_pixels, size)
+    pad = int(np.floor(radius.max())) + 1
     width = size + 2 * pad  # a padded buffer: discs need no bounds check (points are in the square)
     ix = np.clip(np.floor(x).astype(np.int64), 0, size - 1) + pad
     iy = np.clip(np.floor(y).astype(np.int64), 0, size - 1) + pad
@@ -188,8 +244,14 @@ def thumbnail(points, colors, view="iso", up="Z", size=256, depth_test=True, cut
     else:
         key = np.arange(n - 1, -1, -1, dtype=np.uint64)  # the last point drawn wins
     nearest = np.full(width * width, EMPTY, dtype=np.uint64)
-    for offset in (splat_offsets(radius) @ [1, width]).tolist():  # a pass per disc pixel: n keys stay in the cache
-        np.minimum.at(nearest, base + offset, key)
+    # A pass per disc pixel, nearest the centre first (n keys stay in the cache): the
+    # points whose disc reaches it, a prefix of the points by decreasing radius.
+    order = np.argsort(-radius, kind="stable")
+    base, key, reach = base[order], key[order], -radius[order]
+    offsets = splat_offsets(radius.max())
+    for offset, distance in zip((offsets @ [1, width]).tolist(), np.hypot(*offsets.T).tolist()):
+        m = np.searchsorted(reach, -distance, side="right")
+        np.minimum.at(nearest, base[:m] + offset, key[:m])
     if depth_test:
         for _ in range(HOLE_PASSES):
             fill_holes(nearest.reshape(width, width))

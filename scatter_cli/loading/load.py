@@ -234,6 +234,8 @@ def _trimesh_file(job):
         check_decoder(path, file_type, file_obj)
         if file_type == "gltf" and isinstance(file_obj, io.BytesIO):
             _check_self_contained(job.name, file_obj)
+    if file_type == "ply":
+        _check_whole_ply(file_obj, path)
     try:
         with np.errstate(all="ignore"):
             return trimesh.load(file_obj, file_type=file_type, process=False)
@@ -244,6 +246,18 @@ def _trimesh_file(job):
         malformed = file_type == "ply" and ply.header_error(_head(file_obj, ply.MAX_HEADER))
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ScatterError(f"{path}: {malformed or f'not a readable {file_type.upper()} mesh ({reason[:200]})'}") from None
+
+
+def _check_whole_ply(file_obj, path):
+    """A PLY that ends before the rows its header declares is an error saying where it
+    ends (trimesh reads a short ASCII body without a word)."""
+    if isinstance(file_obj, io.BytesIO):
+        problem = ply.truncation(file_obj.getbuffer())
+    else:
+        with ply.contents(file_obj) as data:
+            problem = None if data is None else ply.truncation(data)
+    if problem:
+        raise ScatterError(f"{path}: {problem}")
 
 
 def _head(file_obj, size):

@@ -145,6 +145,83 @@ def header_error(head):
     return None
 
 
+def truncation(data):
+    """Where a PLY ends that holds fewer rows than its header declares, in words for a
+    message ("truncated: the file ends at byte B, at face 8 of 20 ..."); None when it
+    holds them all, or when that cannot be told (a header that is not one, binary lists
+    of varying length). ``data``: the file's bytes (any buffer)."""
+    try:
+        header = parse_header(data)
+    except HeaderError:
+        return None
+    rows = _ascii_rows(header, data) if header.encoding == "ascii" else _binary_rows(header, data)
+    short = next(((e, k) for e, k in zip(header.elements, rows or ()) if k < e.count), None)
+    if short is None:
+        return None
+    element, held = short
+    declared = " and ".join(f"{e.count:,} {e.name}" for e in header.elements)
+    return (f"truncated: the file ends at byte {len(data):,}, at {element.name} {held + 1:,} of {element.count:,} "
+            f"(of the {declared} rows its header declares)")
+
+
+def _ascii_rows(header, data):
+    """The rows of each element an ASCII body holds, a row a line: complete lines only
+    (a last line without its newline is cut short)."""
+    body = bytes(data[header.body :])
+    if body.count(b"\n") >= sum(e.count for e in header.elements):
+        return None
+    lines = [line for line in body.split(b"\n") if line.strip()]
+    held = len(lines) - (0 if body.endswith(b"\n") or not lines else 1)
+    return _share_out(held, header.elements)
+
+
+def _share_out(held, elements):
+    """``held`` rows, in element order: the rows of each element."""
+    rows = []
+    for e in elements:
+        rows.append(min(held, e.count))
+        held -= rows[-1]
+    return rows
+
+
+def _binary_rows(header, data):
+    """The rows of each element a binary body holds; None when a list's length varies
+    from row to row (its rows cannot be counted without reading them all)."""
+    pos, rows = header.body, []
+    for e in header.elements:
+        size = _row_size(e, data, pos, header.order)
+        if size is None:
+            return None
+        rows.append(min(e.count, (len(data) - pos) // size) if size else e.count)
+        if rows[-1] < e.count:
+            return rows
+        pos += size * e.count
+    return rows
+
+
+def _row_size(element, data, pos, order):
+    """The bytes of each row of ``element`` whose rows start at ``pos``: fixed for scalar
+    properties; for lists, those of the first row when every row present has the same
+    list lengths, else None. 1 when even the first row is cut short (none held)."""
+    size, lists = 0, []
+    for p in element.properties:
+        if len(p) == 2:
+            size += np.dtype(PLY_TYPES[p[0]]).itemsize
+            continue
+        count_type = np.dtype(order + PLY_TYPES[p[1]])
+        if pos + size + count_type.itemsize > len(data):
+            return 1
+        n = int(np.frombuffer(data, count_type, 1, pos + size)[0])
+        lists.append((size, count_type, n))
+        size += count_type.itemsize + n * np.dtype(PLY_TYPES[p[2]]).itemsize
+    fit = min(element.count, (len(data) - pos) // size) if size else 0
+    for at, count_type, n in lists:
+        counts = np.ndarray((fit,), count_type, data, pos + at, (size,))
+        if (counts != n).any():
+            return None
+    return size
+
+
 def read_triangles(path):
     """(vertices (V, 3) float64, faces (F, 3) int64) of a binary PLY, or None."""
     with contents(path) as data:

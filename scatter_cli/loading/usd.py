@@ -52,9 +52,9 @@ def load_usd(path: str, input_format=None, *, objects=None, plain=False) -> Surf
                 copy = os.path.join(tmp, "stage." + suffix)
                 with open(copy, "wb") as f:
                     f.write(data)
-                surface, aliases = _StageReader(_open(copy, name), name, plain).surface()
+                surface, aliases = _StageReader(open_stage(copy, name), name, plain).surface()
         else:
-            surface, aliases = _StageReader(_open(path, name), name, plain).surface()
+            surface, aliases = _StageReader(open_stage(path, name), name, plain).surface()
     # USD's own warnings (a reference that does not resolve, ...) as the run's warnings
     surface.warnings += [f"{name}: {m}" for m in map(_diagnostic, printed) if m]
     surface.warnings += unsampled_warning(name, surface.unsampled)
@@ -111,7 +111,9 @@ def _import_pxr(path):
         raise ScatterError(f"{path}: reading USD stages needs usd-core: {INSTALL_HINT}") from None
 
 
-def _open(path, name):
+def open_stage(path, name):
+    """The stage at ``path`` (``name``: the file as messages call it); a one-line
+    ScatterError when it is not one (the words of sample, batch and preview alike)."""
     from pxr import Tf, Usd
 
     try:

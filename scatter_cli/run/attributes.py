@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ScatterError
+from ..loading import textures as textures_named
 from .columns import ATTRIBUTES
 from ..sampling.normals import face_normals
 from ..surface.model import Surface, normal_transforms
@@ -185,6 +186,7 @@ class AttributeMaker:
     # -- color --------------------------------------------------------------------------
 
     def _prepare_color(self):
+        textures_named.require_pillow(self.surface.source)
         textures = self.surface._cache.setdefault("textures", {})
         for gi in self._used:
             g = self.surface.geometries[gi]

@@ -22,9 +22,9 @@ from ..surface.model import Surface, apply_matrix, cofactor, cofactors, corners,
 from .warps import square_to_triangle
 
 DRAWS_PER_POINT = 3
-DEFAULT_CHUNK = 1 << 17  # points a chunk, unless the mesh is large (docs/sampling.md: chunk sizes)
+DEFAULT_CHUNK = 1 << 17  # points a chunk, unless the mesh is large (docs/how-it-samples.md: chunk sizes)
 # Faces from which the kernel takes a chunk's points in face order, and the chunk size it
-# gets then: larger chunks hold closer faces (docs/sampling.md: chunk sizes).
+# gets then: larger chunks hold closer faces (docs/how-it-samples.md: chunk sizes).
 SORT_FACES, LARGE_MESH_CHUNK = 1 << 18, 1 << 19
 _kernel = native.kernel("_csampling")
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ScatterError, ScatterUsageError
+from ..loading import textures as textures_named
 from .plan import SamplePlan
 from ..surface.model import Surface
 from ..surface.data import color_source
@@ -117,6 +118,7 @@ class TextureWeight(_Weight):
     what = "texture or material colour"
 
     def __init__(self, surface, channel, spec):
+        textures_named.require_pillow(surface.source)
         super().__init__(surface, channel, spec)
         self._bound = {}
         for gi, src in self._sources.items():

@@ -93,8 +93,12 @@ def vertex_normal_table(geometry):
 
 
 def _placeholder(image):
-    """trimesh's stand-in image for a material without a texture (a few pixels, made in memory)."""
-    return getattr(image, "format", "x") is None and getattr(image, "size", (99, 99))[0] <= 2
+    """trimesh's stand-in image for a material without a texture (a few pixels, made in memory;
+    without Pillow, a wrapper of the ImportError, which any look at it raises)."""
+    try:
+        return getattr(image, "format", "x") is None and getattr(image, "size", (99, 99))[0] <= 2
+    except ImportError:
+        return True
 
 
 class ColorSource:

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import ScatterError
 from ..sampling.plan import RawChunk, SamplePlan, apply_matrix
+from .signs import SignTally
 
 VOLUME_DRAWS = 8  # part, 3 box coordinates, 4 uniforms for 3 Gaussians (Box-Muller)
 STREAM_KEY = 0x766F6C756D65  # "volume": keys the volume stream apart from the surface one
@@ -138,6 +139,8 @@ class VolumeLabels:
         self.needs_winding = "winding" in wanted or ("inside" in wanted or "sdf" in wanted) and sign == "winding"
         self.needs_parity = sign == "parity" and bool(wanted & {"inside", "sdf"})
         self._distance_tree = self._winding_tree = None
+        # how many signs rest on a winding number near 1/2 (the run warns when many do)
+        self.tally = SignTally() if sign == "winding" and wanted & {"inside", "sdf"} else None
         if self.needs_distance or self.needs_parity:
             from .distance import TriangleTree
 
@@ -172,6 +175,8 @@ class VolumeLabels:
             from .winding import winding_numbers
 
             winding = winding_numbers(self._winding_tree, p)
+            if self.tally is not None:
+                self.tally.add(winding)
         if self.needs_parity:
             from .parity import parity_inside
 

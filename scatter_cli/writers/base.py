@@ -77,12 +77,17 @@ def _check_room(path, folder, size):
     cannot take (its temporary copy is written there); a file system that does not say
     is not checked."""
     try:
-        fs = os.statvfs(folder)
+        room = room_of(os.statvfs(folder))
     except OSError:
         return  # a missing folder is open_output's to report
-    room = fs.f_bavail * fs.f_frsize
-    if size > room:
+    if room is not None and size > room:
         raise ScatterError(f"{path}: the output needs {_bytes(size)}, its file system has {_bytes(room)} free")
+
+
+def room_of(fs):
+    """The bytes free to a user on a file system (``os.statvfs``), or None when it keeps
+    no count of blocks (/proc, /sys: writing there fails for another reason)."""
+    return fs.f_bavail * fs.f_frsize if fs.f_blocks else None
 
 
 def _stat(path):
@@ -160,6 +165,9 @@ def _create_temp(path, folder):
             return os.open(tmp, _CREATE, 0o666), tmp
         except FileExistsError:
             continue
-        except (FileNotFoundError, NotADirectoryError):
-            raise ScatterError(f"{path}: cannot write: folder '{os.path.dirname(path) or '.'}' does not exist") from None
+        except (FileNotFoundError, NotADirectoryError) as exc:
+            shown = os.path.dirname(path) or "."
+            if os.path.isdir(folder):  # there, but it takes no new files (/proc)
+                raise ScatterError(f"{path}: cannot write: folder '{shown}' takes no new files ({exc.strerror})") from None
+            raise ScatterError(f"{path}: cannot write: folder '{shown}' does not exist") from None
     raise FileExistsError(f"no free temporary name beside {path}")

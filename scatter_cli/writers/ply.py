@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..errors import ScatterError
-from ..loading.ply import MAX_HEADER, HeaderError, parse_header
+from ..loading.ply import MAX_HEADER, HeaderError, contents, parse_header, truncation
 from .base import reading
 from .binary import BinaryWriter, row_size
 from .pointfiles import IsMesh, PointFile
@@ -62,8 +62,15 @@ def read(path, fmt="ply"):
     if not vertex.scalar:
         raise ScatterError(f"{path}: vertex list properties are not point columns")
     layout = ("ply", header.encoding, tuple((e.name, e.properties) for e in header.elements))
-    return PointFile.checked(path, vertex.dtype(header.order), vertex.count, header.body, header.encoding != "ascii",
-                             layout, lambda count: with_vertex_count(header, count))
+    try:
+        return PointFile.checked(path, vertex.dtype(header.order), vertex.count, header.body,
+                                 header.encoding != "ascii", layout, lambda count: with_vertex_count(header, count))
+    except ScatterError:
+        with contents(path) as data:  # a short body: said where it ends, as the mesh loader says it
+            problem = None if data is None else truncation(data)
+        if problem:
+            raise ScatterError(f"{path}: {problem}") from None
+        raise
 
 
 def with_vertex_count(header, count) -> bytes:

@@ -27,7 +27,8 @@ import numpy as np
 
 from ..errors import ScatterError
 from .base import Writer
-from .pointfiles import COLOR_NAMES, NORMAL_NAMES, IsMesh, reason, stride
+from ..loading.usd import open_stage
+from .pointfiles import COLOR_NAMES, NORMAL_NAMES, IsMesh, stride
 
 # Bytes per point of each value as the stage holds it (float32 values, colour as rgb and
 # opacity, orient as quatf, quath and a protoIndices int), once as a Vt array and once
@@ -234,7 +235,9 @@ def read(path, fmt="usd"):
     prim of the stage at ``path``, in world space (x, y, z), with their ``normals`` (nx,
     ny, nz) and ``displayColor`` (red, green, blue) primvars where every prim has them."""
     Gf, Sdf, Usd, UsdGeom, Vt = _pxr(f"{path}: reading USD")
-    stage = _open_stage(path, Usd)
+    if not os.path.isfile(path):
+        raise ScatterError(f"{path}: no such file")
+    stage = open_stage(path, path)  # in the mesh loader's words, so that sample and preview say the same
     prims = [p for p in stage.Traverse() if p.IsA(UsdGeom.Points) or p.IsA(UsdGeom.PointInstancer)]
     if not prims:
         raise IsMesh(f"{path}: a USD stage without points is a mesh, not a point file")
@@ -260,18 +263,6 @@ def _prim_points(prim, Usd, UsdGeom):
     api = UsdGeom.PrimvarsAPI(prim)
     return (local @ matrix[:3, :3] + matrix[3, :3],  # USD: row vectors
             _primvar(api, "normals", len(local)), _primvar(api, "displayColor", len(local)))
-
-
-def _open_stage(path, Usd):
-    if not os.path.isfile(path):
-        raise ScatterError(f"{path}: no such file")
-    try:
-        stage = Usd.Stage.Open(path)
-    except Exception as exc:  # pxr raises Tf errors
-        raise ScatterError(f"{path}: not a USD stage ({reason(exc)})") from None
-    if stage is None:
-        raise ScatterError(f"{path}: not a USD stage")
-    return stage
 
 
 def _primvar(api, name, n):

@@ -27,7 +27,7 @@ from ..plan import RawChunk, in_blocks
 from .spacing import hex_spacing, nearest_distances, relative_radius
 
 # Candidates drawn per output point before thinning: more buy a larger spacing (rho) for
-# more time (docs/sampling.md: oversampling).
+# more time (docs/how-it-samples.md: oversampling).
 OVERSAMPLING = 8  # for --poisson -n N
 SMALL_SET, SMALL_SET_OVERSAMPLING = 5_000, 15  # for --poisson sets of up to SMALL_SET points
 RADIUS_OVERSAMPLING = 5  # for --radius: times the most points an R-spaced set can hold
