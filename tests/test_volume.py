@@ -192,3 +192,43 @@ def test_normalized_frames():
     world = scatter_cli.sample(mesh, 10, volume=True, attributes=("sdf",), precision="float64")
     assert np.allclose((world.points - center) * scale, sphere.points)
     assert np.allclose(world.sdf * scale, sphere.sdf)
+
+
+def _tree_arrays(trees):
+    """Every array of each tree (the distance and the winding tree), by attribute."""
+    return [{k: v for k, v in vars(t).items() if isinstance(v, np.ndarray)} for t in trees]
+
+
+def _assert_same_trees(a, b):
+    for x, y in zip(_tree_arrays(a), _tree_arrays(b)):
+        assert x.keys() == y.keys() and all(np.array_equal(x[k], y[k]) for k in x)
+
+
+def _built_both_ways(monkeypatch):
+    """(the label trees built one after the other, built at the same time)."""
+    import scatter_cli.core.native as native
+    from scatter_cli.volume.source import label_trees
+
+    tris = _triangles(trimesh.creation.icosphere(subdivisions=3))[0]
+    monkeypatch.setattr(native, "worker_count", lambda: 1)
+    in_turn = label_trees(tris, True, True)
+    monkeypatch.setattr(native, "worker_count", lambda: 2)
+    return in_turn, label_trees(tris, True, True)
+
+
+def test_the_label_trees_are_the_same_built_together_or_in_turn(monkeypatch):
+    _assert_same_trees(*_built_both_ways(monkeypatch))
+
+
+def test_a_tree_built_otherwise_on_its_thread_fails_that_check(monkeypatch):
+    import threading
+
+    import scatter_cli.volume.winding as winding
+
+    def elsewhere(t):  # on another thread than the main one: the faces in another order
+        return tree(t if threading.current_thread() is threading.main_thread() else t[::-1])
+
+    tree = winding.WindingTree
+    monkeypatch.setattr(winding, "WindingTree", elsewhere)
+    with pytest.raises(AssertionError):
+        _assert_same_trees(*_built_both_ways(monkeypatch))

@@ -917,6 +917,7 @@ static PyObject *crossings_py(PyObject *self, PyObject *args)
 
 typedef struct {
     double key;
+    double c[3]; /* the face's centre, carried along: each level reads its items in turn, not centres by id */
     int64_t id;
 } Item;
 
@@ -991,7 +992,7 @@ static PyObject *order_py(PyObject *self, PyObject *args)
     int64_t *o = PyArray_DATA(out);
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp i = 0; i < nf; i++)
-        items[i] = (Item){0.0, i};
+        items[i] = (Item){0.0, {c[3 * i], c[3 * i + 1], c[3 * i + 2]}, i};
     for (int64_t size = leaves * leaf; size > leaf; size /= 2)
         for (int64_t s = 0; s < nf; s += size) {
             int64_t e = s + size < nf ? s + size : nf, half = size / 2;
@@ -999,10 +1000,10 @@ static PyObject *order_py(PyObject *self, PyObject *args)
                 continue;
             double lo[3], hi[3];
             for (int k = 0; k < 3; k++)
-                lo[k] = hi[k] = c[3 * items[s].id + k];
+                lo[k] = hi[k] = items[s].c[k];
             for (int64_t i = s + 1; i < e; i++)
                 for (int k = 0; k < 3; k++) {
-                    double v = c[3 * items[i].id + k];
+                    double v = items[i].c[k];
                     lo[k] = v < lo[k] ? v : lo[k], hi[k] = v > hi[k] ? v : hi[k];
                 }
             int axis = 0;
@@ -1010,7 +1011,7 @@ static PyObject *order_py(PyObject *self, PyObject *args)
                 if (hi[k] - lo[k] > hi[axis] - lo[axis])
                     axis = k;
             for (int64_t i = s; i < e; i++)
-                items[i].key = c[3 * items[i].id + axis];
+                items[i].key = items[i].c[axis];
             select_least(items + s, e - s, half);
         }
     /* each leaf in face order */

@@ -124,6 +124,34 @@ class VolumeSource:
         return RawChunk(start, points, np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64), None, sharp)
 
 
+def label_trees(triangles, distance: bool, winding: bool):
+    """(the distance tree, the winding tree) of ``triangles`` (T, 3, 3) float64, each
+    None when not wanted. Both wanted and more than one worker thread: they are built at
+    the same time, one on another thread (the same trees either way; most of a build
+    is NumPy and kernel work that runs without the GIL)."""
+    from ..core.native import worker_count
+
+    def distance_tree():
+        from .distance import TriangleTree
+
+        tree = TriangleTree.from_triangles(triangles)
+        tree.wide()  # the kernel's form, else made at the first query
+        return tree
+
+    def winding_tree():
+        from .winding import WindingTree
+
+        return WindingTree(triangles)
+
+    if not (distance and winding and worker_count() > 1):
+        return distance_tree() if distance else None, winding_tree() if winding else None
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1, thread_name_prefix="winding-tree") as pool:
+        later = pool.submit(winding_tree)
+        return distance_tree(), later.result()
+
+
 class VolumeLabels:
     """Turns chunks of volume points into the asked-for label arrays (``make``)."""
 
@@ -138,17 +166,10 @@ class VolumeLabels:
         self.needs_distance = bool(wanted & {"sdf", "closest", "face", "object"})
         self.needs_winding = "winding" in wanted or ("inside" in wanted or "sdf" in wanted) and sign == "winding"
         self.needs_parity = sign == "parity" and bool(wanted & {"inside", "sdf"})
-        self._distance_tree = self._winding_tree = None
         # how many signs rest on a winding number near 1/2 (the run warns when many do)
         self.tally = SignTally() if sign == "winding" and wanted & {"inside", "sdf"} else None
-        if self.needs_distance or self.needs_parity:
-            from .distance import TriangleTree
-
-            self._distance_tree = TriangleTree.from_triangles(triangles)
-        if self.needs_winding:
-            from .winding import WindingTree
-
-            self._winding_tree = WindingTree(triangles)
+        self._distance_tree, self._winding_tree = label_trees(triangles, self.needs_distance or self.needs_parity,
+                                                              self.needs_winding)
 
     def stored_points(self, points, real_dtype):
         """The world points (n, 3) float64 that the labels of ``points`` (n, 3), world
