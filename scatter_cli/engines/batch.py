@@ -14,6 +14,7 @@ import os
 import sys
 import time
 
+from ..core.native import available_cpus
 from ..errors import ScatterError, ScatterUsageError
 from ..loading.formats import MESH_SUFFIXES
 from ..run.options import SampleOptions
@@ -220,13 +221,6 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
         print(f"batch: {result['written']} written, {result['skipped']} skipped, {result['failed']} failed "
               f"in {result['seconds']:.1f} s", file=sys.stderr)
     return result
-
-
-def available_cpus() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:
-        return os.cpu_count() or 1
 
 
 def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing, done):

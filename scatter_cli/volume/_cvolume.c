@@ -13,7 +13,8 @@
  *
  * Every float64 operation is the NumPy code's, in its order (built with -ffp-contract=off).
  * closest() hands blocks of points to the threads as they finish the last; crossings()
- * splits the points between them in fixed ranges. The GIL is released meanwhile.
+ * cuts the points into fixed ranges, many a thread, taken the same way. The GIL is
+ * released meanwhile.
  * Arrays are checked: a wrong shape, a non-finite value or an index out of range raises.
  */
 #define PY_SSIZE_T_CLEAN
@@ -27,7 +28,7 @@
 #include <stdlib.h>
 #include "_cthreads.h"
 
-/* below this many points a call runs on one thread */
+/* below this many points a call runs on one thread; crossings() cuts no range smaller */
 #define THREAD_POINTS 512
 #define MAX_DEPTH 62
 
@@ -906,9 +907,9 @@ static PyObject *crossings_py(PyObject *self, PyObject *args)
                         {iv[3 * j], iv[3 * j + 1], iv[3 * j + 2]}};
     }
     Crossings c = {t, PyArray_DATA(pts), rays, (int)k, pad, PyArray_DATA(inside), n};
-    int count = n < THREAD_POINTS ? 1 : threads;
+    int pieces = pieces_for(n, THREAD_POINTS, threads);
     Py_BEGIN_ALLOW_THREADS
-    in_parallel(count, crossings_job, &c);
+    in_pieces(pieces, threads, crossings_job, &c);
     Py_END_ALLOW_THREADS
     Py_RETURN_NONE;
 }

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import time
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -94,7 +93,7 @@ class ExteriorSource:
         faces_total = len(occluder.normals)
         hit_faces = np.zeros(faces_total, dtype=bool)
         tried_faces = np.zeros(faces_total, dtype=bool)
-        with ThreadPoolExecutor(max_workers=threads) as pool:
+        with native.thread_pool(threads) as pool:
             if occluder.enclosed is None:
                 rays += self._enclose_if_worth_it(pool, threads, count, limit)
             block = 0
@@ -153,7 +152,7 @@ class ExteriorSource:
         points = np.take(chunk.points, order, axis=0)
         normals = np.take(self.occluder.normals, rows[order], axis=0)
         parts = list(pool.map(lambda i: self.occluder.normals_blocked(points[i], normals[i]),
-                              np.array_split(np.arange(stop), threads)))
+                              np.array_split(np.arange(stop), native.PIECES_PER_THREAD * threads)))
         hidden = sum(int(np.count_nonzero(blocked)) for blocked, _ in parts)
         rays = sum(r for _, r in parts)
         total = limit if count is None else min(limit, count * stop / max(stop - hidden, 1))
@@ -197,7 +196,7 @@ class ExteriorSource:
                 escaped[i] = occluder.normal_escapes(np.take(points, i, axis=0),
                                                      np.take(occluder.normals, faces[i], axis=0))
 
-        list(pool.map(cast, np.array_split(order, threads)))
+        list(pool.map(cast, np.array_split(order, native.PIECES_PER_THREAD * threads)))
         cuts = np.cumsum([0] + [len(d[2]) for d in drawn])
         return pool.map(lambda k: self._finish_block(*drawn[k], escaped[cuts[k]:cuts[k + 1]]), range(len(drawn)))
 
