@@ -165,11 +165,15 @@ class ExteriorSource:
     @staticmethod
     def _blocks_to_go(count, kept, done, threads):
         """Blocks for the next round of the pass: about what the rate so far says is left
-        (a few more), in multiples of the thread count, at most 16 rounds' worth a time."""
-        if count is None or not kept:
+        (a few more), at most 16 a thread; in the first, no more than the count would fill
+        if every candidate were exterior (the rays of a round are cut among the threads
+        whatever its blocks: many threads must not draw blocks a small count never uses)."""
+        if count is None or (done and not kept):
             return threads
+        if not done:
+            return max(1, min(threads, math.ceil(count / BLOCK)))
         need = (count - kept) * done / kept * 1.05 + 1
-        return threads * max(1, min(16, math.ceil(need / threads)))
+        return max(1, min(16 * threads, math.ceil(need)))
 
     def _classify_round(self, pool, group, limit, threads):
         """What :meth:`_finish_block` gives for each block of ``group``, classified on the pool. The
