@@ -9,7 +9,10 @@ thread would pass vacuously), and a kernel whose result moved with the thread co
 fails the comparison (the broken variant).
 """
 
+import contextlib
 import functools
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -19,7 +22,7 @@ import scatter_cli
 from scatter_cli.core import native
 from scatter_cli.loading import fast
 from scatter_cli.loading.load import load_surface
-from scatter_cli.sampling import sharp
+from scatter_cli.sampling import plan, sharp
 from scatter_cli.sampling.exterior import enclosure
 from scatter_cli.sampling.normals import face_normals
 from scatter_cli.sampling.poisson import pairs, thinning
@@ -219,3 +222,62 @@ def test_every_kind_of_run_gives_the_same_bytes_on_any_thread_count(kind, monkey
         monkeypatch.setenv("SCATTER_THREADS", t)
         out[t] = run_bytes(seed=11, **options)
     assert not differing(out)
+
+
+def most_points_in_flight(threads, split, n=3_000_000, chunk=1 << 17):
+    """The most points that run_chunks had computed or computing, not yet taken, at once."""
+    lock, live = threading.Lock(), [0, 0]  # now, most
+
+    def job(a, b):
+        with lock:
+            live[0] += b - a
+            live[1] = max(live[1], live[0])
+        time.sleep(0.001)  # (long enough for the pool to fill)
+        return b - a
+
+    for taken in plan.run_chunks(job, 0, n, chunk, threads, split):
+        with lock:
+            live[0] -= taken
+    return live[1]
+
+
+@pytest.mark.parametrize("threads", [2, 7, 64, 256])
+def test_the_points_in_flight_do_not_grow_with_the_threads(threads, monkeypatch):
+    """Memory per thread bounded: IN_FLIGHT chunks' worth of points at most whatever the
+    threads (pieces of chunks), one chunk's for jobs that split their range themselves;
+    the broken variant holds two whole chunks a thread."""
+    chunk = 1 << 17
+    assert most_points_in_flight(threads, True, chunk=chunk) <= plan.IN_FLIGHT * chunk
+    assert most_points_in_flight(threads, False, chunk=chunk) <= chunk
+    monkeypatch.setattr(plan, "pieces", lambda n, size, threads: (size, 2 * threads))
+    assert most_points_in_flight(threads, True, chunk=chunk) > plan.IN_FLIGHT * chunk
+
+
+def test_one_wide_tree_is_made_whatever_the_threads_that_ask(monkeypatch):
+    """The chunk threads of a volume run ask for the kernel's tree at once: it is made
+    once (made by each, it was twice the memory); the broken variant has no lock."""
+    tree, _, _ = volume_points()
+
+    kernel = distance._kernel
+
+    class Counting:
+        made = 0
+
+        def __getattr__(self, name):
+            return getattr(kernel, name)
+
+        def wide(self, *args):
+            Counting.made += 1
+            time.sleep(0.05)  # (every asking thread arrives meanwhile)
+            return kernel.wide(*args)
+
+    def made_by(threads):
+        Counting.made, tree._wide = 0, None
+        with native.thread_pool(threads) as pool:
+            list(pool.map(lambda _: tree.wide(), range(threads)))
+        return Counting.made
+
+    monkeypatch.setattr(distance, "_kernel", Counting())
+    assert made_by(8) == 1
+    monkeypatch.setattr(distance.TriangleTree, "_making", contextlib.nullcontext())
+    assert made_by(8) > 1

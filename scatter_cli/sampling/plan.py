@@ -452,13 +452,13 @@ def run_chunks(job, start, stop, chunk_size, threads=None, split=True):
     computes them while the caller takes them in order, with at most IN_FLIGHT chunks'
     worth of points computed or waiting at a time, so that memory stays flat whatever
     the count and whatever T: ``split``, pieces of the chunks (:func:`pieces`), each on one
-    thread; else (a job that splits its chunk among the threads itself, such as the
-    volume labels) two whole chunks at a time, so that one's Python runs while the
-    other's kernels do. The output's bytes never change: a job's result does not depend
+    thread; else (a job that splits its range among the threads itself, such as the
+    volume labels) two half chunks at a time, so that one's Python runs while the
+    other's kernels do, in the memory of one chunk. The output's bytes never change: a job's result does not depend
     on where its range was cut.
     """
     threads = threads or native.worker_count()
-    piece, depth = pieces(stop - start, chunk_size, threads) if split else (chunk_size, min(threads, 2))
+    piece, depth = pieces(stop - start, chunk_size, threads) if split else (-(-chunk_size // 2), 2)
     if depth <= 1:
         yield from (job(a, b) for a, b in chunk_ranges(stop, piece, start))
         return
@@ -466,15 +466,14 @@ def run_chunks(job, start, stop, chunk_size, threads=None, split=True):
     with native.thread_pool(min(threads, depth), one_level=split) as pool:
         pending = collections.deque(pool.submit(job, *r) for r in itertools.islice(ranges, depth))
         while pending:
-            result = pending.popleft().result()
-            nxt = next(ranges, None)
+            yield pending.popleft().result()
+            nxt = next(ranges, None)  # (once the caller is done with the last: it counts)
             if nxt is not None:
                 pending.append(pool.submit(job, *nxt))
-            yield result
 
 
-IN_FLIGHT = 4  # chunks' worth of points a pool holds at most, computed or waiting, whatever its threads
-MIN_PIECE = 1 << 14  # points a piece at least: less, and the Python of each piece would be the bound
+IN_FLIGHT = 2  # chunks' worth of points a pool holds at most, computed or waiting, whatever its threads
+MIN_PIECE = 1 << 13  # points a piece at least: less, and the Python of each piece would be the bound
 
 
 def pieces(n, chunk_size, threads):
