@@ -675,15 +675,15 @@ typedef struct {
  * alone, never on the threads, so neither does anything the pass decides. */
 #define PIECE_POINTS 16384
 
-/* One piece of the pairs: those whose earlier point is in cells c0 .. c1 - 1. Its pairs'
- * weights are added to the crowding of both their ends, and their later ends counted, with
- * atomic adds of whole numbers, so the sums do not depend on the order the pieces run in. */
+/* One piece of the pairs: those whose earlier point is in cells c0 .. c1 - 1. Their weights
+ * are added to the crowding of their earlier ends at once, and to that of their later ends
+ * once all pieces are done, from the lists (or at once, atomically, for pairs past the
+ * budget, which are not listed): sums of whole numbers, so their order changes nothing. */
 typedef struct {
     const Greedy *w;
     int64_t c0, c1;
     int64_t *crowd;  /* (a,) shared: the sums */
-    int32_t *degree; /* (a,) shared: how many pairs end at each position; then, filling the
-                        backward rows, how many of them are in place */
+    int32_t *degree; /* (a,) shared: how many of the backward rows' pairs are in place */
     int32_t *later;  /* (a,) shared: how many pairs each of this piece's positions found */
     int64_t *first;  /* (a,) shared: where they start in to and lift */
     int32_t *to;     /* (size,) the later end of each pair found, in position order */
@@ -691,12 +691,23 @@ typedef struct {
     int64_t size, cap;
     int64_t *listed; /* shared: the pairs found so far by all pieces (atomic) */
     int64_t budget;  /* list no more pairs than this in all; past it, over is set and the lists stop */
+    int shared;      /* pieces run on more than one thread: crowd and listed take atomic adds */
     int over;
     const int64_t *back; /* the backward rows to fill (see Rows) */
     int32_t *bnbr;
     uint16_t *blift;
     int ok;
 } Job;
+
+/* *p += v, atomic when the pieces run on several threads; the old value */
+static inline int64_t add64(int shared, int64_t *p, int64_t v)
+{
+    if (shared)
+        return __atomic_fetch_add(p, v, __ATOMIC_RELAXED);
+    int64_t old = *p;
+    *p = old + v;
+    return old;
+}
 
 static int job_reserve(Job *job, int64_t more)
 {
@@ -719,7 +730,6 @@ static void crowd_job(void *jobs, int k, int count)
     const Greedy *w = job->w;
     const Grid *g = w->g;
     int64_t *crowd = job->crowd;
-    int32_t *degree = job->degree;
     double scale = 1.0 / (2.0 * w->radius);
     Scratch b;
     job->ok = scratch_init(&b, w->most);
@@ -729,24 +739,24 @@ static void crowd_job(void *jobs, int k, int count)
         const int32_t *r = w->ranges + 18 * c;
         for (int64_t s = g->cell_start[c]; s < g->cell_start[c + 1]; s++) {
             int64_t hits = later_hits(g, r, s, w->r2, &b);
-            job->over |= __atomic_add_fetch(job->listed, hits, __ATOMIC_RELAXED) > job->budget;
+            job->over |= add64(job->shared, job->listed, hits) + hits > job->budget;
             if (!job->over && !job_reserve(job, hits)) {
                 job->ok = 0;
                 break;
             }
             weigh(b.d2, b.weight, hits, scale);
             int64_t sum = 0;
-            for (int64_t h = 0; h < hits; h++) {
-                __atomic_fetch_add(&crowd[b.at[h]], (int64_t)b.weight[h], __ATOMIC_RELAXED);
+            for (int64_t h = 0; h < hits; h++)
                 sum += (int64_t)b.weight[h];
-            }
-            __atomic_fetch_add(&crowd[s], sum, __ATOMIC_RELAXED);
-            if (job->over)
+            add64(job->shared, &crowd[s], sum);
+            if (job->over) { /* not listed: the later ends' share now */
+                for (int64_t h = 0; h < hits; h++)
+                    add64(job->shared, &crowd[b.at[h]], (int64_t)b.weight[h]);
                 continue;
+            }
             int32_t *restrict to = job->to + job->size;
             uint16_t *restrict lift = job->lift + job->size;
             for (int64_t h = 0; h < hits; h++) {
-                __atomic_fetch_add(&degree[b.at[h]], 1, __ATOMIC_RELAXED);
                 to[h] = b.at[h];
                 lift[h] = (uint16_t)(b.weight[h] - LIFT);
             }
@@ -758,9 +768,8 @@ static void crowd_job(void *jobs, int k, int count)
     scratch_free(&b);
 }
 
-/* The piece's pairs into the backward rows of their later ends, each at the place an
- * atomic count gives it in its row: in an order that depends on timing, put right by
- * sort_rows. */
+/* The piece's pairs into the backward rows of their later ends (the pieces in turn: the
+ * rows fill in position order). */
 static void fill_job(void *jobs, int k, int count)
 {
     Job *job = (Job *)jobs + k;
@@ -771,7 +780,7 @@ static void fill_job(void *jobs, int k, int count)
     for (int64_t s = g->cell_start[job->c0]; s < g->cell_start[job->c1]; s++)
         for (int64_t h = 0; h < job->later[s]; h++, e++) {
             int32_t t = job->to[e];
-            int64_t q = back[t] + __atomic_fetch_add(&job->degree[t], 1, __ATOMIC_RELAXED);
+            int64_t q = back[t] + job->degree[t]++;
             job->bnbr[q] = (int32_t)s;
             job->blift[q] = job->lift[e];
         }
@@ -834,27 +843,6 @@ static int by_grid(const Greedy *w, Rows *rows)
     return 1;
 }
 
-/* Each backward row of positions share k of pieces in position order (the order the
- * pairs were put there in depends on timing). */
-static void sort_rows(void *rows, int k, int pieces)
-{
-    const Rows *r = rows;
-    int64_t s0, s1;
-    share(r->w->g->a, k, pieces, &s0, &s1);
-    for (int64_t s = s0; s < s1; s++) {
-        int32_t *nbr = r->bnbr + r->back[s];
-        uint16_t *lift = r->blift + r->back[s];
-        for (int64_t i = 1; i < r->back[s + 1] - r->back[s]; i++) {
-            int32_t v = nbr[i];
-            uint16_t l = lift[i];
-            int64_t j = i;
-            for (; j > 0 && nbr[j - 1] > v; j--)
-                nbr[j] = nbr[j - 1], lift[j] = lift[j - 1];
-            nbr[j] = v, lift[j] = l;
-        }
-    }
-}
-
 /* The pieces of the cells, about PIECE_POINTS positions each (the cells of a piece hold
  * about equal numbers of points): their jobs, with room for the usual number of pairs
  * (about 9 a point at 8 candidates to a kept point), so that the lists seldom grow. */
@@ -879,8 +867,8 @@ static Job *pieces_of(const Greedy *w, int pieces, int64_t *crowd, int32_t *degr
 }
 
 /* The crowding of every position into crowd (a,), and the neighbours of every position into
- * rows, in pieces of PIECE_POINTS positions on ``threads`` threads. The sums are of whole
- * numbers, so the order they are added in changes nothing. */
+ * rows: the pair search in pieces of PIECE_POINTS positions on ``threads`` threads, the
+ * backward rows filled in turn (in position order, no atomics). */
 static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
 {
     const Grid *g = w->g;
@@ -900,6 +888,9 @@ static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
     int64_t listed = 0;
     Job *jobs = ok ? pieces_of(w, pieces, crowd, degree, rows, rows->piece_start, &listed) : NULL;
     ok = ok && jobs;
+    int shared = threads_for(pieces, threads) > 1;
+    for (int k = 0; ok && k < pieces; k++)
+        jobs[k].shared = shared;
     if (ok) {
         memset(crowd, 0, (size_t)m * sizeof *crowd);
         in_pieces(pieces, threads, crowd_job, jobs);
@@ -907,6 +898,11 @@ static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
     for (int k = 0; ok && k < pieces; k++)
         ok &= jobs[k].ok;
     rows->by_grid = listed > MOST_LISTED * a + 65536; /* (then some pieces stopped listing) */
+    for (int k = 0; ok && k < pieces; k++) /* the listed pairs' later ends, in turn: no atomics */
+        for (int64_t e = 0; e < jobs[k].size; e++) {
+            crowd[jobs[k].to[e]] += (int64_t)jobs[k].lift[e] + LIFT;
+            degree[jobs[k].to[e]]++;
+        }
     if (ok) {
         rows->back[0] = 0;
         for (int64_t s = 0; s < a; s++) {
@@ -925,10 +921,8 @@ static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
             jobs[k].bnbr = rows->bnbr;
             jobs[k].blift = rows->blift;
         }
-        if (ok) {
-            in_pieces(pieces, threads, fill_job, jobs);
-            in_pieces(pieces_for(a, PIECE_POINTS, threads), threads, sort_rows, rows);
-        }
+        for (int k = 0; ok && k < pieces; k++)
+            fill_job(jobs, k, pieces);
     }
     for (int k = 0; jobs && k < pieces; k++) {
         rows->fnbr[k] = rows->by_grid ? NULL : jobs[k].to;
@@ -1036,15 +1030,16 @@ static inline void rows_of(const Rows *r, int32_t s, Span row[2], Scratch *b)
         row[1] = (Span){NULL, NULL, 0};
         return;
     }
-    int lo = 0, hi = r->pieces; /* the piece of s: piece_start[lo] <= s < piece_start[lo + 1] */
-    while (hi - lo > 1) {
-        int mid = (lo + hi) / 2;
-        if (r->piece_start[mid] <= s)
-            lo = mid;
-        else
-            hi = mid;
-    }
-    row[0] = (Span){r->fnbr[lo] + r->first[s], r->flift[lo] + r->first[s], r->later[s]};
+    /* the piece of s, piece_start[k] <= s < piece_start[k + 1], from where s lies in the
+     * positions (the pieces hold about equal numbers of them) */
+    int64_t a = r->w->g->a;
+    int k = (int)((int64_t)s * r->pieces / (a ? a : 1));
+    k = k < r->pieces ? k : r->pieces - 1;
+    while (k > 0 && r->piece_start[k] > s)
+        k--;
+    while (r->piece_start[k + 1] <= s)
+        k++;
+    row[0] = (Span){r->fnbr[k] + r->first[s], r->flift[k] + r->first[s], r->later[s]};
     row[1] = (Span){r->bnbr + r->back[s], r->blift + r->back[s], r->back[s + 1] - r->back[s]};
 }
 
