@@ -21,7 +21,7 @@ from .run.bounds import choose_precision, in_frame, normal_frame, sampled_bounds
 from .run.options import SampleOptions
 from .run.pipeline import surface_source, volume_source
 from .run.columns import ATTRIBUTES, Samples, column_layout
-from .sampling.plan import chunk_ranges, run_chunks
+from .sampling.plan import run_chunks
 from .sampling.sources import Source
 from .loading.load import load_surface
 from .surface.model import Surface
@@ -96,7 +96,7 @@ class Run:
         stop = self.span[1] if stop is None else stop
         if not 0 <= start <= stop <= self.count:
             raise ValueError(f"points {start}..{stop} are outside the run's 0..{self.count}")
-        yield from run_chunks(self._job, chunk_ranges(stop, self.chunk_size, start), threads)
+        yield from run_chunks(self._job, start, stop, self.chunk_size, threads, self.maker.split_chunks)
         self._count_signs()
 
     def _count_signs(self):

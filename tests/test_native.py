@@ -165,20 +165,6 @@ def test_large_meshes_go_in_face_order_and_larger_chunks():
     assert large.in_face_order and large.default_chunk == sampling.LARGE_MESH_CHUNK
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("threads", ["2", "3", "7", "20"])
-def test_greedy_does_not_depend_on_the_thread_count(threads, monkeypatch):
-    # enough points for the kernel to split the crowding pass on 7 threads (16,384 a thread
-    # at least); 20 is more than the kernels start
-    points = np.random.default_rng(5).normal(size=(120_000, 3))
-    points /= np.linalg.norm(points, axis=1, keepdims=True)
-    radius = 0.02
-    monkeypatch.setenv("SCATTER_THREADS", "1")
-    want = thinning.thin_by_radius(points, radius)
-    monkeypatch.setenv("SCATTER_THREADS", threads)
-    np.testing.assert_array_equal(thinning.thin_by_radius(points, radius), want)
-
-
 _THIN_IN_A_CHILD = """
 import sys
 import numpy as np
@@ -252,3 +238,61 @@ def test_a_kernel_missing_from_the_table_is_reported():
     assert kernel_table_errors(no_row, native.KERNELS) == ["_cstable"]
     moved = text.replace("`volume.distance`, `volume.parity`", "`volume.distance`")
     assert kernel_table_errors(moved, native.KERNELS) == ["_cvolume"]
+
+
+def cgroup_tree(tmp_path, membership, files):
+    """A fake /sys/fs/cgroup under tmp_path with ``files`` {path: text}, and a fake
+    /proc/self/cgroup holding ``membership``: (root, membership file)."""
+    for path, text in files.items():
+        (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / path).write_text(text)
+    (tmp_path / "self-cgroup").write_text(membership)
+    return str(tmp_path / "fs"), str(tmp_path / "self-cgroup")
+
+
+@pytest.mark.parametrize("membership, files, want", [
+    # cgroup v2: the least quota of the process's cgroup and those above it
+    ("0::/job/step\n", {"fs/job/step/cpu.max": "max 100000\n", "fs/job/cpu.max": "150000 100000\n",
+                        "fs/cpu.max": "400000 100000\n"}, 1.5),
+    # v1, the cpu controller mounted with cpuacct
+    ("4:memory:/x\n1:cpu,cpuacct:/job\n", {"fs/cpu,cpuacct/job/cpu.cfs_quota_us": "250000\n",
+                                           "fs/cpu,cpuacct/job/cpu.cfs_period_us": "100000\n"}, 2.5),
+    # a container: its own cgroup mounted as the root, the membership path not visible
+    ("0::/docker/abc\n", {"fs/cpu.max": "300000 100000\n"}, 3.0),
+    ("0::/\n", {"fs/cpu.max": "max 100000\n"}, None),  # no quota
+    ("1:cpu,cpuacct:/\n", {"fs/cpu,cpuacct/cpu.cfs_quota_us": "-1\n", "fs/cpu,cpuacct/cpu.cfs_period_us": "100000\n"}, None),
+])
+def test_the_cgroup_cpu_quota_is_read(tmp_path, membership, files, want):
+    assert native.cgroup_cpu_quota(*cgroup_tree(tmp_path, membership, files)) == want
+
+
+def test_the_default_threads_are_the_cpus_this_process_may_use(monkeypatch):
+    """The affinity mask, at most the quota rounded up; SCATTER_THREADS overrides it. The
+    broken variants: a quota ignored, a fixed cap."""
+    monkeypatch.delenv("SCATTER_THREADS", raising=False)
+    monkeypatch.setattr(native.os, "sched_getaffinity", lambda pid: set(range(64)))
+
+    def default(quota):
+        monkeypatch.setattr(native, "cgroup_cpu_quota", lambda: quota)
+        native.available_cpus.cache_clear()
+        native._threads.cache_clear()
+        return native.worker_count()
+
+    try:
+        assert [default(None), default(2.5), default(100.0), default(0.2)] == [64, 3, 64, 1]
+        monkeypatch.setenv("SCATTER_THREADS", "5")
+        assert default(2.5) == 5
+    finally:
+        native.available_cpus.cache_clear()
+        native._threads.cache_clear()
+
+
+def test_a_quota_above_the_process_cgroup_counts(tmp_path, monkeypatch):
+    """The broken variant reads the process's own cgroup alone: a job's quota set on the
+    cgroup above its step goes unseen."""
+    args = cgroup_tree(tmp_path, "0::/job/step\n", {"fs/job/step/cpu.max": "max 100000\n",
+                                                   "fs/job/cpu.max": "150000 100000\n"})
+    assert native.cgroup_cpu_quota(*args) == 1.5
+    levels = native._levels
+    monkeypatch.setattr(native, "_levels", lambda folder, path: levels(folder, path)[:1])
+    assert native.cgroup_cpu_quota(*args) is None

@@ -11,6 +11,7 @@ import os
 import numpy as np
 import pytest
 
+from scatter_cli.core import native
 from scatter_cli.sampling.stable import source as stable, arrivals as stable_arrivals, faces as stable_faces, order as stable_order, weights as stable_weights
 from scatter_cli.sampling.poisson import thinning
 from scatter_cli.stats.chisquare import chi2_gof
@@ -440,10 +441,10 @@ class _SideSizes:
 @needs_kernel
 @pytest.mark.parametrize("threads, room", [("2", None), ("3", None), ("7", None), ("2", -50.0)])
 def test_kernel_sorts_across_threads_in_numpys_order(threads, room, monkeypatch):
-    """Over 2^16 arrivals: several face ranges write into each time bucket, several
-    threads sort bucket ranges in place (each writing its lowest positions to side arrays
-    while the thread below still reads them), and with room -50 sd every bucket overflows
-    and the pass reruns with exact room. The arrivals and their order are NumPy's."""
+    """Over 2^16 arrivals: several face ranges write into each time bucket, the threads
+    sort bucket ranges in place, many a thread (each writing its lowest positions to side
+    arrays while the range below may still be read), and with room -50 sd every bucket
+    overflows and the pass reruns with exact room. The arrivals and their order are NumPy's."""
     table = stable_faces.FaceTable(load_surface(str(SAMPLES / "skull.ply")), 5)
     tau = 150_000 / table.total
     bits = stable_arrivals.counter_bits(table, tau)
@@ -455,8 +456,8 @@ def test_kernel_sorts_across_threads_in_numpys_order(threads, room, monkeypatch)
     spy = _SideSizes(stable_order._kernel)
     monkeypatch.setattr(stable_order, "_kernel", spy)
     t, ids, dup = stable_order.kernel_arrivals(table, tau, bits)
-    assert len(spy.sides) == int(threads)
-    # with slack in the buckets, every thread but the first writes below its own segments
+    assert len(spy.sides) == native.PIECES_PER_THREAD * int(threads)
+    # with slack in the buckets, every range but the first writes below its own segments
     assert (min(spy.sides[1:]) > 0) if room is None else (max(spy.sides) == 0)
     assert t.tobytes() == t0[order].tobytes()
     assert ids.tobytes() == stable_arrivals.pack(face, ctr, bits)[order].tobytes()

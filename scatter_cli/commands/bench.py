@@ -155,7 +155,7 @@ def our_sampler(surface, method="random", warp="sqrt", precision="float64"):
     """This tool's method with any warp, in float64 (as ``scatter sample``) or float32
     arithmetic; the sample plan is rebuilt on every call, as a command would."""
     from ..sampling.methods import DRAWS
-    from ..sampling.plan import DEFAULT_CHUNK, SamplePlan, chunk_ranges, run_chunks
+    from ..sampling.plan import DEFAULT_CHUNK, SamplePlan, run_chunks
     from ..sampling.warps import WARPS
 
     draws, warp_fn = DRAWS[method], WARPS[warp][0]
@@ -173,7 +173,7 @@ def our_sampler(surface, method="random", warp="sqrt", precision="float64"):
             return a, plan.place(a, used, bary).points
 
         out = np.empty((count, 3), dtype=dtype)
-        for a, pts in run_chunks(job, chunk_ranges(count, DEFAULT_CHUNK)):
+        for a, pts in run_chunks(job, 0, count, DEFAULT_CHUNK):
             out[a : a + len(pts)] = pts
         return out
 

@@ -1,4 +1,4 @@
-"""The optional compiled kernels (C extensions built at install), and the worker count.
+"""The optional compiled kernels (C extensions built at install), and the thread count.
 
 Each kernel does the float64 operations of the NumPy code it stands in for, in the same
 order, so it changes the time a job takes, never its output (tests/test_kernel_parity.py
@@ -10,7 +10,9 @@ the thinning kernel its plain distance loops instead of its AVX-512 ones.
 
 import functools
 import importlib
+import math
 import os
+import threading
 from typing import NamedTuple
 
 
@@ -59,22 +61,103 @@ def _flag(variable):
     return os.environ.get(variable, "") not in ("", "0")
 
 
-@functools.lru_cache(maxsize=1)
-def _cores() -> int:
-    """The machine's cores (os.cpu_count reads /sys each time)."""
-    return os.cpu_count() or 1
+@functools.lru_cache(maxsize=1)  # read once: a batch asks for every mesh
+def available_cpus() -> int:
+    """The CPUs this process may use: those of its affinity mask, at most its cgroup's CPU
+    quota (a container's ``--cpus``, rounded up), at least 1."""
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # (not Linux)
+        cpus = os.cpu_count() or 1
+    quota = cgroup_cpu_quota()
+    if quota is not None:
+        cpus = min(cpus, math.ceil(quota))
+    return max(1, cpus)
+
+
+def cgroup_cpu_quota(root="/sys/fs/cgroup", membership="/proc/self/cgroup"):
+    """CPUs the quota of this process's cgroup and of the cgroups above it allows (the least
+    of their quota / period), or None without a quota. Reads cgroup v2's ``cpu.max`` and
+    v1's ``cpu.cfs_quota_us`` and ``cpu.cfs_period_us``; where the process's cgroup is not
+    visible (a container mounts its own as the root), the root's."""
+    try:
+        with open(membership) as f:
+            lines = f.read().splitlines()
+    except OSError:
+        return None
+    least = None
+    for line in lines:
+        _, controllers, path = line.split(":", 2)
+        if controllers == "":  # v2
+            folders = [root]
+        elif "cpu" in controllers.split(","):  # v1: mounted under the controllers' names
+            folders = [os.path.join(root, name) for name in (controllers, "cpu", "cpu,cpuacct")]
+        else:
+            continue
+        for folder in dict.fromkeys(folders):
+            for level in _levels(folder, path):
+                quota = _quota_at(level)
+                if quota is not None and (least is None or quota < least):
+                    least = quota
+    return least
+
+
+def _levels(folder, path):
+    """The folders of cgroup ``path`` under the mount ``folder``, from it up to the mount."""
+    parts = [p for p in path.split("/") if p]
+    if not os.path.isdir(os.path.join(folder, *parts)):
+        parts = []  # another namespace's path: the mount's root is this process's cgroup
+    return [os.path.join(folder, *parts[:k]) for k in range(len(parts), -1, -1)]
+
+
+def _quota_at(folder):
+    """quota / period of the cgroup ``folder`` (v2 or v1), None when it sets none."""
+    try:
+        with open(os.path.join(folder, "cpu.max")) as f:
+            quota, period = f.read().split()[:2]
+    except (OSError, ValueError):
+        try:
+            with open(os.path.join(folder, "cpu.cfs_quota_us")) as f, \
+                    open(os.path.join(folder, "cpu.cfs_period_us")) as g:
+                quota, period = f.read().strip(), g.read().strip()
+        except OSError:
+            return None
+    try:
+        quota, period = int(quota), int(period)
+    except ValueError:  # "max": no quota
+        return None
+    return quota / period if quota > 0 and period > 0 else None
 
 
 def worker_count() -> int:
-    """Threads for sampling and thinning: SCATTER_THREADS, else the cores, at most 4."""
+    """Threads for the kernels and the pools: SCATTER_THREADS, else :func:`available_cpus`;
+    1 on a thread of a :func:`thread_pool`."""
+    if getattr(_pool_thread, "on", False):
+        return 1
     return _threads(os.environ.get("SCATTER_THREADS", ""))
+
+
+_pool_thread = threading.local()
+PIECES_PER_THREAD = 8  # work cut into this many pieces a thread keeps them all busy (as _cthreads.h does)
+
+
+def thread_pool(threads, one_level=True):
+    """A pool of ``threads`` threads; ``one_level``: the kernels its threads call run on
+    their thread alone, so that T threads run T threads, not T kernels of T threads each."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    return ThreadPoolExecutor(max_workers=threads, initializer=_one_level if one_level else None)
+
+
+def _one_level():
+    _pool_thread.on = True
 
 
 @functools.lru_cache(maxsize=8)  # asked several times per mesh
 def _threads(env) -> int:
     env = env.strip()
     if not env:
-        return max(1, min(4, _cores()))
+        return available_cpus()
     try:
         return max(1, int(env))
     except ValueError:

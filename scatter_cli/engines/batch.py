@@ -14,6 +14,7 @@ import os
 import sys
 import time
 
+from ..core.native import available_cpus
 from ..errors import ScatterError, ScatterUsageError
 from ..loading.formats import MESH_SUFFIXES
 from ..run.options import SampleOptions
@@ -53,7 +54,7 @@ class Inputs:
         for top, dirs, files in os.walk(folder):
             dirs.sort()
             found.extend(os.path.join(top, f) for f in files if os.path.splitext(f)[1].lower() in self.suffixes)
-        found.sort(key=lambda p: os.path.relpath(p, folder).split(os.sep))
+        found.sort(key=lambda p: _below(p, folder).split(os.sep))
         for p in found:
             self.add_file(p, root)
 
@@ -77,8 +78,17 @@ class Inputs:
         name = os.path.basename(path)
         stem = os.path.splitext(name)[0]
         root = self.root_of[i]
-        rel = stem if root < 0 else os.path.splitext(os.path.relpath(path, self.roots[root]))[0]
+        rel = stem if root < 0 else os.path.splitext(_below(path, self.roots[root]))[0]
         return {"stem": stem, "name": name, "rel": rel, "index": i}
+
+
+def _below(path, folder):
+    """``path`` relative to ``folder``, which ``os.walk(folder)`` found it under: as
+    os.path.relpath gives it, by cutting the string (relpath makes both absolute first,
+    a cost per mesh the batch's own thread would pay at tens of thousands of them)."""
+    if path.startswith(folder):
+        return path[len(folder):].lstrip(os.sep)
+    return os.path.relpath(path, folder)
 
 
 def _open_list(path):
@@ -222,13 +232,6 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
         print(f"batch: {result['written']} written, {result['skipped']} skipped, {result['failed']} failed "
               f"in {result['seconds']:.1f} s", file=sys.stderr)
     return result
-
-
-def available_cpus() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:
-        return os.cpu_count() or 1
 
 
 def run_local(jobs_iter, setup, fmt, *, jobs, timeout, max_memory, skip_existing, done):

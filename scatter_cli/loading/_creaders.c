@@ -1280,7 +1280,7 @@ static void stl_part_run(void *parts, int k, int count)
     s->status = stl_body(s);
 }
 
-#define MIN_PART (4 << 20)
+#define MIN_PART (1 << 20) /* bytes a part at least */
 
 /* The parts in file order decide: the first to end at endsolid ends the file, a part
  * that reached its stop hands on to the next; the vertices of the parts read are joined
@@ -1306,6 +1306,27 @@ static int stl_join(stl_part *parts, int n)
     return 1; /* no endsolid */
 }
 
+/* The parts of the text after the header line, from ``from`` to ``end``: at most ``most``
+ * parts of MIN_PART bytes or more, each ending at a line break (every break ends a line,
+ * so each part starts at one); returns how many. */
+static int stl_parts(const char *from, const char *end, int most, stl_part *parts)
+{
+    int n = 0;
+    while (n < most) {
+        const char *stop = end;
+        if (n < most - 1 && (end - from) / (most - n) >= MIN_PART) {
+            const char *mid = from + (end - from) / (most - n);
+            const char *nl = memchr(mid, '\n', (size_t)(end - mid));
+            stop = nl ? nl + 1 : end;
+        }
+        parts[n++] = (stl_part){from, stop, end, {0}, 1};
+        from = stop;
+        if (stop == end)
+            break;
+    }
+    return n;
+}
+
 static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
 {
     Py_buffer buf;
@@ -1314,31 +1335,20 @@ static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
         return NULL;
     const char *text = buf.buf, *end = text + buf.len;
     cursor c = {text, end};
-    stl_part parts[MAX_THREADS];
-    memset(parts, 0, sizeof parts);
+    int most = pieces_for(buf.len, MIN_PART, threads);
+    stl_part *parts = calloc((size_t)most, sizeof *parts);
+    if (!parts) {
+        PyBuffer_Release(&buf);
+        return PyErr_NoMemory();
+    }
     int n = 0, status = 1;
     Py_BEGIN_ALLOW_THREADS
     skip_blank_lines(&c);
     if (starts_nocase(&c, "solid")) {
         c.p += 5;
         if (plain_line_rest(&c) == 0) {
-            /* parts split at line breaks: every break ends a line, so each part starts at one */
-            int want = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
-            const char *from = c.p;
-            while (n < want) {
-                const char *stop = end;
-                if (n < want - 1 && (end - from) / (want - n) >= MIN_PART) {
-                    const char *mid = from + (end - from) / (want - n);
-                    const char *nl = memchr(mid, '\n', (size_t)(end - mid));
-                    stop = nl ? nl + 1 : end;
-                }
-                parts[n] = (stl_part){from, stop, end, {0}, 1};
-                n++;
-                from = stop;
-                if (stop == end)
-                    break;
-            }
-            in_parallel(n, stl_part_run, parts);
+            n = stl_parts(c.p, end, most, parts);
+            in_pieces(n, threads, stl_part_run, parts);
             status = stl_join(parts, n);
         }
     }
@@ -1347,6 +1357,7 @@ static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
     for (int k = 1; k < n; k++)
         grow_free(&parts[k].v);
     grow v = parts[0].v;
+    free(parts);
     size_t nv = v.len / 24;
     if (status < 0) {
         grow_free(&v);

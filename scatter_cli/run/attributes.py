@@ -23,6 +23,8 @@ NORMAL_USERS = ("normal", "smooth-normal", "orient")
 
 
 class AttributeMaker:
+    split_chunks = True  # chunks may be cut into pieces on the threads (sampling.plan.run_chunks)
+
     def __init__(self, surface: Surface, names, seed=0):
         self.surface = surface
         self.seed = seed  # keys the orient spin stream

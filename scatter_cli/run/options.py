@@ -14,6 +14,7 @@ Standard library only: the command line imports this module for its defaults and
 from __future__ import annotations
 
 import dataclasses
+import decimal
 import fractions
 import math
 import numbers
@@ -28,6 +29,7 @@ SIGNS = ("winding", "parity")
 NORMALIZATIONS = ("none", "unit-cube", "unit-sphere")
 DEFAULT_COUNT = 10_000
 PADDING = 0.1  # --padding when not given
+MAX_COUNT = 2**63 - 1  # the most points a run can number (its points are counted in int64)
 # attributes that only a surface point has (usage errors with --volume)
 SURFACE_ONLY = ("normal", "smooth-normal", "bary", "color", "uv", "orient")
 # attributes that only a volume point has (usage errors without --volume)
@@ -159,6 +161,9 @@ def _check_numbers(o: SampleOptions):
         raise ScatterUsageError("give either a count (-n) or a --density, not both")
     if o.count is not None and (not _is_int(o.count) or o.count < 0):
         raise ScatterUsageError(f"the count must be a non-negative integer, not {o.count!r}")
+    if o.count is not None and o.count > MAX_COUNT:
+        shown = f"{o.count:,}" if o.count < 10**30 else format(decimal.Decimal(o.count), ".3e")
+        raise ScatterUsageError(f"the count {shown} is more than a run can number (at most 2^63 - 1 = {MAX_COUNT:,})")
     if o.density is not None and not (_is_real(o.density) and o.density > 0):
         raise ScatterUsageError(f"--density must be a positive number, not {o.density!r}")
     if not _is_int(o.seed) or o.seed < 0:

@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from ..errors import ScatterError
-from .options import DEFAULT_COUNT, SampleOptions, check_sobol_count
+from .options import DEFAULT_COUNT, MAX_COUNT, SampleOptions, check_sobol_count
 from ..sampling.plan import SamplePlan
 from ..sampling.sources import make_source
 
@@ -38,7 +38,7 @@ def volume_source(surface, o: SampleOptions, info: dict, warn=None):
     share = (0.0 if o.near else 1.0) if o.box_share is None else o.box_share
     count = DEFAULT_COUNT if o.count is None else o.count
     if o.density is not None:
-        count = int(round(o.density * float(np.prod(box[1] - box[0])) * scale**3))
+        count = density_count(o.density * float(np.prod(box[1] - box[0])) * scale**3)
     near = with_edges(surface, o, count, lambda n: make_source(plan, n, o.seed, False, weighting=weighting, area=area),
                       False, info, warn)
     edge_sigmas = None if o.near_edges is None else [s / scale for s in o.near_edges]
@@ -219,9 +219,17 @@ def plan_surface(surface, weight=None, warn=None):
     return plan, weighting, area
 
 
+def density_count(expected) -> int:
+    """The count of a ``--density`` run whose mean count is ``expected``: past what a run can
+    number, a failure of the mesh (its area or box made it so)."""
+    if not expected < MAX_COUNT:  # (inf and NaN too)
+        raise ScatterError(f"--density gives {expected:.3g} points: more than a run can number (2^63 - 1)")
+    return int(round(expected))
+
+
 def point_count(count, density, area, method="random") -> int:
     """The run's point count: ``count``, else ``density`` times ``area``, else 10,000."""
     if density is not None:
-        count = int(round(density * area))
+        count = density_count(density * area)
         check_sobol_count(method, count, ScatterError)  # the mesh's area made it: a failure of the mesh
     return DEFAULT_COUNT if count is None else count

@@ -15,9 +15,9 @@
  * their coordinates (within a run of equal hashes, equal coordinates get one position
  * number: the place of the first of them in that order), the slots by the lower position
  * of their edge (within a run, by the upper one), then the edges kept by their head.
- * Each step is cut into one fixed share of its items per thread (_cthreads.h), and every
- * share writes where its place in the whole says, so the result never depends on the
- * thread count or on timing. The GIL is released while they run.
+ * Each step is cut into fixed shares of its items, many a thread (_cthreads.h's pieces),
+ * and every share writes where its place in the whole says, so the result never depends
+ * on the thread count or on timing. The GIL is released while they run.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -62,6 +62,7 @@ typedef struct {
 
 #define DIGIT 11
 #define BUCKETS (1 << DIGIT)
+#define SHARE_ITEMS 8192 /* items a share at least: its BUCKETS counters are worth their cost */
 
 static int bit_length(uint64_t x)
 {
@@ -76,45 +77,45 @@ static inline uint64_t low_bits(uint64_t x, int bits)
     return bits >= 64 ? x : x & ((UINT64_C(1) << bits) - 1);
 }
 
-/* ---- a stable radix sort, one share of the records per thread ---- */
+/* ---- a stable radix sort, in shares of the records ---- */
 
 typedef struct {
     Record *from, *to;
     int64_t n;
-    int shift, threads;
-    int64_t *count; /* BUCKETS counters per thread */
+    int shift, shares;
+    int64_t *count; /* BUCKETS counters per share */
 } Pass;
 
-static void count_digits(void *ctx, int k, int threads)
+static void count_digits(void *ctx, int k, int shares)
 {
     Pass *p = ctx;
     int64_t i0, i1, *count = p->count + (int64_t)k * BUCKETS;
-    share(p->n, k, threads, &i0, &i1);
+    share(p->n, k, shares, &i0, &i1);
     memset(count, 0, BUCKETS * sizeof *count);
     for (int64_t i = i0; i < i1; i++)
         count[(p->from[i].key >> p->shift) & (BUCKETS - 1)]++;
 }
 
-static void move_records(void *ctx, int k, int threads)
+static void move_records(void *ctx, int k, int shares)
 {
     Pass *p = ctx;
     int64_t i0, i1, *at = p->count + (int64_t)k * BUCKETS;
-    share(p->n, k, threads, &i0, &i1);
+    share(p->n, k, shares, &i0, &i1);
     for (int64_t i = i0; i < i1; i++)
         p->to[at[(p->from[i].key >> p->shift) & (BUCKETS - 1)]++] = p->from[i];
 }
 
 /* Sort n records by the low ``bits`` bits of their key, stable (LSD radix, 11 bits a
- * pass), between the buffers a and b; returns the one that holds the result. count:
- * BUCKETS counters per thread. */
-static Record *radix_sort(Record *a, Record *b, int64_t n, int bits, int threads, int64_t *count)
+ * pass), between the buffers a and b, in ``shares`` shares on ``threads`` threads; returns
+ * the one that holds the result. count: BUCKETS counters per share. */
+static Record *radix_sort(Record *a, Record *b, int64_t n, int bits, int shares, int threads, int64_t *count)
 {
     for (int shift = 0; shift < bits; shift += DIGIT) {
-        Pass p = {a, b, n, shift, threads, count};
-        in_parallel(threads, count_digits, &p);
+        Pass p = {a, b, n, shift, shares, count};
+        in_pieces(shares, threads, count_digits, &p);
         int64_t total = 0, largest = 0;
-        for (int d = 0; d < BUCKETS; d++) /* where each thread's records of each digit go */
-            for (int k = 0; k < threads; k++) {
+        for (int d = 0; d < BUCKETS; d++) /* where each share's records of each digit go */
+            for (int k = 0; k < shares; k++) {
                 int64_t c = count[(int64_t)k * BUCKETS + d];
                 count[(int64_t)k * BUCKETS + d] = total;
                 total += c;
@@ -122,7 +123,7 @@ static Record *radix_sort(Record *a, Record *b, int64_t n, int bits, int threads
             }
         if (largest == n) /* one digit for all: the pass would move nothing */
             continue;
-        in_parallel(threads, move_records, &p);
+        in_pieces(shares, threads, move_records, &p);
         Record *t = a;
         a = b, b = t;
     }
@@ -137,38 +138,38 @@ typedef struct {
     const npy_bool *valid;
     int64_t nf, nv, n;
     unsigned char *used;
-    int64_t *id, *offset; /* offset: the first record of each thread's share of vertices */
+    int64_t *id, *offset; /* offset: the first record of each share of vertices */
     Record *r;
     double *xyz;
     int bits;
 } Positions;
 
-static void mark_used(void *ctx, int k, int threads)
+static void mark_used(void *ctx, int k, int shares)
 {
     Positions *c = ctx;
     int64_t f0, f1;
-    share(c->nf, k, threads, &f0, &f1);
+    share(c->nf, k, shares, &f0, &f1);
     for (int64_t f = f0; f < f1; f++)
         if (c->valid[f])
             for (int j = 0; j < 3; j++)
                 __atomic_store_n(&c->used[c->faces[3 * f + j]], 1, __ATOMIC_RELAXED);
 }
 
-static void count_used(void *ctx, int k, int threads)
+static void count_used(void *ctx, int k, int shares)
 {
     Positions *c = ctx;
     int64_t i0, i1, n = 0;
-    share(c->nv, k, threads, &i0, &i1);
+    share(c->nv, k, shares, &i0, &i1);
     for (int64_t i = i0; i < i1; i++)
         n += c->used[i];
     c->offset[k] = n;
 }
 
-static void hash_used(void *ctx, int k, int threads)
+static void hash_used(void *ctx, int k, int shares)
 {
     Positions *c = ctx;
     int64_t i0, i1, at = c->offset[k];
-    share(c->nv, k, threads, &i0, &i1);
+    share(c->nv, k, shares, &i0, &i1);
     for (int64_t i = i0; i < i1; i++) {
         c->id[i] = -1;
         if (c->used[i])
@@ -176,11 +177,11 @@ static void hash_used(void *ctx, int k, int threads)
     }
 }
 
-static void gather_positions(void *ctx, int k, int threads)
+static void gather_positions(void *ctx, int k, int shares)
 {
     Positions *c = ctx;
     int64_t t0, t1;
-    share(c->n, k, threads, &t0, &t1);
+    share(c->n, k, shares, &t0, &t1);
     for (int64_t t = t0; t < t1; t++) /* independent loads: they overlap */
         memcpy(c->xyz + 3 * t, c->v + 3 * c->r[t].item, 3 * sizeof *c->xyz);
 }
@@ -194,11 +195,11 @@ static inline int64_t run_start(const Positions *c, int64_t t)
     return t;
 }
 
-static void number_runs(void *ctx, int k, int threads)
+static void number_runs(void *ctx, int k, int shares)
 {
     Positions *c = ctx;
     int64_t t0, t1;
-    share(c->n, k, threads, &t0, &t1);
+    share(c->n, k, shares, &t0, &t1);
     t0 = run_start(c, t0), t1 = run_start(c, t1);
     for (int64_t t = t0; t < t1;) {
         int64_t e = t + 1;
@@ -218,25 +219,26 @@ static void number_runs(void *ctx, int k, int threads)
 /* Number the distinct positions of the vertices that valid faces use: id[v] for those
  * (the others -1), each the place in the hash order of the first vertex at its position.
  * Returns the count of used vertices (the numbers are below it). a and b: buffers of nv
- * records; xyz: 3 nv doubles; used: nv bytes; offset: one per thread. */
-static int64_t number_positions(Positions *c, Record *a, Record *b, int threads, int64_t *count)
+ * records; xyz: 3 nv doubles; used: nv bytes; offset: one per share; count: BUCKETS
+ * counters per share. */
+static int64_t number_positions(Positions *c, Record *a, Record *b, int shares, int threads, int64_t *count)
 {
     memset(c->used, 0, c->nv);
-    in_parallel(threads, mark_used, c);
-    in_parallel(threads, count_used, c);
+    in_pieces(shares, threads, mark_used, c);
+    in_pieces(shares, threads, count_used, c);
     int64_t n = 0;
-    for (int k = 0; k < threads; k++) {
+    for (int k = 0; k < shares; k++) {
         int64_t m = c->offset[k];
         c->offset[k] = n;
         n += m;
     }
     c->r = a;
-    in_parallel(threads, hash_used, c);
+    in_pieces(shares, threads, hash_used, c);
     c->n = n;
     c->bits = bit_length((uint64_t)n) + 1;
-    c->r = radix_sort(a, b, n, c->bits, threads, count);
-    in_parallel(threads, gather_positions, c);
-    in_parallel(threads, number_runs, c);
+    c->r = radix_sort(a, b, n, c->bits, shares, threads, count);
+    in_pieces(shares, threads, gather_positions, c);
+    in_pieces(shares, threads, number_runs, c);
     return n;
 }
 
@@ -248,8 +250,8 @@ typedef struct {
     const double *normals;
     double limit;
     int64_t nf, n;
-    int64_t *offset; /* per thread: its first record */
-    int64_t *kept; /* per thread: how many edges it kept (in its own place) */
+    int64_t *offset; /* per share: its first record */
+    int64_t *kept; /* per share: how many edges it kept (in its own place) */
     Record *r, *edge; /* the slot records; the edges kept, (head, their number) */
     int64_t *found, *place, *count; /* slots of the edges kept; an edge's first slot in found, its slot count */
 } Edges;
@@ -261,12 +263,12 @@ static inline int edge_of(const Edges *c, int64_t f, int j, uint64_t *key)
     return p != q; /* (no edge between one position and itself) */
 }
 
-static void count_slots(void *ctx, int k, int threads)
+static void count_slots(void *ctx, int k, int shares)
 {
     Edges *c = ctx;
     int64_t f0, f1, n = 0;
     uint64_t key;
-    share(c->nf, k, threads, &f0, &f1);
+    share(c->nf, k, shares, &f0, &f1);
     for (int64_t f = f0; f < f1; f++)
         if (c->valid[f])
             for (int j = 0; j < 3; j++)
@@ -274,12 +276,12 @@ static void count_slots(void *ctx, int k, int threads)
     c->offset[k] = n;
 }
 
-static void fill_slots(void *ctx, int k, int threads)
+static void fill_slots(void *ctx, int k, int shares)
 {
     Edges *c = ctx;
     int64_t f0, f1, at = c->offset[k];
     uint64_t key;
-    share(c->nf, k, threads, &f0, &f1);
+    share(c->nf, k, shares, &f0, &f1);
     for (int64_t f = f0; f < f1; f++)
         if (c->valid[f])
             for (int j = 0; j < 3; j++)
@@ -322,15 +324,15 @@ static inline int64_t lower_run_start(const Edges *c, int64_t t)
     return t;
 }
 
-/* One thread's share of the runs: each run sorted by upper position, the edges it keeps
+/* One share of the runs: each run sorted by upper position, the edges it keeps
  * written from t0 on, t0 the share's first record (there is room: an edge has a slot at
  * least): their records in edge[], their first slot's place in found[] in place[], their
  * slot count in count[]. */
-static void keep_edges(void *ctx, int k, int threads)
+static void keep_edges(void *ctx, int k, int shares)
 {
     Edges *c = ctx;
     int64_t t0, t1;
-    share(c->n, k, threads, &t0, &t1);
+    share(c->n, k, shares, &t0, &t1);
     t0 = lower_run_start(c, t0), t1 = lower_run_start(c, t1);
     int64_t edges = t0, slots = t0;
     for (int64_t t = t0; t < t1;) {
@@ -356,20 +358,20 @@ static void keep_edges(void *ctx, int k, int threads)
     c->offset[k] = t0, c->kept[k] = edges - t0;
 }
 
-/* The edges kept, from every thread's place, into one list in head order: head, second,
+/* The edges kept, from every share's place, into one list in head order: head, second,
  * count and rest (the slots after the second, edge after edge); returns how many and
  * sets *rests. */
-static int64_t list_edges(Edges *c, int threads, Record *scratch, int64_t *counters, int64_t *head,
+static int64_t list_edges(Edges *c, int shares, Record *scratch, int64_t *counters, int64_t *head,
                           int64_t *second, int64_t *count, int64_t *rest, int64_t *rests)
 {
     int64_t edges = 0;
-    for (int k = 0; k < threads; k++) /* every share's edges after the ones before (never ahead) */
+    for (int k = 0; k < shares; k++) /* every share's edges after the ones before (never ahead) */
         for (int64_t j = 0; j < c->kept[k]; j++, edges++) {
             int64_t at = c->offset[k] + j;
             c->edge[edges] = (Record){c->edge[at].key, edges};
             c->place[edges] = c->place[at], c->count[edges] = c->count[at];
         }
-    Record *sorted = radix_sort(c->edge, scratch, edges, bit_length((uint64_t)(3 * c->nf)), 1, counters);
+    Record *sorted = radix_sort(c->edge, scratch, edges, bit_length((uint64_t)(3 * c->nf)), 1, 1, counters);
     int64_t m = 0;
     for (int64_t j = 0; j < edges; j++) {
         int64_t g = sorted[j].item, s0 = c->place[g], n = c->count[g];
@@ -390,30 +392,32 @@ static int64_t find_edges(const double *v, const int64_t *faces, const npy_bool 
                           int64_t *count, int64_t *rest, int64_t *rests)
 {
     int64_t n = (3 * nf > nv ? 3 * nf : nv) + 1, result = -1;
-    int64_t *id = malloc((nv + 1) * sizeof *id), *offset = malloc(threads * sizeof *offset),
-            *kept = malloc(threads * sizeof *kept), *counters = malloc((int64_t)threads * BUCKETS * sizeof *counters),
+    int shares = pieces_for(n, SHARE_ITEMS, threads);
+    int64_t *id = malloc((nv + 1) * sizeof *id), *offset = malloc(shares * sizeof *offset),
+            *kept = malloc(shares * sizeof *kept), *counters = malloc((int64_t)shares * BUCKETS * sizeof *counters),
             *found = malloc(n * sizeof *found), *place = malloc(n * sizeof *place), *cnt = malloc(n * sizeof *cnt);
     unsigned char *used = malloc(nv + 1);
     Record *a = malloc(n * sizeof *a), *b = malloc(n * sizeof *b);
     double *xyz = malloc(3 * (nv + 1) * sizeof *xyz);
     if (id && offset && kept && counters && found && place && cnt && used && a && b && xyz) {
         Positions p = {v, faces, valid, nf, nv, 0, used, id, offset, NULL, xyz, 0};
-        int64_t positions = number_positions(&p, a, b, threads, counters);
+        int64_t positions = number_positions(&p, a, b, shares, threads, counters);
         if (positions > (int64_t)UINT32_MAX) {
             result = -2;
         } else {
             Edges e = {faces, id, valid, normals, limit, nf, 0, offset, kept, a, NULL, found, place, cnt};
-            in_parallel(threads, count_slots, &e);
-            for (int k = 0; k < threads; k++) {
+            in_pieces(shares, threads, count_slots, &e);
+            for (int k = 0; k < shares; k++) {
                 int64_t m = offset[k];
                 offset[k] = e.n;
                 e.n += m;
             }
-            in_parallel(threads, fill_slots, &e);
-            e.r = radix_sort(a, b, e.n, bit_length((uint64_t)(positions > 0 ? positions - 1 : 0)), threads, counters);
+            in_pieces(shares, threads, fill_slots, &e);
+            e.r = radix_sort(a, b, e.n, bit_length((uint64_t)(positions > 0 ? positions - 1 : 0)), shares, threads,
+                             counters);
             e.edge = e.r == a ? b : a;
-            in_parallel(threads, keep_edges, &e);
-            result = list_edges(&e, threads, e.r, counters, head, second, count, rest, rests);
+            in_pieces(shares, threads, keep_edges, &e);
+            result = list_edges(&e, shares, e.r, counters, head, second, count, rest, rests);
         }
     }
     free(id), free(offset), free(kept), free(counters), free(found), free(place), free(cnt), free(used), free(a),
@@ -456,7 +460,7 @@ static PyObject *edges(PyObject *self, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "face indices out of range");
         return NULL;
     }
-    threads = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
+    threads = threads < 1 ? 1 : threads;
     Py_BEGIN_ALLOW_THREADS
     found = find_edges(PyArray_DATA(verts_a), faces, valid, nf, nv, PyArray_DATA(normals_a), limit, threads,
                        PyArray_DATA(head_a), PyArray_DATA(second_a), PyArray_DATA(count_a), PyArray_DATA(rest_a),

@@ -8,9 +8,10 @@ so chunks can be made in any size, order or thread and the output is the same by
 
 from __future__ import annotations
 
+import collections
 import functools
+import itertools
 import math
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,6 +105,8 @@ class SamplePlan:
         if not len(self.cdf) or not self.cdf[-1] > 0 or not math.isfinite(self.cdf[-1]):
             raise ScatterError(f"{surface.source}: the mesh has no faces with a non-zero, finite area")
         self.guide = _guide_table(self.cdf)
+        # every point's instance when there is one: one value, no memory (sliced per chunk)
+        self._one_instance = np.broadcast_to(np.int64(self.parts[0].instance), (1 << 59,))
         # how the kernel goes (the output is the same); the NumPy path has no such order
         self.in_face_order = _kernel is not None and self.faces_used >= SORT_FACES
 
@@ -191,7 +194,7 @@ class SamplePlan:
         if len(self.parts) == 1:
             part = self.parts[0]
             face = used.astype(np.int64, copy=False) if part.faces is None else np.take(part.faces, used)
-            instance = np.broadcast_to(np.int64(part.instance), (n,))  # one value, no memory
+            instance = self._one_instance[:n]  # one value, no memory
             if part.matrix is not None:
                 apply_matrix(part.matrix, points, out=points)
         else:
@@ -275,10 +278,15 @@ def generator_state(seed: int, start: int):
     """(state high, state low, inc high, inc low): the 128-bit PCG64DXSM state, as four
     uint64, from which the kernel draws point ``start`` onwards: ``_stream(seed, start)``'s,
     computed without importing numpy.random (:mod:`scatter_cli.core.seeding`)."""
-    state, inc = seeding.pcg64_state(int(seed))
+    state, inc = _seeded(int(seed))
     state = seeding.advance(state, inc, DRAWS_PER_POINT * int(start))
     mask = (1 << 64) - 1
     return state >> 64, state & mask, inc >> 64, inc & mask
+
+
+@functools.lru_cache(maxsize=16)  # every chunk of a run starts from its seed's state
+def _seeded(seed: int):
+    return seeding.pcg64_state(seed)
 
 
 def _stream(seed, start):
@@ -415,45 +423,66 @@ def _guide_table(cdf):
     return np.where(first[1:] == first[:-1], first[:-1], -1 - first[:-1])
 
 
-def in_blocks(fn, n, min_block=1 << 18):
-    """[fn(i, j)] over consecutive blocks covering range(n), run on the worker threads.
+def in_blocks(fn, n, min_block=1 << 15):
+    """[fn(i, j)] over consecutive blocks covering range(n), on the worker threads: many
+    blocks a thread (each of ``min_block`` at least), taken as the threads finish the last.
 
     For element-wise work only: the blocks depend on n and the thread count, so the
     result must not depend on where the cuts fall.
     """
     threads = native.worker_count()
-    if threads == 1 or n < 2 * min_block:
+    blocks = min(native.PIECES_PER_THREAD * threads, n // max(min_block, 1))
+    if threads == 1 or blocks < 2:
         return [fn(0, n)]
-    cuts = np.linspace(0, n, threads + 1).astype(np.int64)
-    with ThreadPoolExecutor(max_workers=threads) as pool:
+    cuts = np.linspace(0, n, blocks + 1).astype(np.int64).tolist()
+    with native.thread_pool(threads) as pool:
         return list(pool.map(fn, cuts[:-1], cuts[1:]))
 
 
 def chunk_ranges(stop: int, chunk_size: int, start: int = 0):
-    """(start, stop) pairs of at most ``chunk_size`` covering ``range(start, stop)``."""
-    return [(s, min(s + chunk_size, stop)) for s in range(start, stop, chunk_size)]
+    """(start, stop) pairs of at most ``chunk_size`` covering ``range(start, stop)``, made
+    as they are taken (a count of 10^13 has millions of chunks)."""
+    return ((s, min(s + chunk_size, stop)) for s in range(start, stop, chunk_size))
 
 
-def run_chunks(job, ranges, threads=None):
-    """Yield ``job(start, stop)`` for each range, in order, computed by a small pool.
+def run_chunks(job, start, stop, chunk_size, threads=None, split=True):
+    """Yield ``job(a, b)`` over consecutive ranges covering ``start .. stop - 1``, in order.
 
-    At most two results per thread wait at a time, so memory stays flat whatever N.
+    On one thread the ranges are chunks of ``chunk_size`` points. On T threads a pool
+    computes them while the caller takes them in order, with at most IN_FLIGHT chunks'
+    worth of points computed or waiting at a time, so that memory stays flat whatever
+    the count and whatever T: ``split``, pieces of the chunks (:func:`pieces`), each on one
+    thread; else (a job that splits its range among the threads itself, such as the
+    volume labels) two half chunks at a time, so that one's Python runs while the
+    other's kernels do, in the memory of one chunk. The output's bytes never change: a job's result does not depend
+    on where its range was cut.
     """
     threads = threads or native.worker_count()
-    if threads == 1 or len(ranges) <= 1:
-        for r in ranges:
-            yield job(*r)
+    piece, depth = pieces(stop - start, chunk_size, threads) if split else (-(-chunk_size // 2), 2)
+    if depth <= 1:
+        yield from (job(a, b) for a, b in chunk_ranges(stop, piece, start))
         return
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        pending = []
-        it = iter(ranges)
-        for r in it:
-            pending.append(pool.submit(job, *r))
-            if len(pending) >= 2 * threads:
-                break
+    ranges = chunk_ranges(stop, piece, start)
+    with native.thread_pool(min(threads, depth), one_level=split) as pool:
+        pending = collections.deque(pool.submit(job, *r) for r in itertools.islice(ranges, depth))
         while pending:
-            result = pending.pop(0).result()
-            nxt = next(it, None)
+            yield pending.popleft().result()
+            nxt = next(ranges, None)  # (once the caller is done with the last: it counts)
             if nxt is not None:
                 pending.append(pool.submit(job, *nxt))
-            yield result
+
+
+IN_FLIGHT = 2  # chunks' worth of points a pool holds at most, computed or waiting, whatever its threads
+MIN_PIECE = 1 << 13  # points a piece at least: less, and the Python of each piece would be the bound
+
+
+def pieces(n, chunk_size, threads):
+    """(points a piece, pieces in flight at most) for ``n`` points in chunks of
+    ``chunk_size`` on ``threads`` threads: two pieces a thread in flight, of IN_FLIGHT
+    chunks' worth in all (of MIN_PIECE points at least, then fewer in flight), and pieces
+    small enough for a short run to keep the threads busy. (chunk_size, 1): one at a time."""
+    if threads <= 1 or n <= min(chunk_size, MIN_PIECE):
+        return chunk_size, 1
+    piece = min(chunk_size, max(MIN_PIECE, IN_FLIGHT * chunk_size // (2 * threads)), -(-n // (2 * threads)))
+    piece = max(piece, min(MIN_PIECE, chunk_size))
+    return piece, max(1, min(2 * threads, IN_FLIGHT * chunk_size // piece))

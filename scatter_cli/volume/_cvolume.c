@@ -13,7 +13,8 @@
  *
  * Every float64 operation is the NumPy code's, in its order (built with -ffp-contract=off).
  * closest() hands blocks of points to the threads as they finish the last; crossings()
- * splits the points between them in fixed ranges. The GIL is released meanwhile.
+ * cuts the points into fixed ranges, many a thread, taken the same way. The GIL is
+ * released meanwhile.
  * Arrays are checked: a wrong shape, a non-finite value or an index out of range raises.
  */
 #define PY_SSIZE_T_CLEAN
@@ -27,7 +28,7 @@
 #include <stdlib.h>
 #include "_cthreads.h"
 
-/* below this many points a call runs on one thread */
+/* below this many points a call runs on one thread; crossings() cuts no range smaller */
 #define THREAD_POINTS 512
 #define MAX_DEPTH 62
 
@@ -598,26 +599,20 @@ typedef struct {
     double *dist, *closest;
     int64_t *face;
     int64_t n;
-    int64_t next; /* the next block of the visit to take (atomic) */
 } Closest;
 
-/* points a thread takes at a time (in visit order): threads that finish early take more */
+/* points a piece holds (in visit order): threads that finish early take more pieces */
 #define CLOSEST_BLOCK 1024
 
 static void closest_job(void *ctx, int k, int count)
 {
     Closest *c = ctx;
     int64_t slot = -1; /* where the walk starts: any slot gives the same answer */
-    (void)k, (void)count;
-    for (;;) {
-        int64_t i0 = __atomic_fetch_add(&c->next, 1, __ATOMIC_RELAXED) * CLOSEST_BLOCK;
-        if (i0 >= c->n)
-            return;
-        int64_t i1 = i0 + CLOSEST_BLOCK < c->n ? i0 + CLOSEST_BLOCK : c->n;
-        for (int64_t j = i0; j < i1; j++) {
-            int64_t i = c->visit[j];
-            closest_one(&c->t, c->w, c->points + 3 * i, c->tol, c->dist + i, c->closest + 3 * i, c->face + i, &slot);
-        }
+    (void)count;
+    int64_t i0 = (int64_t)k * CLOSEST_BLOCK, i1 = i0 + CLOSEST_BLOCK < c->n ? i0 + CLOSEST_BLOCK : c->n;
+    for (int64_t j = i0; j < i1; j++) {
+        int64_t i = c->visit[j];
+        closest_one(&c->t, c->w, c->points + 3 * i, c->tol, c->dist + i, c->closest + 3 * i, c->face + i, &slot);
     }
 }
 
@@ -729,13 +724,13 @@ static PyObject *closest(PyObject *self, PyObject *args)
             return NULL;
         }
     }
-    Closest c = {t, w, PyArray_DATA(pts), PyArray_DATA(visit), tol, PyArray_DATA(dist), PyArray_DATA(cl), PyArray_DATA(face), n, 0};
-    int count = n < THREAD_POINTS ? 1 : threads, ok = 1;
+    Closest c = {t, w, PyArray_DATA(pts), PyArray_DATA(visit), tol, PyArray_DATA(dist), PyArray_DATA(cl), PyArray_DATA(face), n};
+    int pieces = (int)((n + CLOSEST_BLOCK - 1) / CLOSEST_BLOCK), ok = 1;
     Py_BEGIN_ALLOW_THREADS
     if (w == &own)
         ok = wide_tree(&t, &own);
     if (ok) {
-        in_parallel(count, closest_job, &c);
+        in_pieces(pieces, n < THREAD_POINTS ? 1 : threads, closest_job, &c);
         if (w == &own)
             wide_free(&own);
     }
@@ -906,9 +901,9 @@ static PyObject *crossings_py(PyObject *self, PyObject *args)
                         {iv[3 * j], iv[3 * j + 1], iv[3 * j + 2]}};
     }
     Crossings c = {t, PyArray_DATA(pts), rays, (int)k, pad, PyArray_DATA(inside), n};
-    int count = n < THREAD_POINTS ? 1 : threads;
+    int pieces = pieces_for(n, THREAD_POINTS, threads);
     Py_BEGIN_ALLOW_THREADS
-    in_parallel(count, crossings_job, &c);
+    in_pieces(pieces, threads, crossings_job, &c);
     Py_END_ALLOW_THREADS
     Py_RETURN_NONE;
 }

@@ -29,6 +29,8 @@ points (some hundred times slower).
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..core import native
@@ -97,11 +99,15 @@ class TriangleTree:
         self.scale = float(max(-tri.min(), tri.max()))
         self._wide = None
 
+    _making = threading.Lock()  # one wide tree made, however many chunk threads ask for it at once
+
     def wide(self):
         """The kernel's own form of the tree (made at the first query, not pickled), or None
         without the kernel."""
         if self._wide is None and _kernel is not None:
-            self._wide = _kernel.wide(self.triangles, self.order, self.thin, self.lo, self.hi, self.leaf)
+            with self._making:
+                if self._wide is None:
+                    self._wide = _kernel.wide(self.triangles, self.order, self.thin, self.lo, self.hi, self.leaf)
         return self._wide
 
     def __getstate__(self):

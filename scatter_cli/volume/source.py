@@ -182,6 +182,12 @@ class VolumeLabels:
         offset, scale = self.frame
         return ((points - offset) * scale).astype(np.float32).astype(np.float64) / scale + offset
 
+    @property
+    def split_chunks(self):
+        """Whether chunks may be cut into pieces on the threads: not when the label
+        kernels split each chunk among them themselves (sampling.plan.run_chunks)."""
+        return not (self.needs_distance or self.needs_winding or self.needs_parity)
+
     def make(self, raw: RawChunk, real_dtype) -> dict:
         """dict key -> array for the asked-for names; ``raw.points`` are world points,
         labelled as written (:meth:`stored_points`)."""

@@ -63,6 +63,8 @@ static inline int64_t clip(int64_t v, int64_t lo, int64_t hi) { return v < lo ? 
 
 /* below this many faces a shell is done on one thread */
 #define THREAD_FACES 65536
+/* faces (or vertices, lines) a share at least, when a step is cut into many a thread */
+#define SHARE_FACES 4096
 
 /* ---- parts ---- */
 
@@ -287,7 +289,7 @@ static PyObject *parts(PyObject *self, PyObject *args)
     in_parallel(jobs > 1 ? 2 : 1, fill_half, &w);
     if (jobs == 1)
         fill_half(&w, 1, 1);
-    in_parallel(jobs, parts_second, &w);
+    in_pieces(pieces_for(nf > size ? nf : size, SHARE_FACES, jobs), jobs, parts_second, &w);
     if ((closed = malloc((size_t)w.count ? (size_t)w.count : 1))) {
         memset(closed, 1, (size_t)w.count);
         for (int64_t a = 0; a < size; a++)
@@ -493,10 +495,12 @@ static int cross_face(const Scene *sc, double c[3][3], const double qlo[3], cons
 
 
 
-/* One thread's share of a shell's faces s0..s1-1, in its box of cells base + (n): the
- * cells of the corners of faces no wider than a cell less grow (``point``), the boxes of
- * the others (``diff``, a difference array, made at the first), the crossings and the
- * unsure lines (enclosure.shell_cover and enclosure.crossings). */
+/* What one thread gathers of a shell's faces s0..s1-1, in its box of cells base + (n):
+ * the cells of the corners of faces no wider than a cell less grow (``point``), the boxes
+ * of the others (``diff``, a difference array, made at the first), the crossings and the
+ * unsure lines (enclosure.shell_cover and enclosure.crossings), from the pieces of the
+ * faces it takes: ORs, sums of whole numbers and crossings sorted later, so which thread
+ * takes which piece changes nothing. */
 typedef struct {
     const Scene *sc;
     int64_t s0, s1, base[3], n[3];
@@ -507,18 +511,19 @@ typedef struct {
     int ok;
 } Share;
 
-/* share ``part`` of the faces (count: how many shares there are) */
-static void mark_share(void *shares, int part, int count)
+/* piece k of pieces of the faces, into the share of the thread that takes it */
+static void mark_share(void *shares, int thread, int k, int pieces)
 {
     /* on copies: the threads' Share and Crossings lie side by side, and writing them at
      * every face would make the threads fight over their cache lines */
-    Share *w = (Share *)shares + part, me = *w;
-    (void)count;
+    Share *w = (Share *)shares + thread, me = *w;
     Crossings cross = *me.cross;
     const Grid *g = me.sc->g;
     const int64_t *n = me.n, *base = me.base, e1 = n[1] + 1, e2 = n[2] + 1;
+    int64_t t0, t1;
+    share(me.s1 - me.s0, k, pieces, &t0, &t1);
     int ok = me.ok;
-    for (int64_t t = me.s0; t < me.s1 && ok; t++) {
+    for (int64_t t = me.s0 + t0; t < me.s0 + t1 && ok; t++) {
         double c[3][3], lo[3], hi[3], qc[3][3], qlo[3], qhi[3];
         corners(me.sc, t, c, lo, hi);
         scaled(g, c, qc, qlo, qhi);
@@ -620,21 +625,19 @@ static int shell_pass(const Scene *sc, int64_t s0, int64_t s1, const double *slo
     for (int k = 0; k < 3; k++)
         n[k] = last[k] + 1 - base[k];
     const int64_t cells = n[0] * n[1] * n[2], e0 = n[0] + 1, e1 = n[1] + 1, e2 = n[2] + 1;
-    int count = s1 - s0 < THREAD_FACES ? 1 : threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
-    Share w[MAX_THREADS];
-    Crossings more[MAX_THREADS];
-    int ok = 1;
+    int pieces = s1 - s0 < THREAD_FACES ? 1 : pieces_for(s1 - s0, SHARE_FACES, threads),
+        count = threads_for(pieces, threads);
+    Share *w = calloc((size_t)count, sizeof *w);
+    Crossings *more = calloc((size_t)count, sizeof *more);
     uint8_t *spare = malloc((size_t)cells);
-    for (int k = 0; k < count; k++) {
-        more[k] = (Crossings){NULL, 0, 0};
-        w[k] = (Share){sc, s0 + (s1 - s0) * k / count, s0 + (s1 - s0) * (k + 1) / count, {base[0], base[1], base[2]},
-                       {n[0], n[1], n[2]}, bit, calloc((size_t)cells, 1), k ? calloc((size_t)lines, 1) : unsure,
-                       NULL, k ? &more[k] : cross, 1};
+    int ok = w && more && spare;
+    for (int k = 0; ok && k < count; k++) {
+        w[k] = (Share){sc, s0, s1, {base[0], base[1], base[2]}, {n[0], n[1], n[2]}, bit, calloc((size_t)cells, 1),
+                       k ? calloc((size_t)lines, 1) : unsure, NULL, k ? &more[k] : cross, 1};
         ok &= w[k].point && w[k].unsure;
     }
-    if (ok && spare)
-        in_parallel(count, mark_share, w);
-    ok &= spare != NULL;
+    if (ok)
+        in_pieces_by(pieces, count, mark_share, w);
     for (int k = 0; k < count; k++)
         ok &= w[k].ok;
     for (int k = 1; k < count && ok; k++) { /* the other shares into the first */
@@ -667,11 +670,12 @@ static int shell_pass(const Scene *sc, int64_t s0, int64_t s1, const double *slo
             }
     }
     free(spare);
-    for (int k = 0; k < count; k++) {
+    for (int k = 0; w && more && k < count; k++) {
         free(w[k].point), free(w[k].diff), free(more[k].at);
         if (k)
             free(w[k].unsure);
     }
+    free(w), free(more);
     return ok;
 }
 
@@ -712,7 +716,7 @@ static int64_t *part_order(const int64_t *part, npy_intp nf, int64_t np_, int *f
     return sorted;
 }
 
-/* One thread's share of the faces (in part order) for find_shells: the box and
+/* One share of the faces (in part order) for find_shells: the box and
  * finiteness of each run it holds whole, written in place, and of the (at most two) runs
  * it shares with its neighbours, kept apart to be merged. */
 typedef struct {
@@ -729,8 +733,8 @@ typedef struct {
     int64_t runs, nf;
     double *slo, *shi;
     uint8_t *runfin;
-    RunBox edge[MAX_THREADS][2];
-    int edges[MAX_THREADS];
+    RunBox (*edge)[2]; /* per share */
+    int *edges;
 } Boxes;
 
 static void box_share(void *arg, int k, int count)
@@ -785,14 +789,16 @@ static int64_t find_shells(const Scene *sc, const int64_t *part, const uint8_t *
                            const int64_t *starts, int64_t runs, int64_t nf, int threads, double *slo, double *shi,
                            uint8_t *isshell, Shell *shells)
 {
-    Boxes *w = malloc(sizeof *w);
-    if (!w)
+    int count = nf < THREAD_FACES ? 1 : pieces_for(nf, SHARE_FACES, threads);
+    Boxes box = {.sc = sc, .fin = fin, .limit = limit, .starts = starts, .runs = runs, .nf = nf, .slo = slo,
+                 .shi = shi, .runfin = isshell, .edge = malloc(sizeof *box.edge * (size_t)count),
+                 .edges = malloc(sizeof *box.edges * (size_t)count)}, *w = &box;
+    if (!box.edge || !box.edges) {
+        free(box.edge), free(box.edges);
         return -1;
-    *w = (Boxes){.sc = sc, .fin = fin, .limit = limit, .starts = starts, .runs = runs, .nf = nf, .slo = slo, .shi = shi,
-                 .runfin = isshell};
-    int count = nf < THREAD_FACES ? 1 : threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
-    in_parallel(count, box_share, w);
-    int64_t last = -1; /* runs split between threads: their shares' boxes merged */
+    }
+    in_pieces(count, threads, box_share, w);
+    int64_t last = -1; /* runs split between shares: their boxes merged */
     for (int k = 0; k < count; k++)
         for (int e = 0; e < w->edges[k]; e++) {
             const RunBox *p = &w->edge[k][e];
@@ -809,7 +815,7 @@ static int64_t find_shells(const Scene *sc, const int64_t *part, const uint8_t *
             }
             isshell[p->run] &= p->fin;
         }
-    free(w);
+    free(box.edge), free(box.edges);
     int64_t n = 0;
     for (int64_t r = 0; r < runs; r++) {
         isshell[r] = (uint8_t)(isshell[r] && closed[part[face_at(sc, starts[r])]]);
@@ -848,9 +854,9 @@ static void make_grid(Grid *g, const double *slo, const double *shi, const uint8
 /* table (nx + 1, ny + 1, nz + 1): the summed-area table of the hidden cells, those of
  * odd parity for a shell not marked in ``cover`` on a line not ``unsure``. A cell's
  * parity is the XOR of the bits of the crossings (sorted by key) whose key lies in
- * [its line, its probe point) (enclosure.line_parity). Each thread takes a range of
- * lines (the cells first), then of x slabs (their sums along z and y), then of lines
- * again (the sums along x): integers, so the order of the sums changes nothing. */
+ * [its line, its probe point) (enclosure.line_parity). The threads take ranges of lines
+ * (the cells first), then of x slabs (their sums along z and y), then of lines again
+ * (the sums along x): integers, so the order of the sums changes nothing. */
 typedef struct {
     const Grid *g;
     const Crossings *cross;
@@ -940,10 +946,10 @@ static int hidden_table(const Grid *g, const Crossings *cross, const uint64_t *p
         free(w.at), free(w.before);
         return 0;
     }
-    int count = g->shape[0] * lines < 4 * THREAD_FACES ? 1 : threads;
-    in_parallel(count, hidden_cells, &w);
-    in_parallel(count, sum_slabs, &w);
-    in_parallel(count, sum_across, &w);
+    int many = g->shape[0] * lines < 4 * THREAD_FACES ? 1 : threads;
+    in_pieces(pieces_for(lines, SHARE_FACES, many), many, hidden_cells, &w);
+    in_pieces(pieces_for(g->shape[0], 1, many), many, sum_slabs, &w);
+    in_pieces(pieces_for((g->shape[1] + 1) * (g->shape[2] + 1), SHARE_FACES, many), many, sum_across, &w);
     free(w.at), free(w.before);
     return 1;
 }
@@ -958,7 +964,7 @@ typedef struct {
     const Shell *shells;
     int used;
     const int32_t *table;
-    int64_t candidates[MAX_THREADS];
+    int64_t *candidates; /* per share */
 } Faces;
 
 /* a face can be enclosed only by a shell other than its own whose box holds its box */
@@ -983,8 +989,9 @@ static void maybe_share(void *arg, int k, int count)
     w->candidates[k] = n;
 }
 
-/* the faces whose grown box's cells are all hidden (summed-area table); in blocks dealt
- * round the threads, since the candidates may be all in one place (an inner shell) */
+/* the faces whose grown box's cells are all hidden (summed-area table); in blocks taken
+ * by the threads as they finish the last, since the candidates may be all in one place
+ * (an inner shell) */
 #define FINAL_BLOCK 4096
 
 static void final_share(void *arg, int k, int count)
@@ -992,22 +999,23 @@ static void final_share(void *arg, int k, int count)
     Faces *w = arg;
     const Grid *g = w->sc->g;
     const int64_t sy = (g->shape[1] + 1) * (g->shape[2] + 1), sz = g->shape[2] + 1;
-    for (int64_t b0 = (int64_t)k * FINAL_BLOCK; b0 < w->nf; b0 += (int64_t)count * FINAL_BLOCK)
-        for (int64_t s = b0; s < w->nf && s < b0 + FINAL_BLOCK; s++) {
-            if (!w->maybe[s])
-                continue;
-            double c[3][3], lo[3], hi[3];
-            int64_t a[3], b[3], total = 0;
-            corners(w->sc, s, c, lo, hi);
-            ranges(g, lo, hi, g->grow, a, b);
-            for (int corner = 0; corner < 8; corner++) {
-                int64_t x = corner & 1 ? b[0] + 1 : a[0], y = corner & 2 ? b[1] + 1 : a[1],
-                        z = corner & 4 ? b[2] + 1 : a[2];
-                int picked = (corner & 1) + ((corner >> 1) & 1) + ((corner >> 2) & 1);
-                total += (3 - picked) % 2 ? -w->table[x * sy + y * sz + z] : w->table[x * sy + y * sz + z];
-            }
-            w->out[face_at(w->sc, s)] = total == (b[0] - a[0] + 1) * (b[1] - a[1] + 1) * (b[2] - a[2] + 1);
+    (void)count;
+    int64_t s0 = (int64_t)k * FINAL_BLOCK, s1 = s0 + FINAL_BLOCK < w->nf ? s0 + FINAL_BLOCK : w->nf;
+    for (int64_t s = s0; s < s1; s++) {
+        if (!w->maybe[s])
+            continue;
+        double c[3][3], lo[3], hi[3];
+        int64_t a[3], b[3], total = 0;
+        corners(w->sc, s, c, lo, hi);
+        ranges(g, lo, hi, g->grow, a, b);
+        for (int corner = 0; corner < 8; corner++) {
+            int64_t x = corner & 1 ? b[0] + 1 : a[0], y = corner & 2 ? b[1] + 1 : a[1],
+                    z = corner & 4 ? b[2] + 1 : a[2];
+            int picked = (corner & 1) + ((corner >> 1) & 1) + ((corner >> 2) & 1);
+            total += (3 - picked) % 2 ? -w->table[x * sy + y * sz + z] : w->table[x * sy + y * sz + z];
         }
+        w->out[face_at(w->sc, s)] = total == (b[0] - a[0] + 1) * (b[1] - a[1] + 1) * (b[2] - a[2] + 1);
+    }
 }
 
 /* enclosure.enclosed_faces into out (F,); 0 when out of memory */
@@ -1016,7 +1024,7 @@ static int certify(const double *v, const int64_t *faces, const int64_t *part, n
                    int threads, uint8_t *out)
 {
     int ok = 0, fail = 0;
-    int64_t *sorted = NULL, *starts = NULL;
+    int64_t *sorted = NULL, *starts = NULL, *candidates = NULL;
     double *slo = NULL, *shi = NULL;
     uint8_t *fin = NULL, *maybe = NULL, *unsure = NULL, *isshell = NULL;
     uint64_t *prefix = NULL;
@@ -1025,18 +1033,19 @@ static int certify(const double *v, const int64_t *faces, const int64_t *part, n
     Shell *shells = NULL;
     Crossings cross = {NULL, 0, 0};
     int64_t np_ = 0, runs = 0;
-    threads = threads < 1 ? 1 : threads > MAX_THREADS ? MAX_THREADS : threads;
-    const int many = nf < THREAD_FACES ? 1 : threads;
+    threads = threads < 1 ? 1 : threads;
+    const int many = nf < THREAD_FACES ? 1 : threads, shares = pieces_for(nf, SHARE_FACES, many);
     for (npy_intp i = 0; i < nf; i++)
         np_ = part[i] + 1 > np_ ? part[i] + 1 : np_;
     sorted = part_order(part, nf, np_, &fail);
     fin = malloc((size_t)nf);
     maybe = calloc((size_t)nf, 1);
-    if (fail || !fin || !maybe)
+    candidates = malloc(sizeof *candidates * (size_t)shares);
+    if (fail || !fin || !maybe || !candidates)
         goto done;
     Grid g;
     Scene sc = {v, faces, sorted, probe, &g};
-    Faces w = {.sc = &sc, .nf = nf, .fin = fin, .maybe = maybe, .out = out};
+    Faces w = {.sc = &sc, .nf = nf, .fin = fin, .maybe = maybe, .out = out, .candidates = candidates};
     for (npy_intp s = 0; s < nf; s++)
         runs += s == 0 || part[face_at(&sc, s)] != part[face_at(&sc, s - 1)];
     starts = malloc(sizeof(int64_t) * ((size_t)runs + 1));
@@ -1055,13 +1064,13 @@ static int certify(const double *v, const int64_t *faces, const int64_t *part, n
         goto done;
     w.used = nshell < max_shells ? (int)nshell : max_shells;
     w.starts = starts, w.slo = slo, w.shi = shi, w.shells = shells;
-    int64_t candidates = 0;
+    int64_t maybes = 0;
     if (w.used) {
-        in_parallel(many, maybe_share, &w);
-        for (int k = 0; k < many; k++)
-            candidates += w.candidates[k];
+        in_pieces(shares, many, maybe_share, &w);
+        for (int k = 0; k < shares; k++)
+            maybes += w.candidates[k];
     }
-    if (!candidates) {
+    if (!maybes) {
         ok = 1;
         goto done;
     }
@@ -1093,11 +1102,11 @@ static int certify(const double *v, const int64_t *faces, const int64_t *part, n
     if (!hidden_table(&g, &cross, prefix, cover, unsure, probe[0], threads, table))
         goto done;
     w.table = table;
-    in_parallel(many, final_share, &w);
+    in_pieces((int)((nf + FINAL_BLOCK - 1) / FINAL_BLOCK), many, final_share, &w);
     ok = 1;
 done:
     free(sorted), free(starts), free(slo), free(shi), free(fin), free(maybe), free(unsure);
-    free(isshell), free(cover.at), free(prefix), free(table), free(shells), free(cross.at);
+    free(isshell), free(cover.at), free(prefix), free(table), free(shells), free(cross.at), free(candidates);
     return ok;
 }
 

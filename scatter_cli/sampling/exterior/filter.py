@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import time
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -94,7 +93,7 @@ class ExteriorSource:
         faces_total = len(occluder.normals)
         hit_faces = np.zeros(faces_total, dtype=bool)
         tried_faces = np.zeros(faces_total, dtype=bool)
-        with ThreadPoolExecutor(max_workers=threads) as pool:
+        with native.thread_pool(threads) as pool:
             if occluder.enclosed is None:
                 rays += self._enclose_if_worth_it(pool, threads, count, limit)
             block = 0
@@ -153,7 +152,7 @@ class ExteriorSource:
         points = np.take(chunk.points, order, axis=0)
         normals = np.take(self.occluder.normals, rows[order], axis=0)
         parts = list(pool.map(lambda i: self.occluder.normals_blocked(points[i], normals[i]),
-                              np.array_split(np.arange(stop), threads)))
+                              np.array_split(np.arange(stop), native.PIECES_PER_THREAD * threads)))
         hidden = sum(int(np.count_nonzero(blocked)) for blocked, _ in parts)
         rays = sum(r for _, r in parts)
         total = limit if count is None else min(limit, count * stop / max(stop - hidden, 1))
@@ -166,11 +165,15 @@ class ExteriorSource:
     @staticmethod
     def _blocks_to_go(count, kept, done, threads):
         """Blocks for the next round of the pass: about what the rate so far says is left
-        (a few more), in multiples of the thread count, at most 16 rounds' worth a time."""
-        if count is None or not kept:
+        (a few more), at most 16 a thread; in the first, no more than the count would fill
+        if every candidate were exterior (the rays of a round are cut among the threads
+        whatever its blocks: many threads must not draw blocks a small count never uses)."""
+        if count is None or (done and not kept):
             return threads
+        if not done:
+            return max(1, min(threads, math.ceil(count / BLOCK)))
         need = (count - kept) * done / kept * 1.05 + 1
-        return threads * max(1, min(16, math.ceil(need / threads)))
+        return max(1, min(16 * threads, math.ceil(need)))
 
     def _classify_round(self, pool, group, limit, threads):
         """What :meth:`_finish_block` gives for each block of ``group``, classified on the pool. The
@@ -197,7 +200,7 @@ class ExteriorSource:
                 escaped[i] = occluder.normal_escapes(np.take(points, i, axis=0),
                                                      np.take(occluder.normals, faces[i], axis=0))
 
-        list(pool.map(cast, np.array_split(order, threads)))
+        list(pool.map(cast, np.array_split(order, native.PIECES_PER_THREAD * threads)))
         cuts = np.cumsum([0] + [len(d[2]) for d in drawn])
         return pool.map(lambda k: self._finish_block(*drawn[k], escaped[cuts[k]:cuts[k + 1]]), range(len(drawn)))
 

@@ -671,25 +671,43 @@ typedef struct {
  * to 65536 (d = 0): stored less LIFT, they fit in 16 bits. */
 #define LIFT 32000
 
-/* One thread's share of the pairs: those whose earlier point is in cells c0 .. c1 - 1. */
+/* Positions a piece of the crowding pass holds, about: the pieces depend on the point set
+ * alone, never on the threads, so neither does anything the pass decides. */
+#define PIECE_POINTS 16384
+
+/* One piece of the pairs: those whose earlier point is in cells c0 .. c1 - 1. Their weights
+ * are added to the crowding of their earlier ends at once, and to that of their later ends
+ * once all pieces are done, from the lists (or at once, atomically, for pairs past the
+ * budget, which are not listed): sums of whole numbers, so their order changes nothing. */
 typedef struct {
     const Greedy *w;
     int64_t c0, c1;
-    double *crowd;  /* (a,) by position: this job's part of every sum (whole numbers below 2^53) */
-    int32_t *into;  /* (a,) how many of this job's pairs end at each position; then where in
-                       each backward row its entries go, from the row's start */
-    int32_t *later; /* (a,) shared: how many pairs each of this job's positions found */
-    int64_t *first; /* (a,) shared: where they start in to and lift */
-    int32_t *to;    /* (size,) the later end of each pair found, in position order */
-    uint16_t *lift; /* (size,) its weight less LIFT */
+    int64_t *crowd;  /* (a,) shared: the sums */
+    int32_t *degree; /* (a,) shared: how many of the backward rows' pairs are in place */
+    int32_t *later;  /* (a,) shared: how many pairs each of this piece's positions found */
+    int64_t *first;  /* (a,) shared: where they start in to and lift */
+    int32_t *to;     /* (size,) the later end of each pair found, in position order */
+    uint16_t *lift;  /* (size,) its weight less LIFT */
     int64_t size, cap;
-    int64_t budget; /* list no more pairs than this; past it, over is set and the lists stop */
+    int64_t *listed; /* shared: the pairs found so far by all pieces (atomic) */
+    int64_t budget;  /* list no more pairs than this in all; past it, over is set and the lists stop */
+    int shared;      /* pieces run on more than one thread: crowd and listed take atomic adds */
     int over;
     const int64_t *back; /* the backward rows to fill (see Rows) */
     int32_t *bnbr;
     uint16_t *blift;
     int ok;
 } Job;
+
+/* *p += v, atomic when the pieces run on several threads; the old value */
+static inline int64_t add64(int shared, int64_t *p, int64_t v)
+{
+    if (shared)
+        return __atomic_fetch_add(p, v, __ATOMIC_RELAXED);
+    int64_t old = *p;
+    *p = old + v;
+    return old;
+}
 
 static int job_reserve(Job *job, int64_t more)
 {
@@ -703,7 +721,7 @@ static int job_reserve(Job *job, int64_t more)
     return 1;
 }
 
-/* The pairs whose earlier point is in the job's cells, with their crowding: each pair's
+/* The pairs whose earlier point is in the piece's cells, with their crowding: each pair's
  * weight floor((1 - d / (2 radius)) * CROWD_SCALE) goes to both its ends. */
 static void crowd_job(void *jobs, int k, int count)
 {
@@ -711,33 +729,34 @@ static void crowd_job(void *jobs, int k, int count)
     (void)count;
     const Greedy *w = job->w;
     const Grid *g = w->g;
-    double *restrict crowd = job->crowd;
-    int32_t *restrict into = job->into;
+    int64_t *crowd = job->crowd;
     double scale = 1.0 / (2.0 * w->radius);
     Scratch b;
     job->ok = scratch_init(&b, w->most);
+    /* (worth no room of its own: the piece's points, as a whole list would take) */
+    job->ok = job->ok && job_reserve(job, 12 * (g->cell_start[job->c1] - g->cell_start[job->c0]));
     for (int64_t c = job->c0; job->ok && c < job->c1; c++) {
         const int32_t *r = w->ranges + 18 * c;
         for (int64_t s = g->cell_start[c]; s < g->cell_start[c + 1]; s++) {
             int64_t hits = later_hits(g, r, s, w->r2, &b);
-            job->over |= job->size + hits > job->budget;
+            job->over |= add64(job->shared, job->listed, hits) + hits > job->budget;
             if (!job->over && !job_reserve(job, hits)) {
                 job->ok = 0;
                 break;
             }
             weigh(b.d2, b.weight, hits, scale);
-            double sum = 0;
-            for (int64_t h = 0; h < hits; h++) {
-                crowd[b.at[h]] += b.weight[h];
-                sum += b.weight[h];
-            }
-            crowd[s] += sum;
-            if (job->over)
+            int64_t sum = 0;
+            for (int64_t h = 0; h < hits; h++)
+                sum += (int64_t)b.weight[h];
+            add64(job->shared, &crowd[s], sum);
+            if (job->over) { /* not listed: the later ends' share now */
+                for (int64_t h = 0; h < hits; h++)
+                    add64(job->shared, &crowd[b.at[h]], (int64_t)b.weight[h]);
                 continue;
+            }
             int32_t *restrict to = job->to + job->size;
             uint16_t *restrict lift = job->lift + job->size;
             for (int64_t h = 0; h < hits; h++) {
-                into[b.at[h]]++;
                 to[h] = b.at[h];
                 lift[h] = (uint16_t)(b.weight[h] - LIFT);
             }
@@ -749,7 +768,8 @@ static void crowd_job(void *jobs, int k, int count)
     scratch_free(&b);
 }
 
-/* The job's pairs into the backward rows of their later ends. */
+/* The piece's pairs into the backward rows of their later ends (the pieces in turn: the
+ * rows fill in position order). */
 static void fill_job(void *jobs, int k, int count)
 {
     Job *job = (Job *)jobs + k;
@@ -760,25 +780,25 @@ static void fill_job(void *jobs, int k, int count)
     for (int64_t s = g->cell_start[job->c0]; s < g->cell_start[job->c1]; s++)
         for (int64_t h = 0; h < job->later[s]; h++, e++) {
             int32_t t = job->to[e];
-            int64_t q = back[t] + job->into[t]++;
+            int64_t q = back[t] + job->degree[t]++;
             job->bnbr[q] = (int32_t)s;
             job->blift[q] = job->lift[e];
         }
 }
 
 /* The neighbours of every position s, in two rows: forward, the later[s] pairs it found,
- * from first[s] in the lists of the job that holds it (positions jobs_start[k] ..
- * jobs_start[k + 1] - 1 belong to job k); backward, those that found it, bnbr[back[s]] ..
- * bnbr[back[s + 1] - 1]. Weights are lift + LIFT. Each pair is stored twice, 6 bytes each
- * time. */
+ * from first[s] in the lists of the piece that holds it (positions piece_start[k] ..
+ * piece_start[k + 1] - 1 belong to piece k); backward, those that found it, in position
+ * order, bnbr[back[s]] .. bnbr[back[s + 1] - 1]. Weights are lift + LIFT. Each pair is
+ * stored twice, 6 bytes each time. */
 typedef struct {
     const Greedy *w;     /* with by_grid: the rows are found again in the grid */
     const int32_t *cell; /* (a,) the cell of each position, with by_grid */
     int by_grid;
-    int jobs;
-    int64_t jobs_start[MAX_THREADS + 1];
-    int32_t *fnbr[MAX_THREADS];
-    uint16_t *flift[MAX_THREADS];
+    int pieces;
+    int64_t *piece_start; /* (pieces + 1,) */
+    int32_t **fnbr;       /* (pieces,) */
+    uint16_t **flift;     /* (pieces,) */
     int32_t *later;
     int64_t *first, *back;
     int32_t *bnbr;
@@ -787,10 +807,13 @@ typedef struct {
 
 static void rows_free(Rows *r)
 {
-    for (int k = 0; k < r->jobs; k++) {
+    for (int k = 0; r->fnbr && k < r->pieces; k++) {
         give(r->fnbr[k]);
         give(r->flift[k]);
     }
+    free(r->piece_start);
+    free(r->fnbr);
+    free(r->flift);
     give(r->later);
     give(r->first);
     give(r->back);
@@ -820,60 +843,71 @@ static int by_grid(const Greedy *w, Rows *rows)
     return 1;
 }
 
+/* The pieces of the cells, about PIECE_POINTS positions each (the cells of a piece hold
+ * about equal numbers of points): their jobs, with room for the usual number of pairs
+ * (about 9 a point at 8 candidates to a kept point), so that the lists seldom grow. */
+static Job *pieces_of(const Greedy *w, int pieces, int64_t *crowd, int32_t *degree, const Rows *rows, int64_t *start,
+                      int64_t *listed)
+{
+    const Grid *g = w->g;
+    int64_t a = g->a, c = 0;
+    Job *jobs = calloc((size_t)pieces, sizeof *jobs);
+    for (int k = 0; jobs && k < pieces; k++) {
+        Job job = {w, c, g->cells, crowd, degree, rows->later, rows->first};
+        while (k + 1 < pieces && job.c1 > c && g->cell_start[c] < a * (k + 1) / pieces)
+            c++;
+        job.c1 = k + 1 < pieces ? c : g->cells;
+        start[k] = g->cell_start[job.c0];
+        job.listed = listed;
+        job.budget = MOST_LISTED * a + 65536;
+        jobs[k] = job;
+    }
+    start[pieces] = a;
+    return jobs;
+}
+
 /* The crowding of every position into crowd (a,), and the neighbours of every position into
- * rows. The cells are split between threads at about equal numbers of points. Each sums
- * into its own array (a pair may end in another's cells) and the arrays are added up: sums
- * of whole numbers, so the split changes nothing. A backward row holds the pairs found by
- * job 0, then job 1, ...; the order within a row changes no result. */
+ * rows: the pair search in pieces of PIECE_POINTS positions on ``threads`` threads, the
+ * backward rows filled in turn (in position order, no atomics). */
 static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
 {
     const Grid *g = w->g;
     int64_t a = g->a, m = a ? a : 1;
-    Job jobs[MAX_THREADS];
-    threads = threads < 1 ? 1 : (threads > MAX_THREADS ? MAX_THREADS : threads);
-    if (a < 16384 * threads)
-        threads = 1;
-    rows->jobs = threads;
+    int pieces = (int)((a + PIECE_POINTS - 1) / PIECE_POINTS);
+    pieces = pieces < 1 ? 1 : pieces;
+    rows->w = w;
+    rows->pieces = pieces;
     rows->later = take(m * sizeof(int32_t));
     rows->first = take(m * sizeof(int64_t));
     rows->back = take((m + 1) * sizeof(int64_t));
-    int ok = rows->later && rows->first && rows->back;
-    int64_t c = 0;
-    for (int k = 0; k < threads; k++) {
-        Job job = {w, c, g->cells, take_zeroed(m * sizeof(double)), take_zeroed(m * sizeof(int32_t)), rows->later,
-                   rows->first};
-        while (k + 1 < threads && job.c1 > c && g->cell_start[c] < a * (k + 1) / threads)
-            c++;
-        job.c1 = k + 1 < threads ? c : g->cells;
-        rows->jobs_start[k] = g->cell_start[job.c0];
-        /* room for the usual number of pairs (about 9 a point at 8 candidates to a kept
-           point), so that the lists seldom grow */
-        int64_t points = g->cell_start[job.c1] - g->cell_start[job.c0];
-        ok &= job_reserve(&job, 12 * points);
-        job.budget = MOST_LISTED * points + 65536;
-        jobs[k] = job;
-        ok &= job.crowd && job.into;
+    rows->piece_start = malloc(sizeof(int64_t) * ((size_t)pieces + 1));
+    rows->fnbr = calloc((size_t)pieces, sizeof *rows->fnbr);
+    rows->flift = calloc((size_t)pieces, sizeof *rows->flift);
+    int32_t *degree = take_zeroed(m * sizeof(int32_t));
+    int ok = rows->later && rows->first && rows->back && rows->piece_start && rows->fnbr && rows->flift && degree;
+    int64_t listed = 0;
+    Job *jobs = ok ? pieces_of(w, pieces, crowd, degree, rows, rows->piece_start, &listed) : NULL;
+    ok = ok && jobs;
+    int shared = threads_for(pieces, threads) > 1;
+    for (int k = 0; ok && k < pieces; k++)
+        jobs[k].shared = shared;
+    if (ok) {
+        memset(crowd, 0, (size_t)m * sizeof *crowd);
+        in_pieces(pieces, threads, crowd_job, jobs);
     }
-    rows->jobs_start[threads] = a;
-    if (ok)
-        in_parallel(threads, crowd_job, jobs);
-    for (int k = 0; ok && k < threads; k++) {
+    for (int k = 0; ok && k < pieces; k++)
         ok &= jobs[k].ok;
-        rows->by_grid |= jobs[k].over;
-    }
+    rows->by_grid = listed > MOST_LISTED * a + 65536; /* (then some pieces stopped listing) */
+    for (int k = 0; ok && k < pieces; k++) /* the listed pairs' later ends, in turn: no atomics */
+        for (int64_t e = 0; e < jobs[k].size; e++) {
+            crowd[jobs[k].to[e]] += (int64_t)jobs[k].lift[e] + LIFT;
+            degree[jobs[k].to[e]]++;
+        }
     if (ok) {
         rows->back[0] = 0;
         for (int64_t s = 0; s < a; s++) {
-            double sum = 0;
-            int64_t row = 0;
-            for (int k = 0; k < threads; k++) {
-                sum += jobs[k].crowd[s];
-                int32_t n = jobs[k].into[s];
-                jobs[k].into[s] = (int32_t)row;
-                row += n;
-            }
-            crowd[s] = (int64_t)sum;
-            rows->back[s + 1] = rows->back[s] + row;
+            rows->back[s + 1] = rows->back[s] + degree[s];
+            degree[s] = 0;
         }
     }
     if (ok && rows->by_grid)
@@ -882,27 +916,22 @@ static int crowding(const Greedy *w, int threads, int64_t *crowd, Rows *rows)
         rows->bnbr = take((rows->back[a] ? rows->back[a] : 1) * sizeof(int32_t));
         rows->blift = take((rows->back[a] ? rows->back[a] : 1) * sizeof(uint16_t));
         ok = rows->bnbr && rows->blift;
-        for (int k = 0; ok && k < threads; k++) {
+        for (int k = 0; ok && k < pieces; k++) {
             jobs[k].back = rows->back;
             jobs[k].bnbr = rows->bnbr;
             jobs[k].blift = rows->blift;
         }
-        if (ok)
-            in_parallel(threads, fill_job, jobs);
+        for (int k = 0; ok && k < pieces; k++)
+            fill_job(jobs, k, pieces);
     }
-    for (int k = 0; k < threads; k++) {
-        give(jobs[k].crowd);
-        give(jobs[k].into);
-        rows->fnbr[k] = jobs[k].to;
-        rows->flift[k] = jobs[k].lift;
+    for (int k = 0; jobs && k < pieces; k++) {
+        rows->fnbr[k] = rows->by_grid ? NULL : jobs[k].to;
+        rows->flift[k] = rows->by_grid ? NULL : jobs[k].lift;
+        if (rows->by_grid)
+            give(jobs[k].to), give(jobs[k].lift);
     }
-    if (rows->by_grid)
-        for (int k = 0; k < threads; k++) {
-            give(rows->fnbr[k]);
-            give(rows->flift[k]);
-            rows->fnbr[k] = NULL;
-            rows->flift[k] = NULL;
-        }
+    free(jobs);
+    give(degree);
     return ok;
 }
 
@@ -1001,8 +1030,14 @@ static inline void rows_of(const Rows *r, int32_t s, Span row[2], Scratch *b)
         row[1] = (Span){NULL, NULL, 0};
         return;
     }
-    int k = 0;
-    while (s >= r->jobs_start[k + 1])
+    /* the piece of s, piece_start[k] <= s < piece_start[k + 1], from where s lies in the
+     * positions (the pieces hold about equal numbers of them) */
+    int64_t a = r->w->g->a;
+    int k = (int)((int64_t)s * r->pieces / (a ? a : 1));
+    k = k < r->pieces ? k : r->pieces - 1;
+    while (k > 0 && r->piece_start[k] > s)
+        k--;
+    while (r->piece_start[k + 1] <= s)
         k++;
     row[0] = (Span){r->fnbr[k] + r->first[s], r->flift[k] + r->first[s], r->later[s]};
     row[1] = (Span){r->bnbr + r->back[s], r->blift + r->back[s], r->back[s + 1] - r->back[s]};

@@ -13,7 +13,6 @@ counter`` with ``counter = block << COUNT_BITS | j``.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -110,9 +109,9 @@ def all_arrivals(table, tau):
     NumPy path)."""
     n = len(table)
     threads = native.worker_count()
-    pieces = 1 if threads == 1 or n < THREAD_FACES else 4 * threads
+    pieces = 1 if threads == 1 or n < THREAD_FACES else native.PIECES_PER_THREAD * threads
     cuts = np.linspace(0, n, pieces + 1).astype(np.int64).tolist()
-    with ThreadPoolExecutor(max_workers=threads) as pool:
+    with native.thread_pool(threads) as pool:
         parts = list(pool.map(lambda a, b: arrivals(table, tau, a, b), cuts[:-1], cuts[1:]))
     return tuple(np.concatenate(x) for x in zip(*parts)) if len(parts) > 1 else parts[0]
 

@@ -6,8 +6,6 @@ before a time.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
 from ...core import native
@@ -15,7 +13,7 @@ from .arrivals import BLOCK_MEAN, POISSON_CDF
 
 _kernel = native.kernel("_cstable")
 ROOM_SDS = 6.0  # a face range's share of a time bucket holds its mean count plus this many standard deviations
-PIECES = 2  # face ranges a worker thread
+PIECES = 2  # face ranges a worker thread (more would cost room: each range has room of its own in every bucket)
 FINE_BITS = 12  # a coarse bucket of the kernel's arrival sort holds 2^12 to 2^15 time keys
 
 
@@ -45,7 +43,7 @@ def kernel_arrivals(table, tau, bits):
     mean = np.array([tau * float(np.sum(table.rate[a:b])) / coarse for a, b in zip(cuts[:-1], cuts[1:])])
     room = np.tile(np.maximum(0, mean + ROOM_SDS * np.sqrt(mean) + 16).astype(np.int64), (coarse, 1))
     args = (table.key, table.rate, float(tau), BLOCK_MEAN, POISSON_CDF)
-    with ThreadPoolExecutor(max_workers=threads) as pool:
+    with native.thread_pool(threads) as pool:
         for _ in range(2):
             start = (np.cumsum(room) - room.ravel()).reshape(coarse, pieces)
             size = int(room.sum())
@@ -73,14 +71,14 @@ def _balanced_cuts(rate, tau, pieces):
 
 def _kernel_order(pool, t, ids, start, counts, buckets, key, bits):
     """Sort the bucketed arrivals (segments ``start``, ``counts`` (C P,), see
-    :func:`kernel_arrivals`) in place, bucket ranges of about equal counts on the threads:
-    (time (m,), id (m,), duplicates). A thread writes the positions below its first
-    segment to side arrays (a thread below may still read them), copied in afterwards."""
+    :func:`kernel_arrivals`) in place, in bucket ranges of about equal counts, many a
+    thread: (time (m,), id (m,), duplicates). A range writes the positions below its first
+    segment to side arrays (a range below may still read them), copied in afterwards."""
     parts, coarse = buckets[0], len(start) // buckets[0]
     bounds = np.zeros(coarse + 1, np.int64)
     np.cumsum(counts.reshape(coarse, parts).sum(axis=1), out=bounds[1:])
     m = int(bounds[-1])
-    sorters = native.worker_count() if m >= 1 << 16 else 1
+    sorters = native.PIECES_PER_THREAD * native.worker_count() if m >= 1 << 16 else 1
     qcuts = np.searchsorted(bounds, np.linspace(0, m, sorters + 1)).tolist()
     qcuts[0], qcuts[-1] = 0, coarse
     sides = []
