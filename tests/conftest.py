@@ -67,6 +67,24 @@ def run_scatter(*args, input=None, check=False, env=None, timeout=120, stdout=No
     return proc
 
 
+def scatter_in_process(*args):
+    """``scatter ARGS`` through the command's entry point in this process, for checks of
+    what a command says and returns (usage errors): a CompletedProcess like run_scatter's,
+    its standard output and error captured as bytes. Each family of such checks keeps one
+    case in a real subprocess (run_scatter) for what only a process shows."""
+    import contextlib
+    import io
+
+    from .batchtools import command_in_process
+
+    out, err = io.BytesIO(), io.BytesIO()
+    text_out = io.TextIOWrapper(out, encoding="utf-8", write_through=True)
+    text_err = io.TextIOWrapper(err, encoding="utf-8", write_through=True)
+    with contextlib.redirect_stdout(text_out), contextlib.redirect_stderr(text_err):
+        code = command_in_process([str(a) for a in args])
+    return subprocess.CompletedProcess(["scatter", *map(str, args)], code, out.getvalue(), err.getvalue())
+
+
 @pytest.fixture
 def sample_mesh():
     return lambda name: SAMPLES / name

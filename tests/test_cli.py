@@ -5,7 +5,7 @@ import re
 import numpy as np
 import pytest
 
-from .conftest import popen_user, run_scatter, run_user, scatter_command
+from .conftest import popen_user, run_scatter, run_user, scatter_command, scatter_in_process
 
 
 def assert_one_line_error(proc, code, *words):
@@ -148,7 +148,8 @@ def test_all_vertices_non_finite(tmp_path):
     ],
 )
 def test_usage_errors_exit_2(sample_mesh, existing, args, words):
-    proc = run_scatter("sample", sample_mesh("icosahedron_binary.stl"), "-o", existing, *args)
+    run = run_scatter if args == ["-n", "-5"] else scatter_in_process  # one in a real process
+    proc = run("sample", sample_mesh("icosahedron_binary.stl"), "-o", existing, *args)
     assert_one_line_error(proc, 2, *words)
     assert_untouched(existing)
 

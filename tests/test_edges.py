@@ -18,7 +18,7 @@ from scatter_cli.sampling import edges as edges_module, sharp
 from scatter_cli.sampling.normals import face_normals
 from scatter_cli.stats.chisquare import chi2_gof
 
-from .conftest import ROOT, run_scatter
+from .conftest import ROOT, run_scatter, scatter_in_process
 from .test_cli import assert_one_line_error
 
 LEVEL = 1e-3
@@ -391,10 +391,9 @@ def test_volume_points_are_sharp_only_near_edge_points():
     assert (run.sharp[same] == 0).all() and same.sum() > 0.25 * 5000
 
 
-@pytest.mark.slow
 # -- the command line ----------------------------------------------------------------------
 
-@pytest.mark.parametrize("args,words", [
+USAGE_ERRORS = [
     (["--edges", "1.5"], "--edges must be a share from 0 to 1"),
     (["--edges", "lots"], "--edges must be a share from 0 to 1"),
     (["--edges", "0.5", "--poisson"], "--edges does not combine with --poisson"),
@@ -408,9 +407,13 @@ def test_volume_points_are_sharp_only_near_edge_points():
     (["--edges", "0.5", "--near-edges", "0.01"], "--near-edges needs --near"),
     (["--edges", "0.5", "--sharp-angle", "0"], "--sharp-angle must be a number of degrees in (0, 180]"),
     (["--edges", "0.5", "--sharp-angle", "181"], "--sharp-angle must be a number of degrees in (0, 180]"),
-])
+]
+
+
+@pytest.mark.parametrize("args,words", USAGE_ERRORS)
 def test_usage_errors(tmp_path, args, words):
-    proc = run_scatter("sample", box_mesh_file(tmp_path), "-n", "10", *args, "-o", tmp_path / "out.ply")
+    run = run_scatter if args == USAGE_ERRORS[0][0] else scatter_in_process  # one in a real process
+    proc = run("sample", box_mesh_file(tmp_path), "-n", "10", *args, "-o", tmp_path / "out.ply")
     assert_one_line_error(proc, 2, words)
     assert not (tmp_path / "out.ply").exists()
 

@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-from .conftest import SAMPLES, popen_user, run_scatter, run_user, scatter_command
+from .conftest import SAMPLES, popen_user, run_scatter, run_user, scatter_command, scatter_in_process
 from testkit.fuzz_inputs import SEEDS
 
 pytestmark = pytest.mark.slow  # a subprocess a test
@@ -51,11 +51,11 @@ def out(tmp_path):
     return folder, existing, folder / "new.csv"
 
 
-def run_both(out, *args, **kw):
+def run_both(out, *args, run=run_scatter, **kw):
     """Run the command twice: onto the existing file and onto a new one."""
     folder, existing, new = out
-    a = run_scatter(*args, "-o", existing, **kw)
-    b = run_scatter(*args, "-o", new, **kw)
+    a = run(*args, "-o", existing, **kw)
+    b = run(*args, "-o", new, **kw)
     return a, b
 
 
@@ -119,7 +119,8 @@ def test_bad_input(tmp_path, out, case):
     path, code, words = _inputs(src)[case]
     # input errors come before the output is opened; the new-file variant of every
     # output fault is tested below (permissions, disk full, signals)
-    assert_one_line_error(run_scatter("sample", path, "-n", 10, "-o", out[1]), code, *words)
+    run = run_scatter if case == "missing" else scatter_in_process  # one in a real process
+    assert_one_line_error(run("sample", path, "-n", 10, "-o", out[1]), code, *words)
     assert_clean(out[0], out[1], out[2])
 
 
@@ -133,7 +134,8 @@ def test_bad_input(tmp_path, out, case):
     ],
 )
 def test_bad_values_are_usage_errors(out, args, words):
-    for proc in run_both(out, "sample", GOOD, *args):
+    run = run_scatter if args == ["-n", "-5"] else scatter_in_process  # one in a real process
+    for proc in run_both(out, "sample", GOOD, *args, run=run):
         assert_one_line_error(proc, 2, *words)
     assert_clean(out[0], out[1], out[2])
 

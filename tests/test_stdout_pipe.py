@@ -112,11 +112,23 @@ def test_a_reader_gone_in_the_middle_of_the_last_write_gives_141(output, unbuffe
     assert run_into_pipe(["sample", MESH, "-n", LARGE, *output], head, unbuffered) == (141, "")
 
 
-def test_the_unbuffered_last_write_is_what_the_check_catches(monkeypatch):
-    """The broken variant: standard output left unbuffered, the OS takes part of the last
-    write without an error, the rest is dropped and the run ends 0."""
-    monkeypatch.setattr(process, "whole_writes", lambda: None)
-    assert run_into_pipe(["sample", MESH, "-n", LARGE], head, unbuffered=True) == (0, "")
+@pytest.mark.parametrize("broken", [False, True])
+def test_an_unbuffered_standard_output_gets_a_buffer(monkeypatch, broken):
+    """What the runs above rely on: without a buffered layer (PYTHONUNBUFFERED) the OS can
+    take part of the last large write without an error and the rest is dropped (exit 0);
+    whole_writes gives standard output that layer. The broken variant (no whole_writes)
+    leaves the raw file under it."""
+    if broken:
+        monkeypatch.setattr(process, "whole_writes", lambda: None)
+    read_end, write_end = os.pipe()
+    raw = io.TextIOWrapper(io.FileIO(write_end, "wb", closefd=False), encoding="utf-8", write_through=True)
+    monkeypatch.setattr(sys, "stdout", raw)
+    process.whole_writes()
+    layered = isinstance(sys.stdout.buffer, io.BufferedWriter)
+    monkeypatch.undo()
+    os.close(read_end)
+    discard({raw}, write_end)
+    assert layered is not broken
 
 
 def test_merge_onto_a_closed_pipe_gives_141(tmp_path):

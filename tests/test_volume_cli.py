@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from tests.conftest import SAMPLES, run_scatter
+from tests.conftest import SAMPLES, run_scatter, scatter_in_process
 
 pytestmark = pytest.mark.slow  # a subprocess a test
 
@@ -13,7 +13,7 @@ ICO = SAMPLES / "icosahedron_binary.stl"
 HEMI = SAMPLES / "hemisphere.off"
 
 
-@pytest.mark.parametrize("args", [
+USAGE_ERRORS = [
     ["--volume", "-a", "normal"],
     ["--volume", "-a", "orient"],
     ["--near", "0.1", "-a", "color"],
@@ -31,10 +31,14 @@ HEMI = SAMPLES / "hemisphere.off"
     ["--volume", "--padding", "-1"],
     ["--volume", "--sign", "rays"],
     ["--normalize", "unit-ball"],
-])
+]
+
+
+@pytest.mark.parametrize("args", USAGE_ERRORS)
 def test_usage_errors_are_one_line_and_exit_2(args, tmp_path):
     out = tmp_path / "o.ply"
-    proc = run_scatter("sample", ICO, "-n", "100", *args, "-o", out)
+    run = run_scatter if args == USAGE_ERRORS[0] else scatter_in_process  # one in a real process
+    proc = run("sample", ICO, "-n", "100", *args, "-o", out)
     lines = proc.stderr.decode().strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1 and lines[0].startswith("error:"), proc.stderr
     assert not out.exists()
