@@ -22,6 +22,7 @@ import scatter_cli.api as api
 from scatter_cli.run.options import SampleOptions
 from scatter_cli.writers import run_precision
 
+from .batchtools import command_in_process
 from .conftest import SAMPLES
 
 BOX, TRUCK = str(SAMPLES / "boxtextured.glb"), str(SAMPLES / "cesiummilktruck.glb")
@@ -389,25 +390,11 @@ def cli_argv(options):
     return argv
 
 
-def scatter_in_process(argv):
-    """``scatter ARGV`` in this process (``scatter_cli.cli.main``): its exit code."""
-    import signal
-
-    from scatter_cli.cli import main
-
-    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        return main([str(a) for a in argv])
-    finally:
-        for s, h in handlers.items():
-            signal.signal(s, h)
-
-
 def assert_usage_error(tmp_path, capsys, mesh, argv, *words, output="out.npy"):
     """``scatter sample MESH ARGV -o OUTPUT`` exits 2 with one ``error:`` line naming
     ``words``, and writes nothing."""
     capsys.readouterr()
-    code = scatter_in_process(["sample", mesh, *argv, "-n", 10, "-o", tmp_path / output])
+    code = command_in_process([str(a) for a in ["sample", mesh, *argv, "-n", 10, "-o", tmp_path / output]])
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("error: ") and err.count("\n") == 1, (argv, code, err)
     assert all(w in err for w in words), (words, err)
