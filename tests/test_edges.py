@@ -168,6 +168,77 @@ def test_the_kernel_finds_the_edges_numpy_finds(mesh, threads):
                 assert np.array_equal(getattr(kernel, field), getattr(twin, field)), (field, limit)
 
 
+def _mix64(z):
+    """_cedges.c's mix64, on Python integers."""
+    mask = (1 << 64) - 1
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & mask
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & mask
+    return z ^ (z >> 31)
+
+
+def _bits(x):
+    return int(np.array(x + 0.0, np.float64).view(np.uint64))
+
+
+def _position_hash(p):
+    """The kernel's hash of a position (its edge keys are made of these)."""
+    b = [_bits(c) for c in p]
+    return _mix64(b[0] ^ _mix64(b[1] ^ _mix64(b[2])))
+
+
+def _colliding(p):
+    """A position other than ``p`` with the same hash, every coordinate in a plain range:
+    the hash is invertible in its first coordinate, so pick the others and solve for it."""
+    b = [_bits(c) for c in p]
+    rest = _mix64(b[1] ^ _mix64(b[2]))
+    for k in range(1, 100000):
+        y = p[1] + k * 1e-3
+        x = float(np.array(b[0] ^ rest ^ _mix64(_bits(y) ^ _mix64(b[2])), np.uint64).view(np.float64))
+        if 1e-3 < abs(x) < 1e3:
+            return (x, y, p[2])
+    raise AssertionError("no colliding position found")
+
+
+def test_a_collision_of_edge_keys_never_joins_two_edges():
+    """Two edges whose end positions hash alike, (P, A) and (Q, A) with hash(P) = hash(Q),
+    get one 64-bit key in the kernel: it must still keep them apart, as its NumPy twin
+    does. The variant that joins slots by key alone gets this mesh wrong."""
+    p, a, b = (0.5, 0.25, 0.125), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0)
+    q = _colliding(p)
+    assert q != p and _position_hash(q) == _position_hash(p)
+    v = np.array([p, a, b, q], float)
+    f = np.array([[0, 1, 2], [3, 1, 2]], np.int64)  # (P, A) and (Q, A): different edges, one key
+    normals = face_normals(v, f)
+    assert (np.abs(normals).sum(axis=1) > 0).all()
+    twin = sharp._numpy_edge_slots(v, f, np.ones(2, bool), normals, np.inf)
+    kernel = sharp.edge_slots(v, f, np.ones(2, bool), normals, np.inf)
+    for field in ("head", "second", "count", "rest"):
+        assert np.array_equal(getattr(kernel, field), getattr(twin, field)), field
+    assert sorted(twin.count.tolist()) == [1, 1, 1, 1, 2]  # (A, B) shared, the other four alone
+    by_key = {}  # the broken variant: slots joined by their positions' hashes alone
+    for s in range(6):
+        ends = f[s // 3, s % 3], f[s // 3, (s + 1) % 3]
+        by_key.setdefault(frozenset(_position_hash(v[i]) for i in ends), []).append(s)
+    assert sorted(len(slots) for slots in by_key.values()) == [2, 2, 2]  # two of them wrongly paired
+
+
+def test_many_faces_on_one_edge_are_one_edge():
+    """A fan of 40 faces around one edge (a run of slots long enough to be sorted apart),
+    with the fan's outer edges beside it: the kernel's arrays are its NumPy twin's."""
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    rim = np.c_[np.cos(angles), np.sin(angles), np.full(40, 0.5)]
+    v = np.vstack([[0, 0, 0], [0, 0, 1], rim])
+    f = np.c_[np.zeros(40, np.int64), np.ones(40, np.int64), np.arange(2, 42)]
+    f[::3] = f[::3, [1, 0, 2]]  # both directions along the shared edge
+    normals = face_normals(v, f)
+    for limit in (np.inf, 0.9):
+        kernel = sharp.edge_slots(v, f, np.ones(40, bool), normals, limit)
+        twin = sharp._numpy_edge_slots(v, f, np.ones(40, bool), normals, limit)
+        for field in ("head", "second", "count", "rest"):
+            assert np.array_equal(getattr(kernel, field), getattr(twin, field)), field
+    assert twin.count.max() == 40
+
+
 def test_the_kernel_refuses_an_index_out_of_range():
     if sharp._kernel is None:
         pytest.skip("no compiled kernels")

@@ -11,12 +11,13 @@
  * repeated per face (STL, split glTF) has the edges of its welded twin, and nothing here
  * depends on how the vertices are numbered.
  *
- * Radix sorts of small records, no hash table to probe: the used vertices by a hash of
- * their coordinates (within a run of equal hashes, equal coordinates get one position
- * number: the place of the first of them in that order), the slots by the lower position
- * of their edge (within a run, by the upper one), then the edges kept by their head.
- * Each step is cut into fixed shares of its items, many a thread (_cthreads.h's pieces),
- * and every share writes where its place in the whole says, so the result never depends
+ * Radix sorts of small records, no hash table to probe: the slots by the low bits of a
+ * key of their edge, hashed from its two end positions' coordinates, the same either way
+ * round; within a run of equal low bits (an edge's slots, and now and then another
+ * edge's), the slots of equal keys whose end positions are equal form an edge (so a
+ * collision of keys never joins two edges); then the edges kept by their head. Each step
+ * is cut into fixed shares of its items, many a thread (_cthreads.h's pieces), and every
+ * share writes where its place in the whole says, so the result never depends
  * on the thread count or on timing. The GIL is released while they run.
  */
 #define PY_SSIZE_T_CLEAN
@@ -28,6 +29,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 
 static inline uint64_t mix64(uint64_t z)
 {
@@ -43,11 +45,6 @@ static inline uint64_t bits_of(double x)
     x += 0.0;
     memcpy(&w, &x, sizeof w);
     return w;
-}
-
-static inline uint64_t position_hash(const double *p)
-{
-    return mix64(bits_of(p[0]) ^ mix64(bits_of(p[1]) ^ mix64(bits_of(p[2]))));
 }
 
 static inline int same_position(const double *p, const double *q)
@@ -130,149 +127,88 @@ static Record *radix_sort(Record *a, Record *b, int64_t n, int bits, int shares,
     return a;
 }
 
-/* ---- positions ---- */
+/* ---- memory ---- */
+
+#define HUGE_PAGE ((size_t)1 << 21)
+
+/* malloc() for the large buffers, which are read in random order: on huge pages where
+ * the system has them, so that fewer reads miss the address cache (and fewer pages fault
+ * in). Freed with free(). */
+static void *large(size_t size)
+{
+#ifdef MADV_HUGEPAGE
+    void *p = NULL;
+    if (size >= HUGE_PAGE && posix_memalign(&p, HUGE_PAGE, size) == 0) {
+        madvise(p, size, MADV_HUGEPAGE); /* a hint: without huge pages the buffer is as good */
+        return p;
+    }
+#endif
+    return malloc(size);
+}
+
+/* ---- slots ---- */
+
+/* Face blocks: for each face, the bits of its three corners' coordinates (-0.0 as 0.0)
+ * and its unit normal's, 12 words: what keep_edges() reads of a slot's face, in one place. */
+#define BLOCK 12
+
+/* Whether slots s and t join the same two positions (either way round). */
+static inline int same_edge(const uint64_t *blocks, int64_t s, int64_t t)
+{
+    const uint64_t *a = blocks + BLOCK * (s / 3), *b = blocks + BLOCK * (t / 3);
+    const uint64_t *p = a + 3 * (s % 3), *q = a + 3 * ((s + 1) % 3), *p2 = b + 3 * (t % 3), *q2 = b + 3 * ((t + 1) % 3);
+    return (p[0] == p2[0] && p[1] == p2[1] && p[2] == p2[2] && q[0] == q2[0] && q[1] == q2[1] && q[2] == q2[2]) ||
+           (p[0] == q2[0] && p[1] == q2[1] && p[2] == q2[2] && q[0] == p2[0] && q[1] == p2[1] && q[2] == p2[2]);
+}
+
+/* The dot product of the unit normals of slot s's and slot t's faces. */
+static inline double dot(const uint64_t *blocks, int64_t s, int64_t t)
+{
+    double a[3], b[3];
+    memcpy(a, blocks + BLOCK * (s / 3) + 9, sizeof a), memcpy(b, blocks + BLOCK * (t / 3) + 9, sizeof b);
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+/* The coordinates' bits of position p (-0.0 as 0.0) into w. */
+static inline void position_bits(const double *p, uint64_t *w)
+{
+    w[0] = bits_of(p[0]), w[1] = bits_of(p[1]), w[2] = bits_of(p[2]);
+}
+
+/* The key of the edge between positions hashed a and b: the same either way round. */
+static inline uint64_t edge_key(uint64_t a, uint64_t b)
+{
+    uint64_t lo = a < b ? a : b, hi = a < b ? b : a;
+    return mix64(lo ^ mix64(hi ^ 0x9E3779B97F4A7C15ULL));
+}
 
 typedef struct {
     const double *v;
     const int64_t *faces;
     const npy_bool *valid;
-    int64_t nf, nv, n;
-    unsigned char *used;
-    int64_t *id, *offset; /* offset: the first record of each share of vertices */
-    Record *r;
-    double *xyz;
-    int bits;
-} Positions;
-
-static void mark_used(void *ctx, int k, int shares)
-{
-    Positions *c = ctx;
-    int64_t f0, f1;
-    share(c->nf, k, shares, &f0, &f1);
-    for (int64_t f = f0; f < f1; f++)
-        if (c->valid[f])
-            for (int j = 0; j < 3; j++)
-                __atomic_store_n(&c->used[c->faces[3 * f + j]], 1, __ATOMIC_RELAXED);
-}
-
-static void count_used(void *ctx, int k, int shares)
-{
-    Positions *c = ctx;
-    int64_t i0, i1, n = 0;
-    share(c->nv, k, shares, &i0, &i1);
-    for (int64_t i = i0; i < i1; i++)
-        n += c->used[i];
-    c->offset[k] = n;
-}
-
-static void hash_used(void *ctx, int k, int shares)
-{
-    Positions *c = ctx;
-    int64_t i0, i1, at = c->offset[k];
-    share(c->nv, k, shares, &i0, &i1);
-    for (int64_t i = i0; i < i1; i++) {
-        c->id[i] = -1;
-        if (c->used[i])
-            c->r[at++] = (Record){position_hash(c->v + 3 * i), i};
-    }
-}
-
-static void gather_positions(void *ctx, int k, int shares)
-{
-    Positions *c = ctx;
-    int64_t t0, t1;
-    share(c->n, k, shares, &t0, &t1);
-    for (int64_t t = t0; t < t1; t++) /* independent loads: they overlap */
-        memcpy(c->xyz + 3 * t, c->v + 3 * c->r[t].item, 3 * sizeof *c->xyz);
-}
-
-/* The first record of the run (equal low bits of the hash) that holds record t or
- * follows it. */
-static inline int64_t run_start(const Positions *c, int64_t t)
-{
-    while (t > 0 && t < c->n && low_bits(c->r[t].key ^ c->r[t - 1].key, c->bits) == 0)
-        t++;
-    return t;
-}
-
-static void number_runs(void *ctx, int k, int shares)
-{
-    Positions *c = ctx;
-    int64_t t0, t1;
-    share(c->n, k, shares, &t0, &t1);
-    t0 = run_start(c, t0), t1 = run_start(c, t1);
-    for (int64_t t = t0; t < t1;) {
-        int64_t e = t + 1;
-        while (e < c->n && low_bits(c->r[e].key ^ c->r[t].key, c->bits) == 0)
-            e++;
-        for (int64_t i = t; i < e; i++) { /* a run: one position but for the rare other hash or collision */
-            int64_t first = i;
-            for (int64_t q = t; q < i && first == i; q++)
-                if (c->r[q].key == c->r[i].key && same_position(c->xyz + 3 * q, c->xyz + 3 * i))
-                    first = c->id[c->r[q].item];
-            c->id[c->r[i].item] = first;
-        }
-        t = e;
-    }
-}
-
-/* Number the distinct positions of the vertices that valid faces use: id[v] for those
- * (the others -1), each the place in the hash order of the first vertex at its position.
- * Returns the count of used vertices (the numbers are below it). a and b: buffers of nv
- * records; xyz: 3 nv doubles; used: nv bytes; offset: one per share; count: BUCKETS
- * counters per share. */
-static int64_t number_positions(Positions *c, Record *a, Record *b, int shares, int threads, int64_t *count)
-{
-    memset(c->used, 0, c->nv);
-    in_pieces(shares, threads, mark_used, c);
-    in_pieces(shares, threads, count_used, c);
-    int64_t n = 0;
-    for (int k = 0; k < shares; k++) {
-        int64_t m = c->offset[k];
-        c->offset[k] = n;
-        n += m;
-    }
-    c->r = a;
-    in_pieces(shares, threads, hash_used, c);
-    c->n = n;
-    c->bits = bit_length((uint64_t)n) + 1;
-    c->r = radix_sort(a, b, n, c->bits, shares, threads, count);
-    in_pieces(shares, threads, gather_positions, c);
-    in_pieces(shares, threads, number_runs, c);
-    return n;
-}
-
-/* ---- edges ---- */
-
-typedef struct {
-    const int64_t *faces, *id;
-    const npy_bool *valid;
     const double *normals;
     double limit;
     int64_t nf, n;
+    int bits;
     int64_t *offset; /* per share: its first record */
     int64_t *kept; /* per share: how many edges it kept (in its own place) */
-    Record *r, *edge; /* the slot records; the edges kept, (head, their number) */
+    int64_t *bounds; /* share k keeps the edges of records bounds[k] .. bounds[k + 1] - 1: whole runs */
+    Record *r, *edge; /* the slot records (edge key, slot); the edges kept, (head, their number) */
     int64_t *found, *place, *count; /* slots of the edges kept; an edge's first slot in found, its slot count */
+    uint64_t *blocks; /* BLOCK words a face */
 } Edges;
-
-static inline int edge_of(const Edges *c, int64_t f, int j, uint64_t *key)
-{
-    uint64_t p = (uint64_t)c->id[c->faces[3 * f + j]], q = (uint64_t)c->id[c->faces[3 * f + (j + 1) % 3]];
-    *key = p < q ? q << 32 | p : p << 32 | q;
-    return p != q; /* (no edge between one position and itself) */
-}
 
 static void count_slots(void *ctx, int k, int shares)
 {
     Edges *c = ctx;
     int64_t f0, f1, n = 0;
-    uint64_t key;
     share(c->nf, k, shares, &f0, &f1);
     for (int64_t f = f0; f < f1; f++)
-        if (c->valid[f])
-            for (int j = 0; j < 3; j++)
-                n += edge_of(c, f, j, &key);
+        if (c->valid[f]) {
+            const double *p[3] = {c->v + 3 * c->faces[3 * f], c->v + 3 * c->faces[3 * f + 1], c->v + 3 * c->faces[3 * f + 2]};
+            for (int j = 0; j < 3; j++) /* (no edge between one position and itself) */
+                n += !same_position(p[j], p[(j + 1) % 3]);
+        }
     c->offset[k] = n;
 }
 
@@ -280,77 +216,113 @@ static void fill_slots(void *ctx, int k, int shares)
 {
     Edges *c = ctx;
     int64_t f0, f1, at = c->offset[k];
-    uint64_t key;
     share(c->nf, k, shares, &f0, &f1);
     for (int64_t f = f0; f < f1; f++)
-        if (c->valid[f])
-            for (int j = 0; j < 3; j++)
-                if (edge_of(c, f, j, &key))
-                    c->r[at++] = (Record){key, 3 * f + j};
+        if (c->valid[f]) {
+            uint64_t *w = c->blocks + BLOCK * f, h[3];
+            for (int j = 0; j < 3; j++) {
+                position_bits(c->v + 3 * c->faces[3 * f + j], w + 3 * j);
+                h[j] = mix64(w[3 * j] ^ mix64(w[3 * j + 1] ^ mix64(w[3 * j + 2])));
+            }
+            memcpy(w + 9, c->normals + 3 * f, 3 * sizeof *w);
+            for (int j = 0; j < 3; j++) {
+                const uint64_t *p = w + 3 * j, *q = w + 3 * ((j + 1) % 3);
+                if (p[0] != q[0] || p[1] != q[1] || p[2] != q[2]) /* (no edge between one position and itself) */
+                    c->r[at++] = (Record){edge_key(h[j], h[(j + 1) % 3]), 3 * f + j};
+            }
+        }
 }
 
-static int by_upper_then_slot(const void *x, const void *y)
+static int by_key_then_slot(const void *x, const void *y)
 {
     const Record *a = x, *b = y;
-    uint64_t ua = a->key >> 32, ub = b->key >> 32;
-    return ua != ub ? (ua < ub ? -1 : 1) : (a->item < b->item ? -1 : a->item > b->item);
+    return a->key != b->key ? (a->key < b->key ? -1 : 1) : (a->item < b->item ? -1 : a->item > b->item);
 }
 
-/* Sort a run of slot records by upper position, slots in order for equal ones. */
+/* Sort a run of slot records by key, slots in order for equal ones. */
 static void sort_run(Record *r, int64_t n)
 {
     if (n > 16) {
-        qsort(r, n, sizeof *r, by_upper_then_slot);
+        qsort(r, n, sizeof *r, by_key_then_slot);
         return;
     }
-    for (int64_t i = 1; i < n; i++) /* insertion sort: a run holds the few edges of one position */
-        for (int64_t j = i; j > 0 && by_upper_then_slot(r + j - 1, r + j) > 0; j--) {
+    for (int64_t i = 1; i < n; i++) /* insertion sort: a run holds an edge's slots or two */
+        for (int64_t j = i; j > 0 && by_key_then_slot(r + j - 1, r + j) > 0; j--) {
             Record h = r[j];
             r[j] = r[j - 1], r[j - 1] = h;
         }
 }
 
-static inline double dot(const double *n, int64_t f, int64_t g)
+/* The first record of the run (equal low bits of the key) that holds record t or follows it. */
+static inline int64_t run_start(const Edges *c, int64_t t)
 {
-    const double *a = n + 3 * f, *b = n + 3 * g;
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
-/* The first record of the run (one lower position) that holds record t or follows it. */
-static inline int64_t lower_run_start(const Edges *c, int64_t t)
-{
-    while (t > 0 && t < c->n && (uint32_t)c->r[t].key == (uint32_t)c->r[t - 1].key)
+    while (t > 0 && t < c->n && low_bits(c->r[t].key ^ c->r[t - 1].key, c->bits) == 0)
         t++;
     return t;
 }
 
-/* One share of the runs: each run sorted by upper position, the edges it keeps
- * written from t0 on, t0 the share's first record (there is room: an edge has a slot at
- * least): their records in edge[], their first slot's place in found[] in place[], their
- * slot count in count[]. */
+/* The edges of records [i, m), all of one key, in order of their first slot, each one's
+ * slots in order: written from edges and slots on (see keep_edges); returns the new edge
+ * count and sets *slots. Records of an edge already written get the key's complement. */
+static int64_t keep_key(Edges *c, int64_t i, int64_t m, int64_t edges, int64_t *slots)
+{
+    uint64_t key = c->r[i].key;
+    for (int64_t lead = i; lead < m; lead++) {
+        if (c->r[lead].key != key) /* (taken by an edge before) */
+            continue;
+        int64_t first = *slots, s = c->r[lead].item;
+        c->found[(*slots)++] = s;
+        for (int64_t j = lead + 1; j < m; j++) /* one edge but for a collision of the 64-bit keys */
+            if (c->r[j].key == key && same_edge(c->blocks, s, c->r[j].item)) {
+                c->found[(*slots)++] = c->r[j].item;
+                c->r[j].key = ~key;
+            }
+        int64_t n = *slots - first;
+        if (n == 2 && dot(c->blocks, s, c->found[first + 1]) >= c->limit) {
+            *slots = first; /* two faces too close to flat to be sharp */
+            continue;
+        }
+        c->edge[edges] = (Record){(uint64_t)s, edges};
+        c->place[edges] = first, c->count[edges] = n;
+        edges++;
+    }
+    return edges;
+}
+
+/* Records ahead of the one keep_edges() reads whose memory it asks for early: the slots
+ * of an edge lie far apart, and reading their corners one after the other would wait on
+ * memory at every step. */
+#define AHEAD 16
+
+static inline void ask(const Edges *c, int64_t s)
+{
+    __builtin_prefetch(c->blocks + BLOCK * (s / 3));
+    __builtin_prefetch(c->blocks + BLOCK * (s / 3) + BLOCK - 1);
+}
+
+/* One share of the runs (cut before any share starts: keep_key() marks keys), each run
+ * sorted by key; the edges it keeps are written from t0 on, t0 the share's first record
+ * (there is room: an edge has a slot at least): their records in edge[], their first
+ * slot's place in found[] in place[], their slot count in count[]. */
 static void keep_edges(void *ctx, int k, int shares)
 {
     Edges *c = ctx;
-    int64_t t0, t1;
-    share(c->n, k, shares, &t0, &t1);
-    t0 = lower_run_start(c, t0), t1 = lower_run_start(c, t1);
-    int64_t edges = t0, slots = t0;
+    int64_t t0 = c->bounds[k], t1 = c->bounds[k + 1];
+    (void)shares;
+    int64_t edges = t0, slots = t0, asked = t0;
     for (int64_t t = t0; t < t1;) {
         int64_t e = t + 1;
-        while (e < t1 && (uint32_t)c->r[e].key == (uint32_t)c->r[t].key)
+        while (e < t1 && low_bits(c->r[e].key ^ c->r[t].key, c->bits) == 0)
             e++;
-        sort_run(c->r + t, e - t);
+        for (; asked < t1 && asked < e + AHEAD; asked++)
+            ask(c, c->r[asked].item);
+        if (e - t > 2)
+            sort_run(c->r + t, e - t);
         for (int64_t i = t; i < e;) {
             int64_t m = i + 1;
             while (m < e && c->r[m].key == c->r[i].key)
                 m++;
-            if (m - i != 2 || !(dot(c->normals, c->r[i].item / 3, c->r[i + 1].item / 3) >= c->limit)) {
-                c->edge[edges] = (Record){(uint64_t)c->r[i].item, edges};
-                c->place[edges] = slots, c->count[edges] = m - i;
-                edges++;
-                for (int64_t j = i; j < m; j++)
-                    c->found[slots++] = c->r[j].item;
-            }
+            edges = keep_key(c, i, m, edges, &slots);
             i = m;
         }
         t = e;
@@ -386,42 +358,37 @@ static int64_t list_edges(Edges *c, int shares, Record *scratch, int64_t *counte
 }
 
 /* The edges (see the top of the file) into head, second, count, rest; returns E, sets
- * *rests; -1 when out of memory, -2 when there are more than 2^32 used vertices. */
-static int64_t find_edges(const double *v, const int64_t *faces, const npy_bool *valid, int64_t nf, int64_t nv,
+ * *rests; -1 when out of memory. */
+static int64_t find_edges(const double *v, const int64_t *faces, const npy_bool *valid, int64_t nf,
                           const double *normals, double limit, int threads, int64_t *head, int64_t *second,
                           int64_t *count, int64_t *rest, int64_t *rests)
 {
-    int64_t n = (3 * nf > nv ? 3 * nf : nv) + 1, result = -1;
+    int64_t n = 3 * nf + 1, result = -1;
     int shares = pieces_for(n, SHARE_ITEMS, threads);
-    int64_t *id = malloc((nv + 1) * sizeof *id), *offset = malloc(shares * sizeof *offset),
-            *kept = malloc(shares * sizeof *kept), *counters = malloc((int64_t)shares * BUCKETS * sizeof *counters),
-            *found = malloc(n * sizeof *found), *place = malloc(n * sizeof *place), *cnt = malloc(n * sizeof *cnt);
-    unsigned char *used = malloc(nv + 1);
-    Record *a = malloc(n * sizeof *a), *b = malloc(n * sizeof *b);
-    double *xyz = malloc(3 * (nv + 1) * sizeof *xyz);
-    if (id && offset && kept && counters && found && place && cnt && used && a && b && xyz) {
-        Positions p = {v, faces, valid, nf, nv, 0, used, id, offset, NULL, xyz, 0};
-        int64_t positions = number_positions(&p, a, b, shares, threads, counters);
-        if (positions > (int64_t)UINT32_MAX) {
-            result = -2;
-        } else {
-            Edges e = {faces, id, valid, normals, limit, nf, 0, offset, kept, a, NULL, found, place, cnt};
-            in_pieces(shares, threads, count_slots, &e);
-            for (int k = 0; k < shares; k++) {
-                int64_t m = offset[k];
-                offset[k] = e.n;
-                e.n += m;
-            }
-            in_pieces(shares, threads, fill_slots, &e);
-            e.r = radix_sort(a, b, e.n, bit_length((uint64_t)(positions > 0 ? positions - 1 : 0)), shares, threads,
-                             counters);
-            e.edge = e.r == a ? b : a;
-            in_pieces(shares, threads, keep_edges, &e);
-            result = list_edges(&e, shares, e.r, counters, head, second, count, rest, rests);
+    int64_t *offset = malloc(shares * sizeof *offset), *kept = malloc(shares * sizeof *kept),
+            *bounds = malloc((shares + 1) * sizeof *bounds),
+            *counters = malloc((int64_t)shares * BUCKETS * sizeof *counters), *found = large(n * sizeof *found),
+            *place = large(n * sizeof *place), *cnt = large(n * sizeof *cnt);
+    Record *a = large(n * sizeof *a), *b = large(n * sizeof *b);
+    uint64_t *blocks = large(BLOCK * (nf + 1) * sizeof *blocks);
+    if (offset && kept && bounds && counters && found && place && cnt && a && b && blocks) {
+        Edges e = {v, faces, valid, normals, limit, nf, 0, 0, offset, kept, bounds, a, NULL, found, place, cnt, blocks};
+        in_pieces(shares, threads, count_slots, &e);
+        for (int k = 0; k < shares; k++) {
+            int64_t m = offset[k];
+            offset[k] = e.n;
+            e.n += m;
         }
+        in_pieces(shares, threads, fill_slots, &e);
+        e.bits = bit_length((uint64_t)e.n) + 1; /* runs of equal low bits: an edge's slots, rarely more */
+        e.r = radix_sort(a, b, e.n, e.bits, shares, threads, counters);
+        e.edge = e.r == a ? b : a;
+        for (int k = 0; k <= shares; k++)
+            bounds[k] = run_start(&e, (int64_t)((__int128)e.n * k / shares));
+        in_pieces(shares, threads, keep_edges, &e);
+        result = list_edges(&e, shares, e.r, counters, head, second, count, rest, rests);
     }
-    free(id), free(offset), free(kept), free(counters), free(found), free(place), free(cnt), free(used), free(a),
-        free(b), free(xyz);
+    free(offset), free(kept), free(bounds), free(counters), free(found), free(place), free(cnt), free(a), free(b), free(blocks);
     return result;
 }
 
@@ -432,7 +399,7 @@ PyDoc_STRVAR(edges_doc,
 "vertices (V, 3) float64, faces (F, 3) int64, valid (F,) bool; head, second, count and\n"
 "rest (3 F,) int64 get the E edges' head, second slot and count, and the R slots after\n"
 "the second of edges with more; on ``threads`` threads. Raises ValueError for a vertex\n"
-"index of a valid face out of range or more than 2^32 used vertices.");
+"index of a valid face out of range.");
 
 static PyObject *edges(PyObject *self, PyObject *args)
 {
@@ -462,16 +429,12 @@ static PyObject *edges(PyObject *self, PyObject *args)
     }
     threads = threads < 1 ? 1 : threads;
     Py_BEGIN_ALLOW_THREADS
-    found = find_edges(PyArray_DATA(verts_a), faces, valid, nf, nv, PyArray_DATA(normals_a), limit, threads,
+    found = find_edges(PyArray_DATA(verts_a), faces, valid, nf, PyArray_DATA(normals_a), limit, threads,
                        PyArray_DATA(head_a), PyArray_DATA(second_a), PyArray_DATA(count_a), PyArray_DATA(rest_a),
                        &rests);
     Py_END_ALLOW_THREADS
     if (found == -1)
         return PyErr_NoMemory();
-    if (found == -2) {
-        PyErr_SetString(PyExc_ValueError, "more than 2^32 used vertices");
-        return NULL;
-    }
     return Py_BuildValue("LL", (long long)found, (long long)rests);
 }
 

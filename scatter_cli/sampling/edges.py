@@ -147,19 +147,21 @@ class EdgeMixSource:
         on_edge = self.interleaving.mask(start, stop)
         edge = self.table.draw(first, last, self.seed, self.want_bary)
         face = self.faces.draw(start - first, stop - last)
-        n = stop - start
         e, f = np.flatnonzero(on_edge), np.flatnonzero(~on_edge)
+        bary = None if edge.bary is None else _mixed(e, f, edge.bary, face.bary)
+        return RawChunk(start, _mixed(e, f, edge.points, face.points), _mixed(e, f, edge.face, face.face),
+                        _mixed(e, f, edge.instance, face.instance), bary, on_edge,
+                        _mixed(e, f, edge.normal, np.zeros((len(f), 3))))
 
-        def mixed(of_edges, of_faces, shape=(), dtype=np.float64):
-            out = np.empty((n,) + shape, dtype=dtype)
-            out[e], out[f] = of_edges, of_faces
-            return out
 
-        normal = np.zeros((n, 3))
-        normal[e] = edge.normal
-        bary = None if edge.bary is None else mixed(edge.bary, face.bary, (3,))
-        return RawChunk(start, mixed(edge.points, face.points, (3,)), mixed(edge.face, face.face, dtype=np.int64),
-                        mixed(edge.instance, face.instance, dtype=np.int64), bary, on_edge, normal)
+def _mixed(e, f, of_edges, of_faces):
+    """Rows ``of_edges`` (len(e), ...) at rows ``e`` and ``of_faces`` at rows ``f`` of a new
+    array: e and f (k,) int64 split 0 .. len(e) + len(f) - 1 between them."""
+    out = np.empty((len(e) + len(f),) + of_edges.shape[1:], dtype=of_edges.dtype)
+    row = np.dtype((np.void, out.itemsize * (out.size // max(len(out), 1))))  # a row as one item: put moves it whole
+    for index, rows in ((e, of_edges), (f, of_faces)):
+        np.put(out.view(row).reshape(-1), index, np.ascontiguousarray(rows, dtype=out.dtype).view(row).reshape(-1))
+    return out
 
 
 def _unit(v):
