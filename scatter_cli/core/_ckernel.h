@@ -1,7 +1,27 @@
-/* What the compiled kernels share: checking an array argument. Included after
- * Python.h and numpy/arrayobject.h. */
+/* What the compiled kernels share: checking an array argument, and memory for large
+ * buffers. Included after Python.h and numpy/arrayobject.h. */
 #ifndef SCATTER_CKERNEL_H
 #define SCATTER_CKERNEL_H
+
+#include <stdlib.h>
+#include <sys/mman.h>
+
+#define HUGE_PAGE ((size_t)1 << 21)
+
+/* size bytes, aligned to 64, for a large buffer read in random order: on huge pages
+ * where the system offers them (as NumPy asks for its own large arrays), so that fewer
+ * reads miss the address cache and fewer pages fault in. Freed with free(). */
+static inline void *large_alloc(size_t size)
+{
+#ifdef MADV_HUGEPAGE
+    void *p = NULL;
+    if (size >= HUGE_PAGE && posix_memalign(&p, HUGE_PAGE, size) == 0) {
+        madvise(p, size, MADV_HUGEPAGE); /* a hint: without huge pages the buffer is as good */
+        return p;
+    }
+#endif
+    return aligned_alloc(64, (size + 63) / 64 * 64);
+}
 
 /* An array argument checked for dtype, C order and size (size < 0: any size). */
 static inline int get(PyObject *obj, int type, npy_intp size, PyArrayObject **out, const char *name)

@@ -29,7 +29,6 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
 
 static inline uint64_t mix64(uint64_t z)
 {
@@ -125,25 +124,6 @@ static Record *radix_sort(Record *a, Record *b, int64_t n, int bits, int shares,
         a = b, b = t;
     }
     return a;
-}
-
-/* ---- memory ---- */
-
-#define HUGE_PAGE ((size_t)1 << 21)
-
-/* malloc() for the large buffers, which are read in random order: on huge pages where
- * the system has them, so that fewer reads miss the address cache (and fewer pages fault
- * in). Freed with free(). */
-static void *large(size_t size)
-{
-#ifdef MADV_HUGEPAGE
-    void *p = NULL;
-    if (size >= HUGE_PAGE && posix_memalign(&p, HUGE_PAGE, size) == 0) {
-        madvise(p, size, MADV_HUGEPAGE); /* a hint: without huge pages the buffer is as good */
-        return p;
-    }
-#endif
-    return malloc(size);
 }
 
 /* ---- slots ---- */
@@ -367,10 +347,10 @@ static int64_t find_edges(const double *v, const int64_t *faces, const npy_bool 
     int shares = pieces_for(n, SHARE_ITEMS, threads);
     int64_t *offset = malloc(shares * sizeof *offset), *kept = malloc(shares * sizeof *kept),
             *bounds = malloc((shares + 1) * sizeof *bounds),
-            *counters = malloc((int64_t)shares * BUCKETS * sizeof *counters), *found = large(n * sizeof *found),
-            *place = large(n * sizeof *place), *cnt = large(n * sizeof *cnt);
-    Record *a = large(n * sizeof *a), *b = large(n * sizeof *b);
-    uint64_t *blocks = large(BLOCK * (nf + 1) * sizeof *blocks);
+            *counters = malloc((int64_t)shares * BUCKETS * sizeof *counters), *found = large_alloc(n * sizeof *found),
+            *place = large_alloc(n * sizeof *place), *cnt = large_alloc(n * sizeof *cnt);
+    Record *a = large_alloc(n * sizeof *a), *b = large_alloc(n * sizeof *b);
+    uint64_t *blocks = large_alloc(BLOCK * (nf + 1) * sizeof *blocks);
     if (offset && kept && bounds && counters && found && place && cnt && a && b && blocks) {
         Edges e = {v, faces, valid, normals, limit, nf, 0, 0, offset, kept, bounds, a, NULL, found, place, cnt, blocks};
         in_pieces(shares, threads, count_slots, &e);
