@@ -121,7 +121,8 @@ def test_slope_fit():
 def test_same_seed_same_errors(tmp_path):
     mesh = tmp_path / "sphere.ply"
     bench.icosphere(2).export(mesh)
-    kw = dict(meshes=[str(mesh)], counts=[100, 1000], repeats=2, seed=7, want_plot=False, log=lambda m: None)
+    kw = dict(meshes=[str(mesh)], counts=[100, 1000], repeats=2, seed=7, want_plot=False, log=lambda m: None,
+              quick=True)  # (the quick Poisson rows: 10^3 points, not 10^4 and 10^5)
     a = bench.run_bench(out=tmp_path / "a", **kw)
     b = bench.run_bench(out=tmp_path / "b", **kw)
     rows = lambda rep: {r["variant"]: [row["error"] for row in r["rows"]] for r in rep["results"]
