@@ -1,7 +1,7 @@
 """Every core: how each kind of work scales with the threads, and batch with its workers.
 
     NUMPY_MADVISE_HUGEPAGE=0 PYTHONPATH=$PWD python benchmarks/cores.py [--quick] [--repeats 3]
-        [--only surface,volume,...] [--meshes 10000] [--out FILE]
+        [--only surface,volume,off,...] [--meshes 10000] [--out FILE]
 
 For 1, 2, 4, ... threads up to the CPUs this process may use (``native.available_cpus()``:
 its affinity mask, at most its cgroup's CPU quota), then that count itself when it is not
@@ -15,7 +15,9 @@ the skull sample, best of --repeats wall times:
 - exterior: ``--exterior``, 10^6 points (--quick 2x10^5);
 - volume: ``--volume -a sdf,inside``, 10^7 points (--quick 10^6);
 - loaders: an ASCII STL of the skull's faces ten times over, 180 MB (--quick once, 18 MB),
-  parsed from memory;
+  parsed from memory; off and ascii-ply: the skull ten times over (its vertices and faces
+  repeated, the indices moved on) as an OFF and an ASCII PLY, about 60 MB each (--quick
+  once);
 - batch: ``scatter batch`` over --meshes small meshes (copies of a 20-face mesh, 256
   points each, binary PLY) on a tmpfs, the whole command's wall time, ``-j`` 1, 2, 4, ...
   and the default (-j: the CPUs; threads per worker: the CPUs over -j).
@@ -88,6 +90,30 @@ def loaders(quick):
     return f"ASCII STL, {len(text) / 1e6:.0f} MB", lambda: fast.read_stl(text, "skull.stl", False, False, False)
 
 
+def text_mesh(kind, quick):
+    from scatter_cli.loading import fast
+
+    data = skull_text(kind, 1 if quick else 10)
+    name = {"off": "OFF", "ply": "ASCII PLY"}[kind]
+    read = fast.read_off if kind == "off" else fast.read_ply
+    return f"{name}, {len(data) / 1e6:.0f} MB", lambda: read(data, "skull." + kind, False, False, False)
+
+
+def skull_text(kind, copies):
+    """The skull ``copies`` times over as an OFF or ASCII PLY (bytes)."""
+    import trimesh
+
+    mesh = trimesh.load(SKULL, process=False)
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    vertices = "".join("%.9g %.9g %.9g\n" % tuple(r) for r in v.tolist()) * copies
+    faces = "".join("".join("3 %d %d %d\n" % tuple(r) for r in (f + k * len(v)).tolist()) for k in range(copies))
+    nv, nf = copies * len(v), copies * len(f)
+    if kind == "off":
+        return f"OFF\n{nv} {nf} 0\n{vertices}{faces}".encode()
+    return (f"ply\nformat ascii 1.0\nelement vertex {nv}\nproperty double x\nproperty double y\nproperty double z\n"
+            f"element face {nf}\nproperty list uchar int vertex_indices\nend_header\n{vertices}{faces}").encode()
+
+
 # name -> a maker, given --quick, of (what, the work done once)
 WORKS = {
     "surface": lambda quick: prepared(count=10**7 if quick else 10**8),
@@ -96,6 +122,8 @@ WORKS = {
     "exterior": lambda quick: prepared(count=2 * 10**5 if quick else 10**6, exterior=True),
     "volume": lambda quick: prepared(count=10**6 if quick else 10**7, volume=True, attributes="sdf,inside"),
     "loaders": loaders,
+    "off": lambda quick: text_mesh("off", quick),
+    "ascii-ply": lambda quick: text_mesh("ply", quick),
 }
 
 
@@ -159,7 +187,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--only", default="surface,poisson,stable,exterior,volume,loaders,batch")
+    parser.add_argument("--only", default="surface,poisson,stable,exterior,volume,loaders,off,ascii-ply,batch")
     parser.add_argument("--meshes", type=int, default=10_000)
     parser.add_argument("--out")
     args = parser.parse_args()

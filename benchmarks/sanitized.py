@@ -52,7 +52,7 @@ def run_sanitized(kernel, module, tests, script):
     """Build KERNEL.c with the sanitizers in a temporary copy (tests, testkit and
     benchmarks beside it, samples linked), then run there, on 2 threads: the test file ``tests`` (a conftest
     line checks that the kernel of ``module``, a dotted name under scatter_cli, is the
-    sanitized one) and the Python ``script`` (the copy's path as its argv[1]). Any report aborts."""
+    sanitized one; a list: pytest's arguments) and the Python ``script`` (the copy's path as its argv[1]). Any report aborts."""
     with tempfile.TemporaryDirectory() as tmp:
         env = sanitized_copy(tmp, kernel, also=("tests", "testkit", "benchmarks"))
         env["SCATTER_REQUIRE_KERNELS"] = "1"
@@ -60,6 +60,6 @@ def run_sanitized(kernel, module, tests, script):
         os.symlink(ROOT / "samples", Path(tmp) / "samples")
         with open(Path(tmp) / "tests" / "conftest.py", "a") as conf:
             conf.write(f"\nimport scatter_cli.{module} as _m\nassert {tmp!r} in _m._kernel.__file__\n")
-        subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", tests], env=env, check=True,
-                       cwd=tmp)
+        subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                        *([tests] if isinstance(tests, str) else tests)], env=env, check=True, cwd=tmp)
         subprocess.run([sys.executable, "-c", script, tmp], env=env, check=True, cwd=tmp)

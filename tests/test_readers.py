@@ -272,6 +272,110 @@ def test_ascii_stl_read_in_parts_is_read_as_in_one(case):
 
 
 @functools.lru_cache(maxsize=None)
+def body_lines(count=70000, seed=2):
+    """About 3.5 MB of vertex and triangle lines (OFF and ASCII PLY alike): large enough
+    for the readers to cut into 3 parts on 3 threads."""
+    rng = np.random.default_rng(seed)
+    vertices = ["%.6f %.6f %.6f\n" % tuple(r) for r in rng.standard_normal((count, 3)).tolist()]
+    faces = ["3 %d %d %d\n" % tuple(f) for f in rng.integers(0, count, (count, 3)).tolist()]
+    return tuple(vertices), tuple(faces)
+
+
+def body_case(case, vertices, faces):
+    """The lines of a body with ``case`` worked in (late ones in the last part)."""
+    v, f = list(vertices), list(faces)
+    late = len(f) - len(f) // 7
+    if case == "quads and triangles":
+        f[::3] = ["4 %d 1 2 3\n" % k for k in range(0, len(f), 3)]
+    elif case == "pentagons":
+        f = ["5 %d 1 2 3 4\n" % (k % len(v)) for k in range(len(f))]
+    elif case == "blank lines":
+        v[::97] = [line + "  \n\r\n" for line in v[::97]]
+        f[::89] = ["\n \t\n" + line for line in f[::89]]
+    elif case == "extra columns":
+        v = [line[:-1] + " 0.5 7\n" for line in v]
+        f = [line[:-1] + " 255 0 0\n" for line in f]
+    elif case == "too few faces":
+        f = f[:-1]
+    elif case == "a bad vertex late":
+        v[-len(v) // 9] = "1.0 2.0 x\n"
+    elif case == "an index out of range late":
+        f[late] = "3 0 1 %d\n" % len(v)
+    elif case == "junk after the faces":
+        f.append("what\n")
+    elif case == "white space after the faces":
+        f.append("\n  \n\t")
+    elif case == "a blank line among the vertices":
+        v[len(v) // 2] = "\n" + v[len(v) // 2]
+    return v, f
+
+
+def breaks(text, case):
+    return {"crlf": text.replace("\n", "\r\n"), "lone cr": text.replace("\n", "\r")}.get(case, text)
+
+
+def same_in_parts(read, one):
+    """read(threads) on 2, 3 and 7 threads gives what one thread gives (None included)."""
+    for threads in (2, 3, 7):
+        parts = read(threads)
+        assert (parts is None) == (one is None), threads
+        if one is not None:
+            assert [a.tobytes() for a in parts] == [a.tobytes() for a in one], threads
+
+
+OFF_PART_CASES = {"plain": True, "crlf": True, "lone cr": False, "quads and triangles": True, "pentagons": True,
+             "blank lines": True, "extra columns": True, "junk after the faces": True, "too few faces": False,
+             "a bad vertex late": False, "an index out of range late": False}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", sorted(OFF_PART_CASES))
+def test_off_read_in_parts_is_read_as_in_one(case):
+    """An OFF is cut at line breaks and its parts read on threads; the parts' records are
+    numbered from the counts before them, so the result is the one-part result (and None
+    where the file goes to trimesh)."""
+    from scatter_cli.loading import _creaders
+
+    v, f = body_case(case, *body_lines())
+    data = breaks(f"OFF\n{len(body_lines()[0])} {len(body_lines()[1])} 0\n" + "".join(v + f), case).encode()
+    one = _creaders.read_off(data, 1)
+    assert (one is not None) == OFF_PART_CASES[case]
+    if case == "plain":
+        mesh = trimesh.load(trimesh.util.wrap_as_stream(data), file_type="off", process=False)
+        assert one[0].tobytes() == np.asarray(mesh.vertices, float).tobytes()
+        assert one[1].tobytes() == np.asarray(mesh.faces, np.int64).tobytes()
+    same_in_parts(lambda threads: _creaders.read_off(data, threads), one)
+
+
+PLY_PART_CASES = {"plain": True, "crlf": True, "lone cr": True, "quads and triangles": True,
+             "white space after the faces": True, "junk after the faces": False, "too few faces": False,
+             "a blank line among the vertices": False, "a bad vertex late": False, "an index out of range late": False}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", sorted(PLY_PART_CASES))
+def test_ascii_ply_read_in_parts_is_read_as_in_one(case):
+    """The same for the body of an ASCII PLY (whose records are lines, whatever their
+    break, and which must end in white space)."""
+    from scatter_cli.loading import _creaders
+    from scatter_cli.loading.fast import _ascii_layout
+
+    v, f = body_case(case, *body_lines())
+    header = (f"ply\nformat ascii 1.0\nelement vertex {len(body_lines()[0])}\nproperty double x\n"
+              f"property double y\nproperty double z\nelement face {len(body_lines()[1])}\n"
+              "property list uchar int vertex_indices\nend_header\n")
+    data = (header + breaks("".join(v + f), case)).encode()
+    layout = _ascii_layout(data)[0]
+    one = _creaders.read_ply_ascii(data, *layout, b"", 1)
+    assert (one is not None) == PLY_PART_CASES[case]
+    if case == "plain":
+        mesh = trimesh.load(trimesh.util.wrap_as_stream(data), file_type="ply", process=False)
+        assert one[0].tobytes() == np.asarray(mesh.vertices, float).tobytes()
+        assert one[1].tobytes() == np.asarray(mesh.faces, np.int64).tobytes()
+    same_in_parts(lambda threads: _creaders.read_ply_ascii(data, *layout, b"", threads), one)
+
+
+@functools.lru_cache(maxsize=None)
 def icosphere_files(folder, subdivisions):
     mesh = trimesh.creation.icosphere(subdivisions=subdivisions)
     paths = {}

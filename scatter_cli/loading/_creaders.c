@@ -20,6 +20,7 @@
 #define MAX_INDEX 2147483647LL
 #define MAX_CORNERS 255
 #define MAX_MATERIALS 4096
+#define MIN_PART (1 << 20) /* bytes a part of a text read on several threads at least */
 
 typedef struct {
     const char *p, *end;
@@ -1064,10 +1065,214 @@ static int off_header(cursor *c, int64_t *nv, int64_t *nf)
     return 0;
 }
 
+/* The body of an OFF or an ASCII PLY read in parts on several threads: the same arrays
+ * and the same verdict as one pass. Parts are whole lines (each ends just after a '\n',
+ * the last at the end of the text). A first pass counts each part's records; then each
+ * part, knowing the number of its first record, reads its records as one pass would: the
+ * first nv vertices (into their rows of one array), then nf faces (into polygon lists of
+ * its own, joined in part order). Records: for an OFF, the '\n'-lines holding anything
+ * but spaces and CRs (one pass skips blank lines, and reads a record from its first
+ * content to its '\n'); for an ASCII PLY, every line, whatever its break (CRLF, LF or a
+ * lone CR), none blank, and nothing but white space after the faces. One part (a small
+ * file, or one thread) is not counted: it is the one pass. */
+typedef struct {
+    const char *p, *stop;
+    int64_t first, records; /* the number of its first record; how many it holds */
+    polys q;
+    int status;
+} body_part;
+
+typedef struct {
+    int ply; /* 1: an ASCII PLY's rules, 0: an OFF's */
+    int64_t nv, nf;
+    double *v, *e;
+    int props, col[3], single[3];
+    const unsigned char *extra;
+    Py_ssize_t ne;
+    body_part *parts;
+} body;
+
+/* PLY: the lines of [p, stop) (CRLF one break). */
+static int64_t count_lines(const char *p, const char *stop)
+{
+    int64_t n = 0;
+    for (const char *q = p; q < stop && (q = memchr(q, '\n', (size_t)(stop - q))); q++)
+        n++;
+    if (memchr(p, '\r', (size_t)(stop - p))) /* lone CRs end lines too */
+        for (const char *q = p; q < stop; q++)
+            n += *q == '\r' && (q + 1 >= stop || q[1] != '\n');
+    return n + (stop > p && !is_break(stop[-1])); /* a last line without a break */
+}
+
+/* OFF: the '\n'-lines of [p, stop) with something but spaces and CRs. */
+static int64_t count_records(const char *p, const char *stop)
+{
+    int64_t n = 0;
+    for (const char *line = p; line < stop;) {
+        const char *nl = memchr(line, '\n', (size_t)(stop - line)), *e = nl ? nl : stop, *q = line;
+        while (q < e && (is_space(*q) || *q == '\r'))
+            q++;
+        n += q < e;
+        line = nl ? nl + 1 : stop;
+    }
+    return n;
+}
+
+/* The records of every part but the last (whose count numbers none). */
+static void count_part(void *ctx, int k, int count)
+{
+    body *b = ctx;
+    body_part *part = b->parts + k;
+    if (k < count - 1)
+        part->records = b->ply ? count_lines(part->p, part->stop) : count_records(part->p, part->stop);
+}
+
+/* One PLY vertex line into row i: 0, or 1 to hand off. */
+static int ply_vertex(body *b, cursor *c, int64_t i)
+{
+    for (int k = 0; k < b->props; k++) {
+        double d;
+        skip_spaces(c);
+        if (parse_double(c, &d) < 0)
+            return 1;
+        for (int a = 0; a < 3; a++)
+            if (b->col[a] == k)
+                b->v[3 * i + a] = b->single[a] ? (double)(float)d : d;
+        for (Py_ssize_t a = 0; a < b->ne; a++)
+            if (b->extra[a] == k)
+                b->e[b->ne * i + a] = d;
+    }
+    return end_line(c) < 0 ? 1 : 0;
+}
+
+/* One OFF vertex record into its row (from its first content: x y z, the rest of its
+ * '\n'-line ignored): 0, or 1 to hand off. */
+static int off_vertex(cursor *c, double *row)
+{
+    for (int j = 0; j < 3; j++) {
+        skip_spaces(c);
+        if (parse_double(c, &row[j]) < 0)
+            return 1;
+    }
+    skip_line(c);
+    return 0;
+}
+
+/* The records of one part from record part->first on; ``last``: the part ends the text,
+ * so running out of records there hands off, as one pass does. */
+static int read_part(body *b, body_part *part, int last, polys *q)
+{
+    cursor c = {part->p, part->stop};
+    int64_t i = part->first, nv = b->nv, all = b->nv + b->nf;
+    double *v = b->v;
+    int status = 0;
+    if (!b->ply) { /* OFF: blank lines skipped, anything after the faces left unread */
+        for (; i < nv && !status; i++) {
+            skip_blank_lines(&c);
+            if (c.p >= c.end)
+                return last;
+            status = off_vertex(&c, v + 3 * i);
+        }
+        for (; i < all && !status; i++) {
+            skip_blank_lines(&c);
+            if (c.p >= c.end)
+                return last;
+            status = face_record(&c, q, nv, 0, MAX_CORNERS);
+        }
+        return status;
+    }
+    for (; i < nv && !status; i++)
+        status = c.p >= c.end ? last : ply_vertex(b, &c, i);
+    for (; i < all && !status; i++)
+        status = c.p >= c.end ? last : face_record(&c, q, nv, 1, 4);
+    while (!status && c.p < c.end) { /* trimesh reads every line left as numbers */
+        char ch = *c.p++;
+        if (!is_space(ch) && !is_break(ch))
+            status = 1;
+    }
+    return status;
+}
+
+static void read_part_run(void *ctx, int k, int count)
+{
+    body *b = ctx;
+    polys q = b->parts[k].q; /* (on this thread's stack while it grows) */
+    b->parts[k].status = read_part(b, b->parts + k, k == count - 1, &q);
+    b->parts[k].q = q;
+}
+
+/* Up to ``most`` parts of [from, end), of MIN_PART bytes or more, each ending just after a
+ * '\n' but the last; returns how many. */
+static int body_parts(const char *from, const char *end, int most, body_part *parts)
+{
+    int n = 0;
+    while (n < most) {
+        const char *stop = end;
+        if (n < most - 1 && (end - from) / (most - n) >= MIN_PART) {
+            const char *mid = from + (end - from) / (most - n);
+            const char *nl = memchr(mid, '\n', (size_t)(end - mid));
+            stop = nl ? nl + 1 : end;
+        }
+        parts[n++] = (body_part){from, stop, 0, 0, {{0}, {0}, {0}, MAX_CORNERS + 1, 0}, 1};
+        from = stop;
+        if (stop == end)
+            break;
+    }
+    return n;
+}
+
+/* Each part's polygon lists onto parts[0]'s, in order: 0, or -1 out of memory. */
+static int join_polys(body_part *parts, int n)
+{
+    polys *q = &parts[0].q;
+    for (int k = 1; k < n; k++) {
+        polys *r = &parts[k].q;
+        grow *to[3] = {&q->tri, &q->quad, &q->poly}, *from[3] = {&r->tri, &r->quad, &r->poly};
+        for (int g = 0; g < 3; g++) {
+            if (!from[g]->len)
+                continue;
+            if (grow_room(to[g], from[g]->len) < 0)
+                return -1;
+            memcpy(to[g]->data + to[g]->len, from[g]->data, from[g]->len);
+            to[g]->len += from[g]->len;
+        }
+        q->kmin = r->kmin < q->kmin ? r->kmin : q->kmin;
+        q->kmax = r->kmax > q->kmax ? r->kmax : q->kmax;
+    }
+    return 0;
+}
+
+/* The body [from, end) into b->v (and b->e) and *q, on ``threads`` threads: 0, 1 (hand
+ * off) or -1 (out of memory), as one pass would say but for which of two failures. */
+static int read_body(body *b, const char *from, const char *end, int threads, polys *q)
+{
+    int most = pieces_for(end - from, MIN_PART, threads);
+    body_part *parts = calloc((size_t)most, sizeof *parts);
+    if (!parts)
+        return -1;
+    int n = body_parts(from, end, most, parts), status = 0;
+    b->parts = parts;
+    if (n > 1)
+        in_pieces(n, threads, count_part, b);
+    for (int k = 1; k < n; k++)
+        parts[k].first = parts[k - 1].first + parts[k - 1].records;
+    in_pieces(n, threads, read_part_run, b);
+    for (int k = 0; k < n && !status; k++)
+        status = parts[k].status; /* the first failure in file order */
+    if (!status)
+        status = join_polys(parts, n);
+    for (int k = 1; k < n; k++)
+        polys_free(&parts[k].q);
+    *q = parts[0].q;
+    free(parts);
+    return status;
+}
+
 static PyObject *read_off(PyObject *self, PyObject *args)
 {
     Py_buffer buf;
-    if (!PyArg_ParseTuple(args, "y*", &buf))
+    int threads = 1;
+    if (!PyArg_ParseTuple(args, "y*|i", &buf, &threads))
         return NULL;
     const char *text = buf.buf;
     cursor c = {text, text + buf.len};
@@ -1080,19 +1285,9 @@ static PyObject *read_off(PyObject *self, PyObject *args)
         nv <= (c.end - c.p) / 6 + 1 && nf <= (c.end - c.p) / 8 + 1) {
         v = malloc((size_t)nv * 24);
         status = v ? 0 : -1;
-        for (int64_t i = 0; i < nv && !status; i++) {
-            skip_blank_lines(&c);
-            for (int j = 0; j < 3 && !status; j++) {
-                skip_spaces(&c);
-                if (parse_double(&c, &v[3 * i + j]) < 0)
-                    status = 1;
-            }
-            if (!status)
-                skip_line(&c);
-        }
-        for (int64_t i = 0; i < nf && !status; i++) {
-            skip_blank_lines(&c);
-            status = face_record(&c, &q, nv, 0, MAX_CORNERS);
+        if (!status) {
+            body b = {0, nv, nf, v, NULL, 0, {0}, {0}, NULL, 0, NULL};
+            status = read_body(&b, c.p, c.end, threads, &q);
         }
     }
     Py_END_ALLOW_THREADS
@@ -1109,10 +1304,10 @@ static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
     Py_buffer buf;
     Py_ssize_t offset, ne = 0;
     long long nv, nf;
-    int props, x, y, z, sx, sy, sz;
+    int props, x, y, z, sx, sy, sz, threads = 1;
     const unsigned char *extra = NULL;
-    if (!PyArg_ParseTuple(args, "y*nLLiiiiiii|y#", &buf, &offset, &nv, &nf, &props, &x, &y, &z, &sx, &sy, &sz,
-                          &extra, &ne))
+    if (!PyArg_ParseTuple(args, "y*nLLiiiiiii|y#i", &buf, &offset, &nv, &nf, &props, &x, &y, &z, &sx, &sy, &sz,
+                          &extra, &ne, &threads))
         return NULL;
     const char *text = buf.buf;
     int col[3] = {x, y, z}, single[3] = {sx, sy, sz};
@@ -1132,30 +1327,10 @@ static PyObject *read_ply_ascii(PyObject *self, PyObject *args)
         v = malloc((size_t)nv * 24);
         e = ne ? malloc((size_t)nv * (size_t)ne * 8) : NULL;
         status = v && (e || !ne) ? 0 : -1;
-        for (int64_t i = 0; i < nv && !status; i++) {
-            for (int k = 0; k < props && !status; k++) {
-                double d;
-                skip_spaces(&c);
-                if (parse_double(&c, &d) < 0) {
-                    status = 1;
-                    break;
-                }
-                for (int a = 0; a < 3; a++)
-                    if (col[a] == k)
-                        v[3 * i + a] = single[a] ? (double)(float)d : d;
-                for (Py_ssize_t a = 0; a < ne; a++)
-                    if (extra[a] == k)
-                        e[ne * i + a] = d;
-            }
-            if (!status && end_line(&c) < 0)
-                status = 1;
-        }
-        for (int64_t i = 0; i < nf && !status; i++)
-            status = face_record(&c, &q, nv, 1, 4);
-        while (!status && c.p < c.end) { /* trimesh reads every line left as numbers */
-            char ch = *c.p++;
-            if (!is_space(ch) && !is_break(ch))
-                status = 1;
+        if (!status) {
+            body b = {1, nv, nf, v, e, props, {col[0], col[1], col[2]}, {single[0], single[1], single[2]}, extra, ne,
+                      NULL};
+            status = read_body(&b, c.p, c.end, threads, &q);
         }
     }
     Py_END_ALLOW_THREADS
@@ -1280,8 +1455,6 @@ static void stl_part_run(void *parts, int k, int count)
     s->status = stl_body(s);
 }
 
-#define MIN_PART (1 << 20) /* bytes a part at least */
-
 /* The parts in file order decide: the first to end at endsolid ends the file, a part
  * that reached its stop hands on to the next; the vertices of the parts read are joined
  * into parts[0]. Returns the file's status as stl_body words it. */
@@ -1374,10 +1547,10 @@ static PyMethodDef methods[] = {
     {"read_obj", read_obj, METH_VARARGS,
      "read_obj(buffer, attributes=False) -> (vertices, faces, group face counts) or None; with attributes: "
      "(vertices, faces or corner keys, group face counts, group ref forms, vt, vn)"},
-    {"read_off", read_off, METH_VARARGS, "read_off(buffer) -> (vertices, faces) or None"},
+    {"read_off", read_off, METH_VARARGS, "read_off(buffer, threads=1) -> (vertices, faces) or None"},
     {"read_ply_ascii", read_ply_ascii, METH_VARARGS,
-     "read_ply_ascii(buffer, offset, nv, nf, props, x, y, z, x32, y32, z32, extra=b'') -> (vertices, faces[, "
-     "extra columns]) or None"},
+     "read_ply_ascii(buffer, offset, nv, nf, props, x, y, z, x32, y32, z32, extra=b'', threads=1) -> (vertices, "
+     "faces[, extra columns]) or None"},
     {"read_stl_ascii", read_stl_ascii, METH_VARARGS, "read_stl_ascii(buffer, threads=1) -> vertices (3F, 3) or None"},
     {NULL, NULL, 0, NULL},
 };

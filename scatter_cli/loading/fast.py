@@ -125,7 +125,7 @@ def _obj(data, tables=False):
 
 def _off(data):
     c = _kernel
-    got = c and c.read_off(data)
+    got = c and c.read_off(data, worker_count())  # large files: parts on several threads
     return [got] if got else None
 
 
@@ -159,7 +159,7 @@ def _ply(data, smooth=False, color=False):
         return None
     if smooth or color:
         return _ply_ascii_tables(c, data, *layout, smooth, color)
-    got = c.read_ply_ascii(data, *layout[0])
+    got = c.read_ply_ascii(data, *layout[0], b"", worker_count())
     return [got] if got else None
 
 
@@ -174,7 +174,7 @@ def _ply_ascii_tables(c, data, args, props, smooth, color):
     wanted = [k for k, (name, _) in enumerate(props) if name in names]
     if any(k > 255 for k in wanted):
         return None
-    got = c.read_ply_ascii(data, *args, bytes(wanted))
+    got = c.read_ply_ascii(data, *args, bytes(wanted), worker_count())
     if not got:
         return None
     vertices, faces, parsed = got if wanted else (*got, None)
