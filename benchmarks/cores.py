@@ -15,9 +15,9 @@ the skull sample, best of --repeats wall times:
 - exterior: ``--exterior``, 10^6 points (--quick 2x10^5);
 - volume: ``--volume -a sdf,inside``, 10^7 points (--quick 10^6);
 - loaders: an ASCII STL of the skull's faces ten times over, 180 MB (--quick once, 18 MB),
-  parsed from memory; off and ascii-ply: the skull ten times over (its vertices and faces
-  repeated, the indices moved on) as an OFF and an ASCII PLY, about 60 MB each (--quick
-  once);
+  parsed from memory; off, ascii-ply and obj: the skull ten times over (its vertices and
+  faces repeated, the indices moved on) as an OFF, an ASCII PLY and an OBJ, about 60 MB
+  each (--quick once);
 - batch: ``scatter batch`` over --meshes small meshes (copies of a 20-face mesh, 256
   points each, binary PLY) on a tmpfs, the whole command's wall time, ``-j`` 1, 2, 4, ...
   and the default (-j: the CPUs; threads per worker: the CPUs over -j).
@@ -94,13 +94,13 @@ def text_mesh(kind, quick):
     from scatter_cli.loading import fast
 
     data = skull_text(kind, 1 if quick else 10)
-    name = {"off": "OFF", "ply": "ASCII PLY"}[kind]
-    read = fast.read_off if kind == "off" else fast.read_ply
+    name = {"off": "OFF", "ply": "ASCII PLY", "obj": "OBJ"}[kind]
+    read = {"off": fast.read_off, "ply": fast.read_ply, "obj": fast.read_obj}[kind]
     return f"{name}, {len(data) / 1e6:.0f} MB", lambda: read(data, "skull." + kind, False, False, False)
 
 
 def skull_text(kind, copies):
-    """The skull ``copies`` times over as an OFF or ASCII PLY (bytes)."""
+    """The skull ``copies`` times over as an OFF, ASCII PLY or OBJ (bytes)."""
     import trimesh
 
     mesh = trimesh.load(SKULL, process=False)
@@ -110,6 +110,9 @@ def skull_text(kind, copies):
     nv, nf = copies * len(v), copies * len(f)
     if kind == "off":
         return f"OFF\n{nv} {nf} 0\n{vertices}{faces}".encode()
+    if kind == "obj":
+        return ("".join("v " + line for line in vertices.splitlines(True)) + "".join(
+            "f %d %d %d\n" % tuple(int(x) + 1 for x in line.split()[1:]) for line in faces.splitlines())).encode()
     return (f"ply\nformat ascii 1.0\nelement vertex {nv}\nproperty double x\nproperty double y\nproperty double z\n"
             f"element face {nf}\nproperty list uchar int vertex_indices\nend_header\n{vertices}{faces}").encode()
 
@@ -124,6 +127,7 @@ WORKS = {
     "loaders": loaders,
     "off": lambda quick: text_mesh("off", quick),
     "ascii-ply": lambda quick: text_mesh("ply", quick),
+    "obj": lambda quick: text_mesh("obj", quick),
 }
 
 
@@ -187,7 +191,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--only", default="surface,poisson,stable,exterior,volume,loaders,off,ascii-ply,batch")
+    parser.add_argument("--only", default="surface,poisson,stable,exterior,volume,loaders,off,ascii-ply,obj,batch")
     parser.add_argument("--meshes", type=int, default=10_000)
     parser.add_argument("--out")
     args = parser.parse_args()

@@ -376,6 +376,99 @@ def test_ascii_ply_read_in_parts_is_read_as_in_one(case):
 
 
 @functools.lru_cache(maxsize=None)
+def obj_lines(count=60000, seed=3):
+    """About 3.5 MB of OBJ: blocks of vertices (with vt and vn) and faces in turn, the faces
+    under materials that change within and across the blocks, those of m1 with UV refs."""
+    rng = np.random.default_rng(seed)
+    lines = []
+    for block in range(6):
+        n = count // 6
+        lines += ["v %.6f %.6f %.6f\n" % tuple(r) for r in rng.standard_normal((n, 3)).tolist()]
+        lines += ["vt %.4f %.4f\n" % tuple(r) for r in rng.random((n // 4, 2)).tolist()]
+        lines += ["vn 0 0 1\n"] * (n // 8)
+        made = (block + 1) * n
+        material = None
+        for k, f in enumerate(rng.integers(1, made + 1, (n, 3)).tolist()):
+            if k % 1500 == 700:
+                material = k // 1500 % 3
+                lines.append("usemtl m%d\n" % material)
+            # one ref form a material (a group of mixed forms goes to trimesh when UVs are asked for)
+            lines.append("f %d/1 %d/2 %d/3\n" % tuple(f) if material == 1 else "f %d %d %d\n" % tuple(f))
+    return tuple(lines)
+
+
+def obj_case(case, lines):
+    """The lines of an OBJ with ``case`` worked in (late ones in the last part)."""
+    lines = list(lines)
+    late = len(lines) - len(lines) // 9
+    if case == "quads, pentagons and negative refs":
+        more = np.random.default_rng(4).integers(0, 3, len(lines))  # corners to add, no period to the pattern
+        lines = [line[:-1] + " -1 -2"[: 3 * m] + "\n" if line.startswith("f ") and "/" not in line else line
+                 for m, line in zip(more.tolist(), lines)]
+    elif case == "objects, groups, smoothing and comments":
+        lines = [("o part%d\ng g%d\ns 1\n# a comment\n" % (i, i) if i % 4000 == 17 else "") + line
+                 for i, line in enumerate(lines)]
+    elif case == "crlf and continued lines":
+        lines = [line.replace("\n", "\r\n") if i % 2 else line.replace(" ", " \\\n", 1) if i % 7 == 0 and
+                 line.startswith("v ") else line for i, line in enumerate(lines)]
+    elif case == "one material only late":
+        lines = [line for line in lines if not line.startswith("usemtl")]
+        lines.insert(late, "usemtl late\n")
+    elif case == "a vertex with four numbers late":
+        at = next(i for i in range(late, len(lines)) if lines[i].startswith("v "))
+        lines[at] = lines[at][:-1] + " 1\n"
+    elif case == "a vt with three numbers late":
+        at = next(i for i in range(late, len(lines)) if lines[i].startswith("vt "))
+        lines[at] = lines[at][:-1] + " 0\n"
+    elif case == "a line trimesh decides late":
+        lines[late] = "l 1 2\n"
+    elif case == "a ref out of range late":
+        at = next(i for i in range(late, len(lines)) if lines[i].startswith("f "))
+        lines[at] = "f 1 2 %d\n" % (10**7)
+    return lines
+
+
+# case -> whether the reader answers (without UVs and normals asked for, with them: a group
+# of mixed ref forms goes to trimesh then)
+OBJ_PART_CASES = {"plain": (True, True), "quads, pentagons and negative refs": (True, True),
+                  "objects, groups, smoothing and comments": (True, True), "crlf and continued lines": (True, True),
+                  "one material only late": (True, False), "a vertex with four numbers late": (False, False),
+                  "a vt with three numbers late": (False, False), "a line trimesh decides late": (False, False),
+                  "a ref out of range late": (False, False)}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", sorted(OBJ_PART_CASES))
+def test_obj_read_in_parts_is_read_as_in_one(case):
+    """An OBJ is cut at line breaks and its parts read on threads, each with its own
+    materials, groups and runs, joined in file order: the one-part result every time, its
+    UVs and normals too, and the face-vertex arrays trimesh gives for the plain case."""
+    from scatter_cli.loading import _creaders
+
+    data = "".join(obj_case(case, obj_lines())).encode()
+    for tables in (False, True):
+        one = _creaders.read_obj(data, tables, 1)
+        assert (one is not None) == OBJ_PART_CASES[case][tables]
+        for threads in (2, 3, 7):
+            parts = _creaders.read_obj(data, tables, threads)
+            assert (parts is None) == (one is None), threads
+            if one is not None:
+                assert len(parts) == len(one)
+                for a, b in zip(parts, one):
+                    assert (a.tobytes() == b.tobytes()) if isinstance(a, np.ndarray) else a == b, threads
+    if case == "plain":
+        assert_same_load(write_temporary(data, "obj"))
+
+
+def write_temporary(data, suffix):
+    import tempfile
+
+    path = Path(tempfile.mkdtemp()) / f"m.{suffix}"
+    path.write_bytes(data)
+    return path
+
+
+@functools.lru_cache(maxsize=None)
 def icosphere_files(folder, subdivisions):
     mesh = trimesh.creation.icosphere(subdivisions=subdivisions)
     paths = {}

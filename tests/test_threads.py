@@ -21,14 +21,12 @@ import trimesh
 import scatter_cli
 from scatter_cli.core import native
 from scatter_cli.loading import fast
-from scatter_cli.loading.load import load_surface
 from scatter_cli.sampling import plan, sharp
 from scatter_cli.sampling.exterior import enclosure
 from scatter_cli.sampling.normals import face_normals
 from scatter_cli.sampling.poisson import pairs, thinning
 from scatter_cli.volume import distance, parity, winding
 
-from . import exterior_scenes as es
 from .conftest import SAMPLES
 
 THREADS = ("2", "3", "7", "16", "64")
@@ -100,23 +98,26 @@ def ascii_stl():
 
 
 @functools.lru_cache(maxsize=None)
-def off_and_ply():
-    """The skull's vertices and 40,000 of its faces as an OFF and an ASCII PLY (2.4 MB
-    each: two parts)."""
+def text_meshes():
+    """The skull's vertices and 40,000 of its faces as an OFF, an ASCII PLY and an OBJ
+    (2.4 MB each: two parts)."""
     v, f = skull()
     f = f[:40_000]
-    body = "".join("%.9g %.9g %.9g\n" % tuple(r) for r in v.tolist()) + "".join("3 %d %d %d\n" % tuple(r) for r in f.tolist())
+    vertices = "".join("%.9g %.9g %.9g\n" % tuple(r) for r in v.tolist())
+    body = vertices + "".join("3 %d %d %d\n" % tuple(r) for r in f.tolist())
     header = (f"ply\nformat ascii 1.0\nelement vertex {len(v)}\nproperty double x\nproperty double y\n"
               f"property double z\nelement face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
-    return f"OFF\n{len(v)} {len(f)} 0\n{body}".encode(), (header + body).encode()
+    obj = "".join("v " + line for line in vertices.splitlines(True)) + "".join(
+        ("usemtl m%d\n" % (k // 9000) if k % 9000 == 0 else "") + "f %d %d %d\n" % tuple(x + 1 for x in r)
+        for k, r in enumerate(f.tolist()))
+    return {"off": f"OFF\n{len(v)} {len(f)} 0\n{body}".encode(), "ply": (header + body).encode(), "obj": obj.encode()}
 
 
 def readers_case():
-    off, ply = off_and_ply()
     got = {"corners": fast.read_stl(ascii_stl(), "skull.stl", False, False, False)[0][0].tobytes()}
-    for name, read, data in (("off", fast.read_off, off), ("ply", fast.read_ply, ply)):
-        (vertices, faces), = read(data, "skull." + name, False, False, False)
-        got[name] = vertices.tobytes() + faces.tobytes()
+    for name, data in text_meshes().items():
+        read = {"off": fast.read_off, "ply": fast.read_ply, "obj": fast.read_obj}[name]
+        got[name] = b"".join(v.tobytes() + f.tobytes() for v, f in read(data, "skull." + name, False, False, False))
     return got
 
 

@@ -57,6 +57,28 @@ static void grow_free(grow *g)
     g->len = g->cap = 0;
 }
 
+/* Cut [from, end) into at most ``most`` parts of MIN_PART bytes or more, each ending
+ * just after a '\n' but the last (so each starts a line): part k is cut[k] .. cut[k + 1];
+ * returns how many (cut holds most + 1). */
+static int line_cuts(const char *from, const char *end, int most, const char **cut)
+{
+    int n = 0;
+    cut[0] = from;
+    while (n < most) {
+        const char *stop = end;
+        if (n < most - 1 && (end - from) / (most - n) >= MIN_PART) {
+            const char *mid = from + (end - from) / (most - n);
+            const char *nl = memchr(mid, '\n', (size_t)(end - mid));
+            stop = nl ? nl + 1 : end;
+        }
+        cut[++n] = stop;
+        from = stop;
+        if (stop == end)
+            break;
+    }
+    return n;
+}
+
 static void free_capsule(PyObject *cap)
 {
     free(PyCapsule_GetPointer(cap, NULL));
@@ -403,24 +425,39 @@ static int numbers(cursor *c, double *xyz)
     }
 }
 
-static int group_of(obj_state *s)
+/* The material of a part of a file read in parts (read_obj) until its first usemtl: the
+ * one the parts before it leave, known when the parts are joined. */
+static const char INHERIT[] = "";
+
+/* Whether two material names are one (NULL: no usemtl yet). */
+static int same_name(const char *a, size_t a_len, const char *b, size_t b_len)
 {
-    for (int g = 0; g < s->groups; g++) {
-        if (s->name_len[g] == s->material_len &&
-            (s->material == s->names[g] ||
-             (s->material && s->names[g] && !memcmp(s->material, s->names[g], s->material_len))))
+    if (a == INHERIT || b == INHERIT)
+        return a == b;
+    return a_len == b_len && (a == b || (a && b && !memcmp(a, b, a_len)));
+}
+
+/* The group of material ``name``, made (after the others) when new; -1 past MAX_MATERIALS. */
+static int group_named(obj_state *s, const char *name, size_t len)
+{
+    for (int g = 0; g < s->groups; g++)
+        if (same_name(s->names[g], s->name_len[g], name, len))
             return g;
-    }
     if (s->groups >= MAX_MATERIALS)
         return -1;
     int g = s->groups++;
-    s->names[g] = s->material;
-    s->name_len[g] = s->material_len;
+    s->names[g] = name;
+    s->name_len[g] = len;
     s->group_lines[g] = 0;
     s->group_min[g] = s->group_cmin[g] = 4 * MAX_CORNERS;
     s->group_max[g] = s->group_cmax[g] = 0;
     s->group_forms[g] = 0;
     return g;
+}
+
+static int group_of(obj_state *s)
+{
+    return group_named(s, s->material, s->material_len);
 }
 
 /* One ref: v, v/t, v//n or v/t/n (form 0 to 3); tn: the t and n refs (0 when absent). */
@@ -772,11 +809,147 @@ static int64_t *emit_group(obj_state *s, int g, const int32_t *refs, int64_t nv,
     return out;
 }
 
+/* An OBJ read in parts on several threads (its text cut at line breaks, line_cuts): each
+ * part is read as one pass reads the whole, into a state of its own whose material starts
+ * as INHERIT; then the parts are joined in file order into the first one's state, as one
+ * pass would have made it. The refs are kept as written (resolved against the file's
+ * vertex count at the end, as one pass does), so no part needs the counts before it; a
+ * part's groups are renamed to the file's (INHERIT: the material the parts before leave),
+ * made in the order the faces first use them; its runs of face lines move on by the lines
+ * and refs before it, the first joining the last before it when their group is one. */
+typedef struct {
+    const char *p, *stop;
+    obj_state *s;
+    int status;
+} obj_part;
+
+static void obj_part_run(void *ctx, int k, int count)
+{
+    obj_part *part = (obj_part *)ctx + k;
+    cursor c = {part->p, part->stop};
+    (void)count;
+    part->status = obj_lines(&c, part->s);
+}
+
+/* g's bytes appended to to (g freed): 0, or -1 out of memory. */
+static int append(grow *to, grow *g)
+{
+    if (g->len) {
+        if (grow_room(to, g->len) < 0)
+            return -1;
+        memcpy(to->data + to->len, g->data, g->len);
+        to->len += g->len;
+    }
+    grow_free(g);
+    return 0;
+}
+
+/* Part p's state onto s, the parts before it already there; *carried, *carried_len: the
+ * material in effect after them (updated). 0, 1 (hand off) or -1 (out of memory). */
+static int join_obj(obj_state *s, obj_state *p, const char **carried, size_t *carried_len)
+{
+    if (p->v_cols && s->v_cols && p->v_cols != s->v_cols)
+        return 1; /* one pass: every v line as long as the first */
+    s->v_cols = s->v_cols ? s->v_cols : p->v_cols;
+    if (p->vt_cols && s->vt_cols && p->vt_cols != s->vt_cols)
+        return 1;
+    s->vt_cols = s->vt_cols ? s->vt_cols : p->vt_cols;
+    int map[MAX_MATERIALS];
+    for (int g = 0; g < p->groups; g++) {
+        int inherit = p->names[g] == INHERIT;
+        int h = group_named(s, inherit ? *carried : p->names[g], inherit ? *carried_len : p->name_len[g]);
+        if (h < 0)
+            return 1;
+        map[g] = h;
+        s->group_lines[h] += p->group_lines[g];
+        s->group_min[h] = p->group_min[g] < s->group_min[h] ? p->group_min[g] : s->group_min[h];
+        s->group_max[h] = p->group_max[g] > s->group_max[h] ? p->group_max[g] : s->group_max[h];
+        s->group_cmin[h] = p->group_cmin[g] < s->group_cmin[h] ? p->group_cmin[g] : s->group_cmin[h];
+        s->group_cmax[h] = p->group_cmax[g] > s->group_cmax[h] ? p->group_cmax[g] : s->group_cmax[h];
+        s->group_forms[h] |= p->group_forms[g];
+    }
+    int64_t lines = (int64_t)s->corners.len, refs = (int64_t)(s->refs.len / 4);
+    const run *r = (const run *)p->runs.data;
+    for (size_t j = 0; j < p->runs.len / sizeof(run); j++) {
+        run *last = s->runs.len ? (run *)(s->runs.data + s->runs.len - sizeof(run)) : NULL;
+        if (last && last->group == map[r[j].group]) {
+            last->lines += r[j].lines;
+            continue;
+        }
+        if (grow_room(&s->runs, sizeof(run)) < 0)
+            return -1;
+        run moved = {r[j].first_line + lines, r[j].first_ref + refs, r[j].lines, map[r[j].group]};
+        memcpy(s->runs.data + s->runs.len, &moved, sizeof moved);
+        s->runs.len += sizeof moved;
+    }
+    grow *to[7] = {&s->v, &s->refs, &s->corners, &s->trefs, &s->nrefs, &s->vt, &s->vn};
+    grow *from[7] = {&p->v, &p->refs, &p->corners, &p->trefs, &p->nrefs, &p->vt, &p->vn};
+    for (int k = 0; k < 7; k++)
+        if (append(to[k], from[k]) < 0)
+            return -1;
+    if (p->material != INHERIT)
+        *carried = p->material, *carried_len = p->material_len;
+    return 0;
+}
+
+static void obj_state_free(obj_state *s)
+{
+    grow *all[9] = {&s->v, &s->trefs, &s->nrefs, &s->vt, &s->vn, &s->refs, &s->corners, &s->runs, NULL};
+    for (int k = 0; all[k]; k++)
+        grow_free(all[k]);
+    free(s);
+}
+
+/* The text [text, text + n) into s (the first part's state), in parts on ``threads``
+ * threads: 0, 1 (hand off) or -1 (out of memory), as one pass would say but for which of
+ * two failures. */
+static int obj_in_parts(const char *text, Py_ssize_t n, obj_state *s, int threads)
+{
+    int most = pieces_for(n, MIN_PART, threads);
+    if (most <= 1) {
+        cursor c = {text, text + n};
+        return obj_lines(&c, s);
+    }
+    obj_part *parts = calloc((size_t)most, sizeof *parts);
+    const char **cut = malloc(((size_t)most + 1) * sizeof *cut);
+    int count = 0, status = parts && cut ? 0 : -1;
+    if (!status) {
+        count = line_cuts(text, text + n, most, cut);
+        for (int k = 0; k < count; k++) {
+            obj_state *own = k ? calloc(1, sizeof(obj_state)) : s;
+            if (!own) {
+                status = -1;
+                break;
+            }
+            if (k) {
+                own->current = -1, own->attributes = s->attributes;
+                own->material = INHERIT, own->material_len = 0;
+            }
+            parts[k] = (obj_part){cut[k], cut[k + 1], own, 1};
+        }
+    }
+    if (!status) {
+        in_pieces(count, threads, obj_part_run, parts);
+        for (int k = 0; k < count && !status; k++)
+            status = parts[k].status; /* the first failure in file order */
+        const char *carried = s->material;
+        size_t carried_len = s->material_len;
+        for (int k = 1; k < count && !status; k++)
+            status = join_obj(s, parts[k].s, &carried, &carried_len);
+    }
+    for (int k = 1; parts && k < count; k++)
+        if (parts[k].s)
+            obj_state_free(parts[k].s);
+    free(parts);
+    free(cut);
+    return status;
+}
+
 static PyObject *read_obj(PyObject *self, PyObject *args)
 {
     Py_buffer buf;
-    int attributes = 0;
-    if (!PyArg_ParseTuple(args, "y*|p", &buf, &attributes))
+    int attributes = 0, threads = 1;
+    if (!PyArg_ParseTuple(args, "y*|pi", &buf, &attributes, &threads))
         return NULL;
     const char *text = buf.buf;
     Py_ssize_t n = buf.len;
@@ -805,10 +978,8 @@ static PyObject *read_obj(PyObject *self, PyObject *args)
                     status = 1;
             }
         }
-        if (!status) {
-            cursor c = {text, text + n};
-            status = obj_lines(&c, s);
-        }
+        if (!status)
+            status = obj_in_parts(text, n, s, threads);
     }
     Py_END_ALLOW_THREADS
     if (status < 0) {
@@ -1201,23 +1372,16 @@ static void read_part_run(void *ctx, int k, int count)
     b->parts[k].q = q;
 }
 
-/* Up to ``most`` parts of [from, end), of MIN_PART bytes or more, each ending just after a
- * '\n' but the last; returns how many. */
+/* The parts of [from, end) (line_cuts), at most ``most``; returns how many. */
 static int body_parts(const char *from, const char *end, int most, body_part *parts)
 {
-    int n = 0;
-    while (n < most) {
-        const char *stop = end;
-        if (n < most - 1 && (end - from) / (most - n) >= MIN_PART) {
-            const char *mid = from + (end - from) / (most - n);
-            const char *nl = memchr(mid, '\n', (size_t)(end - mid));
-            stop = nl ? nl + 1 : end;
-        }
-        parts[n++] = (body_part){from, stop, 0, 0, {{0}, {0}, {0}, MAX_CORNERS + 1, 0}, 1};
-        from = stop;
-        if (stop == end)
-            break;
-    }
+    const char **cut = malloc(((size_t)most + 1) * sizeof *cut);
+    if (!cut)
+        return -1;
+    int n = line_cuts(from, end, most, cut);
+    for (int k = 0; k < n; k++)
+        parts[k] = (body_part){cut[k], cut[k + 1], 0, 0, {{0}, {0}, {0}, MAX_CORNERS + 1, 0}, 1};
+    free(cut);
     return n;
 }
 
@@ -1251,6 +1415,10 @@ static int read_body(body *b, const char *from, const char *end, int threads, po
     if (!parts)
         return -1;
     int n = body_parts(from, end, most, parts), status = 0;
+    if (n < 0) {
+        free(parts);
+        return -1;
+    }
     b->parts = parts;
     if (n > 1)
         in_pieces(n, threads, count_part, b);
@@ -1479,24 +1647,17 @@ static int stl_join(stl_part *parts, int n)
     return 1; /* no endsolid */
 }
 
-/* The parts of the text after the header line, from ``from`` to ``end``: at most ``most``
- * parts of MIN_PART bytes or more, each ending at a line break (every break ends a line,
- * so each part starts at one); returns how many. */
+/* The parts of the text after the header line, from ``from`` to ``end`` (line_cuts), at
+ * most ``most``; returns how many (-1: no memory). */
 static int stl_parts(const char *from, const char *end, int most, stl_part *parts)
 {
-    int n = 0;
-    while (n < most) {
-        const char *stop = end;
-        if (n < most - 1 && (end - from) / (most - n) >= MIN_PART) {
-            const char *mid = from + (end - from) / (most - n);
-            const char *nl = memchr(mid, '\n', (size_t)(end - mid));
-            stop = nl ? nl + 1 : end;
-        }
-        parts[n++] = (stl_part){from, stop, end, {0}, 1};
-        from = stop;
-        if (stop == end)
-            break;
-    }
+    const char **cut = malloc(((size_t)most + 1) * sizeof *cut);
+    if (!cut)
+        return -1;
+    int n = line_cuts(from, end, most, cut);
+    for (int k = 0; k < n; k++)
+        parts[k] = (stl_part){cut[k], cut[k + 1], end, {0}, 1};
+    free(cut);
     return n;
 }
 
@@ -1521,8 +1682,13 @@ static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
         c.p += 5;
         if (plain_line_rest(&c) == 0) {
             n = stl_parts(c.p, end, most, parts);
-            in_pieces(n, threads, stl_part_run, parts);
-            status = stl_join(parts, n);
+            if (n < 0) {
+                n = 0;
+                status = -1;
+            } else {
+                in_pieces(n, threads, stl_part_run, parts);
+                status = stl_join(parts, n);
+            }
         }
     }
     Py_END_ALLOW_THREADS
@@ -1545,7 +1711,7 @@ static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
 
 static PyMethodDef methods[] = {
     {"read_obj", read_obj, METH_VARARGS,
-     "read_obj(buffer, attributes=False) -> (vertices, faces, group face counts) or None; with attributes: "
+     "read_obj(buffer, attributes=False, threads=1) -> (vertices, faces, group face counts) or None; with attributes: "
      "(vertices, faces or corner keys, group face counts, group ref forms, vt, vn)"},
     {"read_off", read_off, METH_VARARGS, "read_off(buffer, threads=1) -> (vertices, faces) or None"},
     {"read_ply_ascii", read_ply_ascii, METH_VARARGS,

@@ -100,7 +100,7 @@ def _obj(data, tables=False):
     """``tables``: with the UVs and normals of groups whose refs carry them (a third
     item, a dict), their vertices split as trimesh splits them."""
     c = _kernel
-    got = c and c.read_obj(data, tables)
+    got = c and c.read_obj(data, tables, worker_count())  # large files: parts on several threads
     if not got:
         return None
     vertices, faces, counts = got[:3]
