@@ -1,10 +1,10 @@
-"""The OFF and ASCII PLY readers (`_creaders`) of two checkouts, call after call.
+"""The OFF, ASCII PLY and OBJ readers (`_creaders`) of two checkouts, call after call.
 
     python benchmarks/reader_kernels.py BEFORE AFTER [--rounds 9] [--subdivisions 8]
 
 BEFORE and AFTER are folders holding a built `scatter_cli` (their kernels built in
 place). The icosphere (default: 8 subdivisions, 1,310,720 faces; about 50 MB of text
-each) is written by trimesh as an OFF and an ASCII PLY and read from memory by both
+each) is written by trimesh as an OFF, an ASCII PLY and an OBJ and read from memory by both
 kernels in turn, on 1 and 2 threads (a kernel that takes no thread count reads on one);
 medians of the wall times, and whether both gave the same arrays.
 """
@@ -35,15 +35,14 @@ def kernel_of(checkout, tag):
 def reader(kernel, kind, data, threads):
     """A call of ``kernel``'s reader of ``kind`` on ``data`` with ``threads`` where it takes them."""
     layout = _ascii_layout(data)[0] if kind == "ply" else None
+    with_threads = {"off": lambda t: kernel.read_off(data, t), "obj": lambda t: kernel.read_obj(data, False, t),
+                    "ply": lambda t: kernel.read_ply_ascii(data, *layout, b"", t)}[kind]
     try:
-        (kernel.read_off(data, 1) if kind == "off" else kernel.read_ply_ascii(data, *layout, b"", 1))
-        takes_threads = True
-    except TypeError:  # a kernel from before the readers took a thread count
-        takes_threads = False
-    if kind == "off":
-        return (lambda: kernel.read_off(data, threads)) if takes_threads else (lambda: kernel.read_off(data))
-    return (lambda: kernel.read_ply_ascii(data, *layout, b"", threads)) if takes_threads else (
-        lambda: kernel.read_ply_ascii(data, *layout))
+        with_threads(1)
+    except TypeError:  # a kernel from before the readers took a thread count: one thread
+        return {"off": lambda: kernel.read_off(data), "obj": lambda: kernel.read_obj(data, False),
+                "ply": lambda: kernel.read_ply_ascii(data, *layout)}[kind]
+    return lambda: with_threads(threads)
 
 
 def main():
@@ -58,7 +57,7 @@ def main():
     mesh = trimesh.creation.icosphere(subdivisions=args.subdivisions)
     kernels = {"before": kernel_of(args.before, "before"), "after": kernel_of(args.after, "after")}
     print(f"icosphere({args.subdivisions}), {len(mesh.faces):,} faces, median of {args.rounds} rounds after a warm-up")
-    for kind in ("off", "ply"):
+    for kind in ("off", "ply", "obj"):
         out = io.BytesIO()
         mesh.export(out, file_type=kind, **({"encoding": "ascii"} if kind == "ply" else {}))
         data = out.getvalue()
@@ -72,7 +71,8 @@ def main():
                 answers[name] = call()
                 times[name].append(time.perf_counter() - t)
         first = next(iter(answers.values()))
-        same = all(all(a.tobytes() == b.tobytes() for a, b in zip(got, first)) for got in answers.values())
+        same = all(all((a.tobytes() == b.tobytes()) if hasattr(a, "tobytes") else a == b for a, b in zip(got, first))
+                   for got in answers.values())
         print(f"{kind.upper()}, {len(data) / 2**20:.0f} MB: " + ", ".join(
             f"{name} {statistics.median(times[name][1:]):.3f} s" for name in calls) + f"; same arrays: {same}")
 

@@ -15,6 +15,7 @@ from scatter_cli import api
 from scatter_cli.commands import info, preview
 from scatter_cli.errors import ScatterError
 from scatter_cli.loading import ply, textures
+from scatter_cli.loading.load import load_surface
 from scatter_cli.writers import base
 from scatter_cli.writers.pointfiles import read_points
 
@@ -153,6 +154,19 @@ def test_a_truncated_ply_says_where_it_ends(tmp_path, monkeypatch):
     assert error_of(short) == where_it_ends(short, "face", 8, 20, "12 vertex and 20 face")
     monkeypatch.setattr(ply, "truncation", lambda data: None)  # the broken variant: trimesh reads 7 faces
     assert error_of(short) is None
+
+
+def test_a_ply_without_its_last_newline_is_whole(tmp_path):
+    """An ASCII PLY may end without a newline after its last row: it is read, by the fast
+    reader and by trimesh alike; cut inside that row, it is truncated."""
+    data = ascii_icosahedron(tmp_path).read_bytes().rstrip(b"\n")
+    whole = tmp_path / "no-newline.ply"
+    whole.write_bytes(data)
+    assert error_of(whole) is None
+    assert len(load_surface(whole, plain=True).geometries[0].faces) == len(load_surface(whole).geometries[0].faces) == 20
+    short = tmp_path / "short.ply"
+    short.write_bytes(data[: data.rindex(b" ")])  # the last face without its last index
+    assert error_of(short) == where_it_ends(short, "face", 20, 20, "12 vertex and 20 face")
 
 
 def test_a_truncated_point_ply_is_said_alike_by_the_mesh_loader_and_the_point_reader(tmp_path, monkeypatch):

@@ -165,14 +165,38 @@ def truncation(data):
 
 
 def _ascii_rows(header, data):
-    """The rows of each element an ASCII body holds, a row a line: complete lines only
-    (a last line without its newline is cut short)."""
+    """The rows of each element an ASCII body holds, a row a line. A last line without its
+    newline counts when it holds as many values as its row has (a file may end without
+    one, as trimesh and the fast reader take it); else it was cut short."""
     body = bytes(data[header.body :])
     if body.count(b"\n") >= sum(e.count for e in header.elements):
         return None
     lines = [line for line in body.split(b"\n") if line.strip()]
-    held = len(lines) - (0 if body.endswith(b"\n") or not lines else 1)
+    held = len(lines)
+    if lines and not body.endswith(b"\n") and not _whole_row(lines[-1].split(), header.elements, held - 1):
+        held -= 1
     return _share_out(held, header.elements)
+
+
+def _whole_row(values, elements, row):
+    """Whether ``values`` (the words of a line) are as many as row ``row`` of the body has:
+    one a scalar property, a list's length and then that many."""
+    for e in elements:
+        if row < e.count:
+            break
+        row -= e.count
+    else:
+        return False
+    at = 0
+    for p in e.properties:
+        if len(p) == 2:
+            at += 1
+            continue
+        try:
+            at += 1 + int(values[at])
+        except (IndexError, ValueError):
+            return False
+    return at == len(values)
 
 
 def _share_out(held, elements):
