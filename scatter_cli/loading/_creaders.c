@@ -1352,10 +1352,11 @@ static int read_part(body *b, body_part *part, int last, polys *q)
         }
         return status;
     }
-    for (; i < nv && !status; i++)
-        status = c.p >= c.end ? last : ply_vertex(b, &c, i);
-    for (; i < all && !status; i++)
-        status = c.p >= c.end ? last : face_record(&c, q, nv, 1, 4);
+    for (; i < all && !status; i++) {
+        if (c.p >= c.end)
+            return last;
+        status = i < nv ? ply_vertex(b, &c, i) : face_record(&c, q, nv, 1, 4);
+    }
     while (!status && c.p < c.end) { /* trimesh reads every line left as numbers */
         char ch = *c.p++;
         if (!is_space(ch) && !is_break(ch))
