@@ -439,7 +439,7 @@ OBJ_PART_CASES = {"plain": (True, True), "quads, pentagons and negative refs": (
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(OBJ_PART_CASES))
-def test_obj_read_in_parts_is_read_as_in_one(case):
+def test_obj_read_in_parts_is_read_as_in_one(case, tmp_path):
     """An OBJ is cut at line breaks and its parts read on threads, each with its own
     materials, groups and runs, joined in file order: the one-part result every time, its
     UVs and normals too, and the face-vertex arrays trimesh gives for the plain case."""
@@ -457,15 +457,8 @@ def test_obj_read_in_parts_is_read_as_in_one(case):
                 for a, b in zip(parts, one):
                     assert (a.tobytes() == b.tobytes()) if isinstance(a, np.ndarray) else a == b, threads
     if case == "plain":
-        assert_same_load(write_temporary(data, "obj"))
-
-
-def write_temporary(data, suffix):
-    import tempfile
-
-    path = Path(tempfile.mkdtemp()) / f"m.{suffix}"
-    path.write_bytes(data)
-    return path
+        (tmp_path / "m.obj").write_bytes(data)
+        assert_same_load(tmp_path / "m.obj")
 
 
 @functools.lru_cache(maxsize=None)
