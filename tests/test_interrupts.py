@@ -85,3 +85,23 @@ def test_a_signal_inside_the_laz_compressor_is_raised_after_it(handlers, sig, ra
     with pytest.raises(raised):
         write_stream(run.chunks(), stream, "laz", run.layout, run.size, **api.output_options(run, "laz"))
     assert stream.seeks >= 1
+
+
+def test_a_signal_as_the_temporary_file_is_made_leaves_no_file(handlers, tmp_path, monkeypatch):
+    """SIGTERM the moment ``.NAME.XXXXXXXX.part`` exists, before the writer has its stream
+    (the main thread can wait there for the GIL while the sampling threads run): the
+    signal is raised once both exist, and the file goes with it."""
+    from scatter_cli.writers import base
+
+    made = base._create_temp
+
+    def create_then_signal(path, folder):
+        got = made(path, folder)
+        os.kill(os.getpid(), signal.SIGTERM)
+        return got
+
+    monkeypatch.setattr(base, "_create_temp", create_then_signal)
+    with pytest.raises(interrupts.Terminated):
+        with base.open_output(tmp_path / "points.ply") as stream:
+            stream.write(b"never")
+    assert os.listdir(tmp_path) == []

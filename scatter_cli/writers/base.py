@@ -12,6 +12,7 @@ import os
 import stat
 import sys
 
+from ..core.interrupts import held
 from ..errors import STDOUT, ScatterError, writing
 
 
@@ -135,18 +136,26 @@ def open_output(path, size=None):
     folder = os.path.dirname(os.path.abspath(path))
     if size is not None:
         _check_room(path, folder, size)
-    with writing(path):
-        fd, tmp = _create_temp(path, folder)
+    tmp = stream = None
     try:
-        with writing(path), os.fdopen(fd, "wb", buffering=1 << 20) as stream:
+        # A signal between the temporary file's creation and its stream would leave the
+        # file behind: it is held until both exist (then raised, and the file removed).
+        with held(), writing(path):
+            fd, tmp = _create_temp(path, folder)
+            stream = os.fdopen(fd, "wb", buffering=1 << 20)
+        with writing(path), stream:
             yield stream
         with writing(path):
             if existing is not None:
                 os.chmod(tmp, stat.S_IMODE(existing.st_mode))
             os.replace(tmp, path)
     except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
+        if stream is not None:
+            with contextlib.suppress(OSError):
+                stream.close()
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
         raise
 
 
