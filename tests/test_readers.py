@@ -282,7 +282,7 @@ def body_lines(count=70000, seed=2):
 
 
 def body_case(case, vertices, faces):
-    """The lines of a body with ``case`` worked in (late ones in the last part)."""
+    """The lines of a body with ``case`` worked in (late ones in a part after the first)."""
     v, f = list(vertices), list(faces)
     late = len(f) - len(f) // 7
     if case == "quads and triangles":
@@ -398,7 +398,7 @@ def obj_lines(count=60000, seed=3):
 
 
 def obj_case(case, lines):
-    """The lines of an OBJ with ``case`` worked in (late ones in the last part)."""
+    """The lines of an OBJ with ``case`` worked in (late ones in a part after the first)."""
     lines = list(lines)
     late = len(lines) - len(lines) // 9
     if case == "quads, pentagons and negative refs":
