@@ -11,7 +11,6 @@ loaded with this checkout's `load_surface`.
 """
 
 import argparse
-import importlib.util
 import math
 import statistics
 import sys
@@ -22,20 +21,13 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from builds import kernel_of  # noqa: E402
 from scatter_cli.loading.load import load_surface  # noqa: E402
 from scatter_cli.sampling.normals import face_normals  # noqa: E402
 
 FIELDS = ("head", "second", "count", "rest")
-
-
-def kernel_of(checkout, tag):
-    """The `_cedges` extension built in ``checkout``, loaded as a module of its own."""
-    path = next((Path(checkout) / "scatter_cli" / "sampling").glob("_cedges*.so"))
-    spec = importlib.util.spec_from_file_location(f"{tag}._cedges", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def part_mesh():
@@ -64,7 +56,7 @@ def main():
     normals = face_normals(v, f)
     valid = (normals != 0).any(axis=1)
     limit = math.cos(math.radians(15.0)) + 1e-6
-    kernels = {"before": kernel_of(args.before, "before"), "after": kernel_of(args.after, "after")}
+    kernels = {tag: kernel_of(folder, "_cedges", tag) for tag, folder in (("before", args.before), ("after", args.after))}
     print(f"{len(f):,} faces, {args.rounds} rounds")
     for threads in (1, 2):
         wall, cpu, got = {k: [] for k in kernels}, {k: [] for k in kernels}, {}

@@ -10,7 +10,6 @@ medians of the wall times, and whether both gave the same arrays.
 """
 
 import argparse
-import importlib.util
 import io
 import statistics
 import sys
@@ -19,17 +18,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from builds import kernel_of  # noqa: E402
 from scatter_cli.loading.fast import _ascii_layout  # noqa: E402
-
-
-def kernel_of(checkout, tag):
-    """The `_creaders` extension built in ``checkout``, loaded as a module of its own."""
-    path = next((Path(checkout) / "scatter_cli" / "loading").glob("_creaders*.so"))
-    spec = importlib.util.spec_from_file_location(f"{tag}._creaders", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def reader(kernel, kind, data, threads):
@@ -55,7 +47,7 @@ def main():
     parser.add_argument("--subdivisions", type=int, default=8)
     args = parser.parse_args()
     mesh = trimesh.creation.icosphere(subdivisions=args.subdivisions)
-    kernels = {"before": kernel_of(args.before, "before"), "after": kernel_of(args.after, "after")}
+    kernels = {tag: kernel_of(folder, "_creaders", tag) for tag, folder in (("before", args.before), ("after", args.after))}
     print(f"icosphere({args.subdivisions}), {len(mesh.faces):,} faces, median of {args.rounds} rounds after a warm-up")
     for kind in ("off", "ply", "obj"):
         out = io.BytesIO()

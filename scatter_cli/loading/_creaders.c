@@ -57,26 +57,16 @@ static void grow_free(grow *g)
     g->len = g->cap = 0;
 }
 
-/* Cut [from, end) into at most ``most`` parts of MIN_PART bytes or more, each ending
- * just after a '\n' but the last (so each starts a line): part k is cut[k] .. cut[k + 1];
- * returns how many (cut holds most + 1). */
-static int line_cuts(const char *from, const char *end, int most, const char **cut)
+/* Where the next of ``left`` parts of [from, end) ends, for a text read in parts on
+ * several threads: just after a '\n' (so each part starts a line), parts of MIN_PART bytes
+ * or more, the last at ``end``. */
+static const char *next_cut(const char *from, const char *end, int left)
 {
-    int n = 0;
-    cut[0] = from;
-    while (n < most) {
-        const char *stop = end;
-        if (n < most - 1 && (end - from) / (most - n) >= MIN_PART) {
-            const char *mid = from + (end - from) / (most - n);
-            const char *nl = memchr(mid, '\n', (size_t)(end - mid));
-            stop = nl ? nl + 1 : end;
-        }
-        cut[++n] = stop;
-        from = stop;
-        if (stop == end)
-            break;
+    if (left > 1 && (end - from) / left >= MIN_PART) {
+        const char *nl = memchr(from + (end - from) / left, '\n', (size_t)(end - from - (end - from) / left));
+        return nl ? nl + 1 : end;
     }
-    return n;
+    return end;
 }
 
 static void free_capsule(PyObject *cap)
@@ -809,7 +799,7 @@ static int64_t *emit_group(obj_state *s, int g, const int32_t *refs, int64_t nv,
     return out;
 }
 
-/* An OBJ read in parts on several threads (its text cut at line breaks, line_cuts): each
+/* An OBJ read in parts on several threads (its text cut at line breaks, next_cut): each
  * part is read as one pass reads the whole, into a state of its own whose material starts
  * as INHERIT; then the parts are joined in file order into the first one's state, as one
  * pass would have made it. The refs are kept as written (resolved against the file's
@@ -911,22 +901,18 @@ static int obj_in_parts(const char *text, Py_ssize_t n, obj_state *s, int thread
         return obj_lines(&c, s);
     }
     obj_part *parts = calloc((size_t)most, sizeof *parts);
-    const char **cut = malloc(((size_t)most + 1) * sizeof *cut);
-    int count = 0, status = parts && cut ? 0 : -1;
-    if (!status) {
-        count = line_cuts(text, text + n, most, cut);
-        for (int k = 0; k < count; k++) {
-            obj_state *own = k ? calloc(1, sizeof(obj_state)) : s;
-            if (!own) {
-                status = -1;
-                break;
-            }
-            if (k) {
-                own->current = -1, own->attributes = s->attributes;
-                own->material = INHERIT, own->material_len = 0;
-            }
-            parts[k] = (obj_part){cut[k], cut[k + 1], own, 1};
+    int count = 0, status = parts ? 0 : -1;
+    for (const char *p = text; !status && (count == 0 || (p < text + n && count < most)); p = parts[count++].stop) {
+        obj_state *own = count ? calloc(1, sizeof(obj_state)) : s;
+        if (!own) {
+            status = -1;
+            break;
         }
+        if (count) {
+            own->current = -1, own->attributes = s->attributes;
+            own->material = INHERIT, own->material_len = 0;
+        }
+        parts[count] = (obj_part){p, next_cut(p, text + n, most - count), own, 1};
     }
     if (!status) {
         in_pieces(count, threads, obj_part_run, parts);
@@ -941,7 +927,6 @@ static int obj_in_parts(const char *text, Py_ssize_t n, obj_state *s, int thread
         if (parts[k].s)
             obj_state_free(parts[k].s);
     free(parts);
-    free(cut);
     return status;
 }
 
@@ -1373,19 +1358,6 @@ static void read_part_run(void *ctx, int k, int count)
     b->parts[k].q = q;
 }
 
-/* The parts of [from, end) (line_cuts), at most ``most``; returns how many. */
-static int body_parts(const char *from, const char *end, int most, body_part *parts)
-{
-    const char **cut = malloc(((size_t)most + 1) * sizeof *cut);
-    if (!cut)
-        return -1;
-    int n = line_cuts(from, end, most, cut);
-    for (int k = 0; k < n; k++)
-        parts[k] = (body_part){cut[k], cut[k + 1], 0, 0, {{0}, {0}, {0}, MAX_CORNERS + 1, 0}, 1};
-    free(cut);
-    return n;
-}
-
 /* Each part's polygon lists onto parts[0]'s, in order: 0, or -1 out of memory. */
 static int join_polys(body_part *parts, int n)
 {
@@ -1415,11 +1387,9 @@ static int read_body(body *b, const char *from, const char *end, int threads, po
     body_part *parts = calloc((size_t)most, sizeof *parts);
     if (!parts)
         return -1;
-    int n = body_parts(from, end, most, parts), status = 0;
-    if (n < 0) {
-        free(parts);
-        return -1;
-    }
+    int n = 0, status = 0;
+    for (const char *p = from; n == 0 || (p < end && n < most); p = parts[n++].stop)
+        parts[n] = (body_part){p, next_cut(p, end, most - n), 0, 0, {{0}, {0}, {0}, MAX_CORNERS + 1, 0}, 1};
     b->parts = parts;
     if (n > 1)
         in_pieces(n, threads, count_part, b);
@@ -1648,20 +1618,6 @@ static int stl_join(stl_part *parts, int n)
     return 1; /* no endsolid */
 }
 
-/* The parts of the text after the header line, from ``from`` to ``end`` (line_cuts), at
- * most ``most``; returns how many (-1: no memory). */
-static int stl_parts(const char *from, const char *end, int most, stl_part *parts)
-{
-    const char **cut = malloc(((size_t)most + 1) * sizeof *cut);
-    if (!cut)
-        return -1;
-    int n = line_cuts(from, end, most, cut);
-    for (int k = 0; k < n; k++)
-        parts[k] = (stl_part){cut[k], cut[k + 1], end, {0}, 1};
-    free(cut);
-    return n;
-}
-
 static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
 {
     Py_buffer buf;
@@ -1682,14 +1638,10 @@ static PyObject *read_stl_ascii(PyObject *self, PyObject *args)
     if (starts_nocase(&c, "solid")) {
         c.p += 5;
         if (plain_line_rest(&c) == 0) {
-            n = stl_parts(c.p, end, most, parts);
-            if (n < 0) {
-                n = 0;
-                status = -1;
-            } else {
-                in_pieces(n, threads, stl_part_run, parts);
-                status = stl_join(parts, n);
-            }
+            for (const char *p = c.p; n == 0 || (p < end && n < most); p = parts[n++].stop)
+                parts[n] = (stl_part){p, next_cut(p, end, most - n), end, {0}, 1};
+            in_pieces(n, threads, stl_part_run, parts);
+            status = stl_join(parts, n);
         }
     }
     Py_END_ALLOW_THREADS

@@ -129,7 +129,7 @@ def label_trees(triangles, distance: bool, winding: bool):
     None when not wanted. Both wanted and more than one worker thread: they are built at
     the same time, one on another thread (the same trees either way; most of a build
     is NumPy and kernel work that runs without the GIL)."""
-    from ..core.native import worker_count
+    from ..core.native import thread_pool, worker_count
 
     def distance_tree():
         from .distance import TriangleTree
@@ -145,9 +145,7 @@ def label_trees(triangles, distance: bool, winding: bool):
 
     if not (distance and winding and worker_count() > 1):
         return distance_tree() if distance else None, winding_tree() if winding else None
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(1, thread_name_prefix="winding-tree") as pool:
+    with thread_pool(1, one_level=False) as pool:  # (its kernels keep their threads)
         later = pool.submit(winding_tree)
         return distance_tree(), later.result()
 
