@@ -292,7 +292,8 @@ def test_kernel_and_numpy_give_the_same_bytes(name, monkeypatch):
     kernel = distance.closest_points(tree, points) + (parity.parity_inside(tree, points, rays=5),)
     numpy_path(monkeypatch)
     numpy_tree = distance.TriangleTree(v, f)
-    assert np.array_equal(numpy_tree.order, tree.order)
+    for field in ("order", "triangles", "thin", "lo", "hi"):
+        assert getattr(numpy_tree, field).tobytes() == getattr(tree, field).tobytes(), field
     twin = distance.closest_points(numpy_tree, points) + (parity.parity_inside(numpy_tree, points, rays=5),)
     assert all(a.tobytes() == b.tobytes() for a, b in zip(kernel, twin))
 
@@ -378,6 +379,16 @@ def test_the_kernel_refuses_bad_arrays():
             KERNEL.crossings(t.triangles, t.order, t.thin, t.lo, t.hi, t.leaf, p, *args, inside, 2)
     with pytest.raises(ValueError):
         KERNEL.order(np.full((5, 3), np.nan), 4, 2)
+    assert KERNEL.thin(t.triangles).tobytes() == t.thin.tobytes()
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(KERNEL.boxes(t.triangles, t.leaf, len(t.lo) // 2 + 1), (t.lo, t.hi)))
+    for args in ((t.triangles.reshape(-1, 3),), (t.triangles.astype(np.float32),), (np.asfortranarray(t.triangles),)):
+        with pytest.raises((ValueError, TypeError)):
+            KERNEL.thin(*args)
+        with pytest.raises((ValueError, TypeError)):
+            KERNEL.boxes(*args, t.leaf, len(t.lo) // 2 + 1)
+    for leaf, leaves in ((0, 64), (t.leaf, len(t.lo) // 2), (t.leaf, len(t.lo) + 1), (t.leaf, 3), (65, 1)):
+        with pytest.raises(ValueError):  # too few leaves, more than needed, not a power of two, too wide
+            KERNEL.boxes(t.triangles, leaf, leaves)
 
 
 # ---- fuzz ----
@@ -405,7 +416,9 @@ def test_fuzz_kernel_against_numpy_and_brute_force(seed, faces, scale, degenerat
     with monkeypatch.context() as m:
         numpy_path(m)
         twin = distance.closest_points(tree, points) + (parity.parity_inside(tree, points),)
+        numpy_tree = distance.TriangleTree.from_triangles(tri)
     assert all(a.tobytes() == b.tobytes() for a, b in zip(kernel, twin))
+    assert all(getattr(tree, k).tobytes() == getattr(numpy_tree, k).tobytes() for k in ("order", "thin", "lo", "hi"))
     d, q, face = kernel[:3]
     extent = np.abs(tri).max() + np.abs(points).max()
     # brute force at unit scale (scale is not a power of two: exact to 1e-15)

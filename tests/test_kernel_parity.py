@@ -372,8 +372,9 @@ CALLED_BY = {
     "_cenclosure": {"parts": "box_in_box", "enclosed": "box_in_box"},
     "_cembree": {f: "box_in_box" for f in ("load", "new_scene", "add", "buffers", "commit", "occluded")},
     "_cwinding": {f: "winding-icosahedron_binary.stl" for f in ("morton", "order", "subtree_sums", "moments",
-                                                                "radii", "winding")},
-    "_cvolume": {f: "distance-icosahedron_binary.stl" for f in ("wide", "order", "visit", "closest", "crossings")},
+                                                                "expansions", "radii", "winding")},
+    "_cvolume": {f: "distance-icosahedron_binary.stl" for f in ("wide", "order", "thin", "boxes", "visit", "closest",
+                                                                "crossings")},
     "_cedges": {"edges": "edges-pediment"},
 }
 

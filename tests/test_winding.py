@@ -475,6 +475,22 @@ def test_kernel_moments_refuse_bad_arrays():
             KERNEL.moments(*args)
 
 
+@needs_kernel
+def test_kernel_expansions_are_numpys_and_refuse_bad_arrays(monkeypatch):
+    rng = np.random.default_rng(4)
+    sums = rng.normal(size=(40, 34)) * 10.0 ** rng.integers(-150, 150, size=(40, 34))
+    sums[3, 0], sums[5, 9], sums[7, 20] = 0.0, np.inf, np.nan
+    origin, out = rng.normal(size=3), np.zeros((40, winding.FIELDS))
+    KERNEL.expansions(sums, origin, out)
+    monkeypatch.setattr(winding, "_kernel", None)
+    with np.errstate(all="ignore"):
+        assert out.tobytes() == winding._expansions(sums, origin).tobytes()
+    for args in ((sums[:, :33].copy(), origin, out), (sums, origin[:2].copy(), out), (sums, origin, out[:39]),
+                 (sums, origin, out[:, :27].copy()), (sums.astype(np.float32), origin, out), (sums.T, origin, out)):
+        with pytest.raises((TypeError, ValueError)):
+            KERNEL.expansions(*args)
+
+
 def nested_links(rng, size, triangles):
     """(N, 3) int64 links of a random forest of nested subtrees in preorder: inner nodes of
     0 to 3 children (0: an inner node of no subtree), leaves of 0 to 4 triangles, and

@@ -75,31 +75,52 @@ static inline void morton21(const double *p, int64_t n, uint64_t *code)
 }
 
 /* order (n,): np.argsort(code, kind="stable") for codes below 2^bits; 0 when out of
- * memory */
+ * memory. Each pass moves the keys with their indices (no reads of code[order[i]] from
+ * far apart); the digits' counts are taken for every pass in one read, and a pass whose
+ * digit is the same for every key is skipped. */
+#define ORDER_DIGIT 11
+#define ORDER_PASSES 6 /* 6 * 11 bits >= 63 */
 static inline int stable_order(const uint64_t *code, int64_t n, int bits, int64_t *order)
 {
-    int64_t *tmp = malloc(sizeof(int64_t) * (size_t)(n > 0 ? n : 1));
-    if (!tmp)
-        return 0;
-    for (int64_t i = 0; i < n; i++)
-        order[i] = i;
-    int64_t *from = order, *to = tmp;
-    for (int shift = 0; shift < bits; shift += 11) {
-        int64_t count[2049] = {0};
+    size_t size = (size_t)(n > 0 ? n : 1);
+    uint64_t *keys = malloc(sizeof(uint64_t) * 2 * size);
+    int64_t *tmp = malloc(sizeof(int64_t) * size);
+    int64_t(*count)[(1 << ORDER_DIGIT) + 1] = calloc(ORDER_PASSES, sizeof *count);
+    int ok = keys && tmp && count;
+    if (ok) {
+        const int64_t mask = (1 << ORDER_DIGIT) - 1;
+        int passes = (bits + ORDER_DIGIT - 1) / ORDER_DIGIT;
+        passes = passes < ORDER_PASSES ? passes : ORDER_PASSES;
+        for (int64_t i = 0; i < n; i++) {
+            uint64_t c = code[i];
+            for (int p = 0; p < passes; p++)
+                count[p][((c >> (p * ORDER_DIGIT)) & mask) + 1]++;
+        }
+        uint64_t *kf = keys, *kt = keys + size;
+        int64_t *of = order, *ot = tmp;
         for (int64_t i = 0; i < n; i++)
-            count[((code[from[i]] >> shift) & 2047) + 1]++;
-        for (int d = 0; d < 2048; d++)
-            count[d + 1] += count[d];
-        for (int64_t i = 0; i < n; i++)
-            to[count[(code[from[i]] >> shift) & 2047]++] = from[i];
-        int64_t *swap = from;
-        from = to, to = swap;
+            kf[i] = code[i], of[i] = i;
+        for (int p = 0; p < passes; p++) {
+            int64_t *c = count[p];
+            if (n && c[((kf[0] >> (p * ORDER_DIGIT)) & mask) + 1] == n)
+                continue; /* one digit for all: the order stays */
+            for (int64_t d = 0; d < mask + 1; d++)
+                c[d + 1] += c[d];
+            for (int64_t i = 0; i < n; i++) {
+                int64_t to = c[(kf[i] >> (p * ORDER_DIGIT)) & mask]++;
+                kt[to] = kf[i], ot[to] = of[i];
+            }
+            uint64_t *ks = kf;
+            kf = kt, kt = ks;
+            int64_t *os = of;
+            of = ot, ot = os;
+        }
+        if (of != order)
+            for (int64_t i = 0; i < n; i++)
+                order[i] = of[i];
     }
-    if (from != order)
-        for (int64_t i = 0; i < n; i++)
-            order[i] = from[i];
-    free(tmp);
-    return 1;
+    free(keys), free(tmp), free(count);
+    return ok;
 }
 
 #endif

@@ -1025,6 +1025,87 @@ static PyObject *order_py(PyObject *self, PyObject *args)
     return (PyObject *)out;
 }
 
+/* ---- the tree's other arrays ---- */
+
+/* np.maximum's: NaN when either is */
+static inline double nan_max(double a, double b) { return a != a || a > b ? a : b; }
+
+PyDoc_STRVAR(thin_doc, "thin(triangles (F,9) f8) -> (F,) u1: distance.thin_faces.");
+
+static PyObject *thin_py(PyObject *self, PyObject *args)
+{
+    PyObject *ot;
+    PyArrayObject *ta;
+    npy_intp nf;
+    if (!PyArg_ParseTuple(args, "O", &ot) || !get_rows(ot, NPY_FLOAT64, 9, &ta, &nf, "triangles"))
+        return NULL;
+    PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){nf}, NPY_UINT8);
+    if (!out)
+        return NULL;
+    const double *tri = PyArray_DATA(ta), limit = 0.1 * 0.1; /* distance.THIN squared, as Python rounds it */
+    uint8_t *thin = PyArray_DATA(out);
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp i = 0; i < nf; i++) {
+        const double *a = tri + 9 * i, *b = a + 3, *c = a + 6;
+        double ab[3], ac[3], bc[3];
+        for (int k = 0; k < 3; k++)
+            ab[k] = b[k] - a[k], ac[k] = c[k] - a[k], bc[k] = c[k] - b[k];
+        double n[3] = {ab[1] * ac[2] - ab[2] * ac[1], ab[2] * ac[0] - ab[0] * ac[2], ab[0] * ac[1] - ab[1] * ac[0]};
+        double longest = nan_max(nan_max(dot(ab, ab), dot(ac, ac)), dot(bc, bc));
+        thin[i] = dot(n, n) <= limit * longest * longest;
+    }
+    Py_END_ALLOW_THREADS
+    return (PyObject *)out;
+}
+
+PyDoc_STRVAR(boxes_doc, "boxes(triangles (F,9) f8, leaf, leaves) -> (lo, hi), (2 leaves - 1, 3) f8 each: "
+                        "distance.node_boxes.");
+
+static PyObject *boxes_py(PyObject *self, PyObject *args)
+{
+    PyObject *ot;
+    PyArrayObject *ta;
+    npy_intp nf;
+    long long leaf, leaves;
+    if (!PyArg_ParseTuple(args, "OLL", &ot, &leaf, &leaves) || !get_rows(ot, NPY_FLOAT64, 9, &ta, &nf, "triangles"))
+        return NULL;
+    if (leaf < 1 || leaf > 64 || leaves < 1 || leaves > ((long long)1 << MAX_DEPTH) || (leaves & (leaves - 1)) != 0 ||
+        leaves * leaf < nf || (leaves > 1 && leaves / 2 * leaf >= nf)) {
+        PyErr_SetString(PyExc_ValueError, "boxes: bad shapes");
+        return NULL;
+    }
+    npy_intp dims[2] = {2 * (npy_intp)leaves - 1, 3};
+    PyArrayObject *olo = (PyArrayObject *)PyArray_SimpleNew(2, dims, NPY_FLOAT64);
+    PyArrayObject *ohi = (PyArrayObject *)PyArray_SimpleNew(2, dims, NPY_FLOAT64);
+    if (!olo || !ohi) {
+        Py_XDECREF(olo), Py_XDECREF(ohi);
+        return NULL;
+    }
+    const double *tri = PyArray_DATA(ta);
+    double *lo = PyArray_DATA(olo), *hi = PyArray_DATA(ohi);
+    Py_BEGIN_ALLOW_THREADS
+    for (int64_t j = 0; j < leaves; j++) { /* leaf j: node leaves - 1 + j; no faces: lo +inf, hi -inf */
+        double *l = lo + 3 * (leaves - 1 + j), *h = hi + 3 * (leaves - 1 + j);
+        for (int k = 0; k < 3; k++)
+            l[k] = INFINITY, h[k] = -INFINITY;
+        int64_t s1 = (j + 1) * leaf < nf ? (j + 1) * leaf : nf;
+        for (int64_t s = j * leaf; s < s1; s++)
+            for (int v = 0; v < 3; v++)
+                for (int k = 0; k < 3; k++) {
+                    double x = tri[9 * s + 3 * v + k];
+                    l[k] = x < l[k] ? x : l[k], h[k] = x > h[k] ? x : h[k];
+                }
+    }
+    for (int64_t i = leaves - 2; i >= 0; i--)
+        for (int k = 0; k < 3; k++) {
+            double a = lo[3 * (2 * i + 1) + k], b = lo[3 * (2 * i + 2) + k];
+            double c = hi[3 * (2 * i + 1) + k], d = hi[3 * (2 * i + 2) + k];
+            lo[3 * i + k] = a < b ? a : b, hi[3 * i + k] = c > d ? c : d;
+        }
+    Py_END_ALLOW_THREADS
+    return Py_BuildValue("NN", olo, ohi);
+}
+
 PyDoc_STRVAR(visit_doc, "visit(points (n,3) f8) -> (n,) i8: distance.visit_order (the points along a Morton curve).");
 
 static PyObject *visit_py(PyObject *self, PyObject *args)
@@ -1053,6 +1134,8 @@ static PyObject *visit_py(PyObject *self, PyObject *args)
 
 static PyMethodDef methods[] = {
     {"order", order_py, METH_VARARGS, order_doc},
+    {"thin", thin_py, METH_VARARGS, thin_doc},
+    {"boxes", boxes_py, METH_VARARGS, boxes_doc},
     {"visit", visit_py, METH_VARARGS, visit_doc},
     {"wide", wide_py, METH_VARARGS, wide_doc},
     {"closest", closest, METH_VARARGS, closest_doc},

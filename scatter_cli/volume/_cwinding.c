@@ -210,51 +210,29 @@ static void run(void *arg, int k, int count)
  * points walk together (any order gives the same sums); 0 when out of memory */
 static int walk_order(const double *p, int64_t n, int64_t *walk)
 {
-    size_t size = (size_t)(n > 0 ? n : 1);
-    uint32_t *key = malloc(sizeof(uint32_t) * 2 * size);
-    int64_t *tmp = malloc(sizeof(int64_t) * size);
-    int ok = key && tmp;
-    if (ok) {
-        double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY}, scale[3];
-        for (int64_t i = 0; i < n; i++) {
-            const double *q = p + 3 * i;
-            if (isfinite(q[0]) && isfinite(q[1]) && isfinite(q[2]))
-                for (int k = 0; k < 3; k++)
-                    lo[k] = q[k] < lo[k] ? q[k] : lo[k], hi[k] = q[k] > hi[k] ? q[k] : hi[k];
-        }
-        for (int k = 0; k < 3; k++)
-            scale[k] = hi[k] > lo[k] ? 1024.0 / (hi[k] - lo[k]) : 0.0;
-        uint32_t *kf = key, *kt = key + size;
-        int64_t *of = walk, *ot = tmp;
-        for (int64_t i = 0; i < n; i++) {
-            const double *q = p + 3 * i;
-            uint64_t c[3];
-            for (int k = 0; k < 3; k++) {
-                double x = (q[k] - lo[k]) * scale[k];
-                c[k] = x >= 1.0 && x <= 1023.0 ? (uint64_t)x : x > 1023.0 ? 1023 : 0; /* (NaN: 0) */
-            }
-            kf[i] = (uint32_t)((spread21(c[0]) << 2) | (spread21(c[1]) << 1) | spread21(c[2])), of[i] = i;
-        }
-        for (int shift = 0; shift < 30; shift += 10) { /* least significant digit first, stable */
-            int64_t count[1025] = {0};
-            for (int64_t i = 0; i < n; i++)
-                count[(kf[i] >> shift & 1023) + 1]++;
-            for (int d = 0; d < 1024; d++)
-                count[d + 1] += count[d];
-            for (int64_t i = 0; i < n; i++) {
-                int64_t to = count[kf[i] >> shift & 1023]++;
-                kt[to] = kf[i], ot[to] = of[i];
-            }
-            uint32_t *ks = kf;
-            kf = kt, kt = ks;
-            int64_t *os = of;
-            of = ot, ot = os;
-        }
-        if (of != walk)
-            for (int64_t i = 0; i < n; i++)
-                walk[i] = of[i];
+    uint64_t *key = malloc(sizeof(uint64_t) * (size_t)(n > 0 ? n : 1));
+    if (!key)
+        return 0;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY}, scale[3];
+    for (int64_t i = 0; i < n; i++) {
+        const double *q = p + 3 * i;
+        if (isfinite(q[0]) && isfinite(q[1]) && isfinite(q[2]))
+            for (int k = 0; k < 3; k++)
+                lo[k] = q[k] < lo[k] ? q[k] : lo[k], hi[k] = q[k] > hi[k] ? q[k] : hi[k];
     }
-    free(key), free(tmp);
+    for (int k = 0; k < 3; k++)
+        scale[k] = hi[k] > lo[k] ? 1024.0 / (hi[k] - lo[k]) : 0.0;
+    for (int64_t i = 0; i < n; i++) {
+        const double *q = p + 3 * i;
+        uint64_t c[3];
+        for (int k = 0; k < 3; k++) {
+            double x = (q[k] - lo[k]) * scale[k];
+            c[k] = x >= 1.0 && x <= 1023.0 ? (uint64_t)x : x > 1023.0 ? 1023 : 0; /* (NaN: 0) */
+        }
+        key[i] = (spread21(c[0]) << 2) | (spread21(c[1]) << 1) | spread21(c[2]);
+    }
+    int ok = stable_order(key, n, 30, walk);
+    free(key);
     return ok;
 }
 
@@ -548,6 +526,64 @@ static PyObject *moments_py(PyObject *self, PyObject *args)
     Py_RETURN_NONE;
 }
 
+/* ---- the nodes' expansions: winding._expansions's values ---- */
+
+PyDoc_STRVAR(expansions_doc, "expansions(sums (N, 34) float64, origin (3,) float64, out (N, 28) float64): "
+                             "winding._expansions's fields into out (its radius column left as it is)");
+
+static PyObject *expansions_py(PyObject *self, PyObject *args)
+{
+    PyObject *os, *og, *oo;
+    PyArrayObject *sa, *ga, *outa;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OOO", &os, &og, &oo) || !get2(os, NPY_FLOAT64, 34, &sa, "sums") ||
+        !get(og, NPY_FLOAT64, 3, &ga, "origin") || !get2(oo, NPY_FLOAT64, FIELDS, &outa, "out"))
+        return NULL;
+    int64_t n = PyArray_DIM(sa, 0);
+    if (PyArray_DIM(outa, 0) != n || !PyArray_ISWRITEABLE(outa)) {
+        PyErr_SetString(PyExc_ValueError, "out: not one row a node, or not writeable");
+        return NULL;
+    }
+    const double *sums = PyArray_DATA(sa), *o = PyArray_DATA(ga);
+    double *out = PyArray_DATA(outa);
+    int pair[3][3]; /* the index in PAIRS of (j, l) or (l, j) */
+    for (int k = 0; k < 6; k++)
+        pair[PAIRS[k][0]][PAIRS[k][1]] = pair[PAIRS[k][1]][PAIRS[k][0]] = k;
+    Py_BEGIN_ALLOW_THREADS
+    for (int64_t i = 0; i < n; i++) {
+        const double *S = sums + 34 * i;
+        double *f = out + FIELDS * i, c[3], m[3][3], s[3][6];
+        for (int j = 0; j < 3; j++)
+            c[j] = S[1 + j] / S[0];
+        for (int a = 0; a < 3; a++)
+            for (int j = 0; j < 3; j++)
+                m[a][j] = S[7 + 3 * a + j] - S[4 + a] * c[j];
+        for (int k = 0; k < 6; k++) { /* s[a][k]: the sum of an_a (x - c)_j (x - c)_l, (j, l) = PAIRS[k] */
+            int j = PAIRS[k][0], l = PAIRS[k][1];
+            for (int a = 0; a < 3; a++)
+                s[a][k] = S[16 + 6 * a + k] - S[7 + 3 * a + j] * c[l] - S[7 + 3 * a + l] * c[j] + S[4 + a] * c[j] * c[l];
+        }
+#define T3(a, j, l) s[a][pair[j][l]]
+        for (int j = 0; j < 3; j++)
+            f[j] = c[j] + o[j], f[4 + j] = S[4 + j];
+        f[7] = m[0][0] + m[1][1] + m[2][2];
+        f[8] = m[0][0], f[9] = m[1][1], f[10] = m[2][2];
+        f[11] = m[0][1] + m[1][0], f[12] = m[0][2] + m[2][0], f[13] = m[1][2] + m[2][1];
+        for (int k = 0; k < 3; k++)
+            f[14 + k] = 2.0 * (T3(0, 0, k) + T3(1, 1, k) + T3(2, 2, k)) + T3(k, 0, 0) + T3(k, 1, 1) + T3(k, 2, 2);
+        f[17] = T3(0, 0, 0), f[18] = T3(1, 1, 1), f[19] = T3(2, 2, 2);
+        f[20] = 2 * T3(0, 0, 1) + T3(1, 0, 0), f[21] = 2 * T3(0, 0, 2) + T3(2, 0, 0);
+        f[22] = 2 * T3(1, 1, 0) + T3(0, 1, 1), f[23] = 2 * T3(1, 1, 2) + T3(2, 1, 1);
+        f[24] = 2 * T3(2, 2, 0) + T3(0, 2, 2), f[25] = 2 * T3(2, 2, 1) + T3(1, 2, 2);
+        f[26] = 2 * (T3(0, 1, 2) + T3(1, 0, 2) + T3(2, 0, 1));
+#undef T3
+        for (int k = 27; k < FIELDS; k++)
+            f[k] = 0.0;
+    }
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
 PyDoc_STRVAR(morton_doc, "morton(points (n, 3) float64) -> (n,) uint64: winding._morton's codes.");
 
 static PyObject *morton_py(PyObject *self, PyObject *args)
@@ -603,6 +639,7 @@ static PyMethodDef methods[] = {
     {"radii", radii_py, METH_VARARGS, radii_doc},
     {"subtree_sums", sums_py, METH_VARARGS, sums_doc},
     {"moments", moments_py, METH_VARARGS, moments_doc},
+    {"expansions", expansions_py, METH_VARARGS, expansions_doc},
     {"order", order_py, METH_VARARGS, order_doc},
     {NULL, NULL, 0, NULL},
 };

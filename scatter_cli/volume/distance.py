@@ -122,6 +122,8 @@ def thin_faces(tri):
     """(F,) uint8: whether each triangle of ``tri`` (F, 9) is thin: its least height under
     THIN times its longest side (then Ericson's regions may be confused by rounding, and
     its three edges are tried too)."""
+    if _kernel is not None:
+        return _kernel.thin(tri)
     a, b, c = tri[:, 0:3], tri[:, 3:6], tri[:, 6:9]
     ab, ac, bc = b - a, c - a, c - b
     n = np.cross(ab, ac)
@@ -191,6 +193,8 @@ def node_boxes(tri, leaf):
     leaves = 1 << max(0, int(np.ceil(np.log2(-(-nf // leaf)))))
     while leaves * leaf < nf:
         leaves *= 2
+    if _kernel is not None:
+        return _kernel.boxes(tri, leaf, leaves)
     pts = np.full((leaves * leaf * 3, 3), np.inf)
     pts[: 3 * nf] = tri.reshape(-1, 3)
     lo = _rows_min(pts.reshape(leaves, 3 * leaf, 3))

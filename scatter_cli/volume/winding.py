@@ -21,8 +21,8 @@ depth-first in that order; the NumPy path below walks all points of a chunk down
 tree in step, adding each point's next term in the same order, and does the same
 float64 operations (its own arctangent, as the kernel's, from + - * / only), so the two
 give the same bytes (tests/test_winding.py holds them to it). The kernel also computes
-the tree's per-triangle moments, their sums over each node and the nodes' radii, the
-same values as the NumPy functions named.
+the tree's per-triangle moments, their sums over each node, the nodes' expansions and
+radii, the same values as the NumPy functions named.
 """
 
 from __future__ import annotations
@@ -71,10 +71,13 @@ class WindingTree:
     def __init__(self, vertices, faces=None):
         v = np.asarray(vertices, dtype=np.float64)
         tri = v.reshape(-1, 3, 3) if faces is None else np.take(v, np.asarray(faces, dtype=np.int64), axis=0)
-        an = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        keep = np.isfinite(tri).all(axis=(1, 2)) & np.isfinite(an).all(axis=1) & (an != 0).any(axis=1)
+        an = _area_normals(tri)
+        keep = (an[:, 0] != 0) | (an[:, 1] != 0) | (an[:, 2] != 0)
+        if not (np.isfinite(tri).all() and np.isfinite(an).all()):  # (row by row only when needed: slower)
+            keep &= np.isfinite(tri).all(axis=(1, 2)) & np.isfinite(an).all(axis=1)
         self.face = np.flatnonzero(keep)
-        tri, an = np.compress(keep, tri, axis=0), np.compress(keep, an, axis=0)
+        if len(self.face) < len(tri):
+            tri, an = np.compress(keep, tri, axis=0), np.compress(keep, an, axis=0)
         centroid = (tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0
         codes = _morton(centroid)
         order = _stable_order(codes)
@@ -251,12 +254,26 @@ def _node_fields(tri, an, centroid, start, end, skip):
     (17:27). The moments are summed about the middle of the box, then moved to each
     node's centre."""
     n = len(skip)
-    fields = np.zeros((n, FIELDS))
     if not n:
-        return fields
-    origin = 0.5 * (centroid.min(axis=0) + centroid.max(axis=0))
+        return np.zeros((n, FIELDS))
+    # (the box of the centroids column by column: a reduction along axis 0 is slow)
+    lo, hi = (np.array([reduce(centroid[:, k]) for k in range(3)]) for reduce in (np.min, np.max))
+    origin = 0.5 * (lo + hi)
     raw = _moments(tri, an, centroid, origin)
-    sums = np.ascontiguousarray(_subtree_sums(raw, start, skip).T)  # (34, N): rows, as raw's
+    fields = _expansions(_subtree_sums(raw, start, skip), origin)
+    fields[:, 3] = _radii(tri, fields[:, 0:3], start, end, skip)
+    return fields
+
+
+def _expansions(sums, origin):
+    """(N, FIELDS) float64: each node's fields but its radius (left 0), from its sums (N,
+    34) of _moments's rows about ``origin`` (3,). The kernel's ``expansions`` computes the
+    same values."""
+    fields = np.zeros((len(sums), FIELDS))
+    if _kernel is not None:
+        _kernel.expansions(sums, origin, fields)
+        return fields
+    sums = np.ascontiguousarray(sums.T)  # (34, N): rows, as _moments's
     c = sums[1:4] / sums[0]
     a0, a1 = sums[4:7], sums[7:16].reshape(3, 3, -1)
     m = a1 - a0[:, None, :] * c[None, :, :]
@@ -266,7 +283,6 @@ def _node_fields(tri, an, centroid, start, end, skip):
             s[i, j, l] = s[i, l, j] = (sums[16 + 6 * i + k] - a1[i, j] * c[l] - a1[i, l] * c[j]
                                        + a0[i] * c[j] * c[l])
     fields[:, 0:3] = (c + origin[:, None]).T
-    fields[:, 3] = _radii(tri, fields[:, 0:3], start, end, skip)
     fields[:, 4:7] = a0.T
     fields[:, 7] = m[0, 0] + m[1, 1] + m[2, 2]
     fields[:, 8:14] = np.stack([m[0, 0], m[1, 1], m[2, 2], m[0, 1] + m[1, 0], m[0, 2] + m[2, 0], m[1, 2] + m[2, 1]],
@@ -338,6 +354,18 @@ def _radii(tri, centre, start, end, skip):
         r[k] = np.maximum.reduceat(far, np.cumsum(end[k] - start[k]) - (end[k] - start[k]))
     r[np.isnan(r)] = np.nan  # (one NaN, whichever the operations made: a NaN radius never makes a node far)
     return r
+
+
+def _area_normals(tri):
+    """(T, 3) float64: half the cross product of the edges from the first corner of each
+    triangle of ``tri`` (T, 3, 3), as ``0.5 * np.cross`` computes it, without its slow
+    general path."""
+    u, v = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    an = np.empty((len(tri), 3))
+    for k in range(3):
+        i, j = (k + 1) % 3, (k + 2) % 3
+        an[:, k] = 0.5 * (u[:, i] * v[:, j] - u[:, j] * v[:, i])
+    return an
 
 
 def _norms(v):
