@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import scatter_cli
-from scatter_cli.engines import worker
+from scatter_cli.engines import batch, worker
 from scatter_cli.errors import ScatterUsageError
 from scatter_cli.run.options import SampleOptions
 
@@ -62,6 +62,23 @@ def test_template_fields_and_collisions(tmp_path):
     with pytest.raises(ScatterUsageError, match="format"):
         scatter_cli.batch([tree], str(tmp_path / "{rel}.obj"), count=5)
     assert not (tmp_path / "flat").exists()
+
+
+@pytest.mark.parametrize("text", ["{stem}.ply", "{rel}/{index:05d}.ply", "{name:>12}-{stem[0]}.csv", "x.npy",
+                                  "{index}{rel}{name}{stem}.ply"])
+def test_a_template_fills_only_its_fields_and_gets_every_path_right(tmp_path, text):
+    tree = tmp_path / "in"
+    (tree / "a").mkdir(parents=True)
+    for path in (tree / "a" / "x.y.stl", tree / "b.obj"):
+        path.write_bytes(b"")
+    found = batch.collect_inputs([tree, tmp_path / "in" / "a" / "x.y.stl"])
+    template = batch.Template(text)
+    assert template.fields == {f for f in batch.TEMPLATE_FIELDS if "{" + f in text}
+    for i in range(len(found)):
+        full = found.fields(i)
+        assert template.output(found, i) == text.format(**full)
+        assert found.fields(i, template.fields).items() <= full.items()
+    assert [found.fields(i)["rel"] for i in range(len(found))] == ["a/x.y", "b", "x.y"]
 
 
 def bad_meshes(folder):

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import array
 import os
+import re
+import string
 import sys
 import time
 
@@ -73,13 +75,18 @@ class Inputs:
     def __len__(self):
         return len(self.paths)
 
-    def fields(self, i):
+    def fields(self, i, wanted=TEMPLATE_FIELDS):
+        """The template fields of mesh ``i``: those ``wanted`` (an output template's, see
+        :attr:`Template.fields`; a batch fills one per mesh, twice)."""
         path = self.paths[i]
-        name = os.path.basename(path)
-        stem = os.path.splitext(name)[0]
-        root = self.root_of[i]
-        rel = stem if root < 0 else os.path.splitext(_below(path, self.roots[root]))[0]
-        return {"stem": stem, "name": name, "rel": rel, "index": i}
+        out = {"index": i}
+        if "name" in wanted or "stem" in wanted or ("rel" in wanted and self.root_of[i] < 0):
+            out["name"] = name = os.path.basename(path)
+            out["stem"] = os.path.splitext(name)[0]
+        if "rel" in wanted:
+            root = self.root_of[i]
+            out["rel"] = out["stem"] if root < 0 else os.path.splitext(_below(path, self.roots[root]))[0]
+        return out
 
 
 def _below(path, folder):
@@ -117,14 +124,18 @@ class Template:
         self.text = os.fspath(text)
         try:
             self.text.format(stem="s", name="n", rel="r", index=0)
+            # the fields it names (a field's own attributes or items after its name)
+            self.fields = {re.split(r"[.\[]", name, maxsplit=1)[0] for _, name, _, _ in string.Formatter().parse(self.text)
+                           if name}
         except (KeyError, IndexError) as exc:
             raise ScatterUsageError(f"unknown field {exc} in the output template '{self.text}' "
                                     f"(fields: {', '.join('{' + f + '}' for f in TEMPLATE_FIELDS)})") from None
         except ValueError as exc:
             raise ScatterUsageError(f"bad output template '{self.text}': {exc}") from None
 
-    def fill(self, fields):
-        return self.text.format(**fields)
+    def output(self, found, i):
+        """The output path of mesh ``i`` of ``found`` (:class:`Inputs`)."""
+        return self.text.format(**found.fields(i, self.fields))
 
 
 def plan_outputs(found: Inputs, template: Template, fmt=None):
@@ -134,16 +145,17 @@ def plan_outputs(found: Inputs, template: Template, fmt=None):
 
     seen = {}
     suffixes = set()
+    cwd = os.getcwd()  # (os.path.abspath asks for it at every call)
     for i in range(len(found)):
-        out = template.fill(found.fields(i))
+        out = template.output(found, i)
         suffix = os.path.splitext(out)[1].lower()
         if suffix not in suffixes:
             infer_format(out, fmt)
             suffixes.add(suffix)
-        key = hash(os.path.normpath(os.path.abspath(out)))
+        key = hash(os.path.normpath(os.path.join(cwd, out)))
         if key in seen:
             first = seen[key]
-            if _same_output(template.fill(found.fields(first)), out):
+            if _same_output(template.output(found, first), out):
                 raise ScatterUsageError(f"{found.paths[first]} and {found.paths[i]} would both write {out}: "
                                         "use {rel} or {index} in the output template")
         seen[key] = i
@@ -207,7 +219,7 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
     template = Template(output)
     found = collect_inputs(inputs, from_list)
     plan_outputs(found, template, fmt)
-    check_output(infer_format(template.fill(found.fields(0)), fmt), ascii, crs)
+    check_output(infer_format(template.output(found, 0), fmt), ascii, crs)
     setup = {"options": options.as_dict(), "ascii": ascii, "crs": crs, "quiet": quiet}
     if report is not None and os.fspath(report) != "-":
         report = os.path.abspath(report)
@@ -215,7 +227,7 @@ def run_batch(inputs, output, *, from_list=None, jobs=None, skip_existing=False,
 
         remove_temps(report)  # what a killed run of this report left (outputs' are cleared per mesh)
     tally = Tally(len(found), report, collect, progress and not quiet, quiet)
-    jobs_iter = ((i, found.paths[i], template.fill(found.fields(i))) for i in range(len(found)))
+    jobs_iter = ((i, found.paths[i], template.output(found, i)) for i in range(len(found)))
     try:
         if engine == "dask":
             from .dask_engine import run_dask

@@ -423,9 +423,10 @@ class StaleTemps:
     def __init__(self):
         self.folders = {}
         self.lock = threading.Lock()
+        self.cwd = os.getcwd()  # (os.path.abspath asks for it at every call)
 
     def clear(self, output):
-        folder, base = os.path.split(os.path.abspath(output))
+        folder, base = os.path.split(os.path.normpath(os.path.join(self.cwd, output)))
         with self.lock:
             if folder not in self.folders:
                 self.folders[folder] = self.scan(folder)
