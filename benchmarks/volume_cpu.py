@@ -8,12 +8,19 @@ threads) move less than wall seconds when other work shares the cores, so runs o
 builds alternated on a busy machine compare them better than wall time does.
 
     PYTHONPATH=. python benchmarks/volume_cpu.py [--open3d] [--points N] [--parts]
+    python benchmarks/volume_cpu.py --checkouts BEFORE AFTER [--rounds R] [--points N]
 
 ``--parts``: instead, the steps of a distance + winding run (``sdf,inside``) apart: each
 tree's build, both built as a run builds them (``source.label_trees``), and each kind of
 query over all the points, median CPU and wall seconds of 5.
 
-Figures: benchmarks/results/2026-12-03-volume-speed.md.
+``--checkouts``: instead, the whole distance + winding run of benchmarks/volume.py (both
+trees built as a run builds them, then the queries), median wall and CPU seconds of 5 runs
+in a fresh process of each checkout (its kernels built in place), the checkouts taking
+turns for R rounds, then each one's medians over the rounds: a before-and-after on a
+shared machine, where the load moves between rounds.
+
+Figures: benchmarks/results/2026-12-03-volume-speed.md, 2026-12-05-volume-builds.md.
 """
 
 import argparse
@@ -68,12 +75,53 @@ def parts(v, f, p, repeats=5):
     return out
 
 
+ONE_CHECKOUT = r"""
+import sys, time
+import numpy as np
+sys.path.insert(0, "benchmarks")
+import volume as bench
+v, f = bench.load("skull")
+p = bench.box_points(v, int(sys.argv[1]))
+bench.ours_distance_winding(v, f, p[:10000])
+runs = []
+for _ in range(5):
+    c, t = time.process_time(), time.perf_counter()
+    bench.ours_distance_winding(v, f, p)
+    runs.append((time.perf_counter() - t, time.process_time() - c))
+print(*np.median(runs, axis=0))
+"""
+
+
+def checkouts(folders, points, rounds):
+    """{checkout: [(wall s, CPU s) per round]}: the checkouts' runs, taking turns."""
+    import os
+    import subprocess
+
+    out = {d: [] for d in folders}
+    for r in range(rounds):
+        for d in folders:
+            env = dict(os.environ, PYTHONPATH=str(Path(d).resolve()))
+            done = subprocess.run([sys.executable, "-c", ONE_CHECKOUT, str(points)], cwd=d, env=env,
+                                  capture_output=True, text=True, check=True)
+            out[d].append(tuple(map(float, done.stdout.split())))
+            print(f"round {r}: {d}: wall {out[d][-1][0]:.3f} cpu {out[d][-1][1]:.3f}", flush=True)
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--open3d", action="store_true")
     ap.add_argument("--points", type=int, default=10**6)
     ap.add_argument("--parts", action="store_true")
+    ap.add_argument("--checkouts", nargs=2, metavar=("BEFORE", "AFTER"))
+    ap.add_argument("--rounds", type=int, default=6)
     args = ap.parse_args()
+    if args.checkouts:
+        for d, runs in checkouts(args.checkouts, args.points, args.rounds).items():
+            wall, cpu = np.median(runs, axis=0)
+            print(f"{d}: median over {args.rounds} rounds: wall {wall:.3f} s, cpu {cpu:.3f} s")
+        print("load", open("/proc/loadavg").read().split()[0])
+        return
     v, f = bench.load("skull")
     p = bench.box_points(v, args.points)
     if args.parts:
