@@ -462,13 +462,43 @@ def test_obj_read_in_parts_is_read_as_in_one(case, tmp_path):
 
 
 @functools.lru_cache(maxsize=None)
-def icosphere_files(folder, subdivisions):
-    mesh = trimesh.creation.icosphere(subdivisions=subdivisions)
-    paths = {}
-    for fmt, (suffix, options) in FORMATS.items():
-        paths[fmt] = Path(folder) / f"ico{subdivisions}-{fmt}.{suffix}"
-        mesh.export(paths[fmt], **options)
-    return paths
+def icosphere_file(folder, subdivisions, fmt):
+    """The icosphere in format ``fmt`` (a key of FORMATS) in ``folder``, written at the first
+    call for it (each format only where a test reads it: ASCII STL alone takes seconds)."""
+    suffix, options = FORMATS[fmt]
+    path = Path(folder) / f"ico{subdivisions}-{fmt}.{suffix}"
+    if fmt in TEXT_FORMATS:
+        Path(path).write_text(TEXT_FORMATS[fmt](icosphere(subdivisions)))
+    else:
+        icosphere(subdivisions).export(path, **options)
+    return path
+
+
+def lines(pattern, rows):
+    """``pattern`` filled with each row of ``rows`` (n, k) in turn, in one formatting step."""
+    return (pattern * len(rows)) % tuple(np.asarray(rows).ravel().tolist())
+
+
+# The text files of the memory tests, each formatted in one step (trimesh's exports take
+# two to three times as long).
+TEXT_FORMATS = {
+    "obj": lambda m: lines("v %.9g %.9g %.9g\n", m.vertices) + lines("f %d %d %d\n", m.faces + 1),
+    "off": lambda m: f"OFF\n{len(m.vertices)} {len(m.faces)} 0\n" + lines("%.9g %.9g %.9g\n", m.vertices)
+    + lines("3 %d %d %d\n", m.faces),
+    "ply-ascii": lambda m: (f"ply\nformat ascii 1.0\nelement vertex {len(m.vertices)}\nproperty float x\n"
+                           f"property float y\nproperty float z\nelement face {len(m.faces)}\n"
+                           "property list uchar int vertex_indices\nend_header\n")
+    + lines("%.9g %.9g %.9g\n", m.vertices) + lines("3 %d %d %d\n", m.faces),
+    "stl-ascii": lambda m: "solid mesh\n" + lines("facet normal %.8e %.8e %.8e\n outer loop\n"
+                                                  + "  vertex %.8e %.8e %.8e\n" * 3 + " endloop\nendfacet\n",
+                                                  np.concatenate([m.face_normals, m.triangles.reshape(-1, 9)], axis=1))
+    + "endsolid mesh\n",
+}
+
+
+@functools.lru_cache(maxsize=None)
+def icosphere(subdivisions):
+    return trimesh.creation.icosphere(subdivisions=subdivisions)
 
 
 @pytest.mark.slow
@@ -476,9 +506,8 @@ def icosphere_files(folder, subdivisions):
 def test_a_load_takes_at_most_the_file_size_beyond_what_it_returns(fmt, tmp_path_factory):
     """Peak resident memory of a load in a fresh process, less the returned arrays and
     the (mapped) file itself, is at most the file size; the icosphere(7) (327,680 faces)
-    in each format, 6 to 98 MB."""
-    paths = icosphere_files(str(tmp_path_factory.getbasetemp()), 7)
-    got = load_memory(paths[fmt], run_user_text)
+    in each format, 6 to 84 MB."""
+    got = load_memory(icosphere_file(str(tmp_path_factory.getbasetemp()), 7, fmt), run_user_text)
     assert got["extra"] <= got["file"], got
 
 
@@ -486,8 +515,8 @@ def test_a_load_takes_at_most_the_file_size_beyond_what_it_returns(fmt, tmp_path
 def test_the_memory_check_fails_a_loader_that_makes_objects_per_face(tmp_path_factory):
     """The broken variant: the OFF through trimesh (compiled readers off), which parses
     with Python objects per line, exceeds the same bound."""
-    paths = icosphere_files(str(tmp_path_factory.getbasetemp()), 7)
-    got = load_memory(paths["off"], run_user_text, env={"SCATTER_NUMPY": "1"})
+    got = load_memory(icosphere_file(str(tmp_path_factory.getbasetemp()), 7, "off"), run_user_text,
+                      env={"SCATTER_NUMPY": "1"})
     assert got["extra"] > got["file"], got
 
 
