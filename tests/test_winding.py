@@ -486,7 +486,7 @@ def test_kernel_expansions_are_numpys_and_refuse_bad_arrays(monkeypatch):
     with np.errstate(all="ignore"):
         assert out.tobytes() == winding._expansions(sums, origin).tobytes()
     for args in ((sums[:, :33].copy(), origin, out), (sums, origin[:2].copy(), out), (sums, origin, out[:39]),
-                 (sums, origin, out[:, :27].copy()), (sums.astype(np.float32), origin, out), (sums.T, origin, out)):
+                 (sums, origin, out[:, :27].copy()), (np.ones((40, 34), np.float32), origin, out), (sums.T, origin, out)):
         with pytest.raises((TypeError, ValueError)):
             KERNEL.expansions(*args)
 
