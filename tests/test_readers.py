@@ -468,7 +468,7 @@ def icosphere_file(folder, subdivisions, fmt):
     suffix, options = FORMATS[fmt]
     path = Path(folder) / f"ico{subdivisions}-{fmt}.{suffix}"
     if fmt in TEXT_FORMATS:
-        Path(path).write_text(TEXT_FORMATS[fmt](icosphere(subdivisions)))
+        path.write_text(TEXT_FORMATS[fmt](icosphere(subdivisions)))
     else:
         icosphere(subdivisions).export(path, **options)
     return path

@@ -190,9 +190,7 @@ def node_boxes(tri, leaf):
     """(N, 3), (N, 3) float64: the boxes of the complete tree over ``tri`` (F, 9) in leaves
     of ``leaf`` faces, N = 2 L - 1 for L leaves (a power of two); empty: lo +inf, hi -inf."""
     nf = len(tri)
-    leaves = 1 << max(0, int(np.ceil(np.log2(-(-nf // leaf)))))
-    while leaves * leaf < nf:
-        leaves *= 2
+    leaves = leaf_count(nf, leaf)
     if _kernel is not None:
         return _kernel.boxes(tri, leaf, leaves)
     pts = np.full((leaves * leaf * 3, 3), np.inf)
