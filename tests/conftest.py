@@ -26,6 +26,26 @@ ROOT = Path(__file__).resolve().parent.parent
 SAMPLES = ROOT / "samples"
 
 
+def pytest_configure(config):
+    """Compile the package's bytecode once, before the test processes start (in the main
+    process only, not in pytest-xdist's workers). An editable install leaves the checkout
+    uncompiled, and where PYTHONDONTWRITEBYTECODE is set (as on CI's machines) every
+    ``scatter`` the tests start would compile the modules it imports again, about 0.08 s
+    of each of some 800 commands; a plain ``pip install .`` compiles them at install."""
+    if not hasattr(config, "workerinput"):
+        import compileall
+
+        for package in ("scatter_cli", "testkit"):
+            compileall.compile_dir(ROOT / package, quiet=1)
+
+
+def pytest_collection_modifyitems(config, items):
+    """The heavy tests first, in file order otherwise: pytest-xdist hands out tests in
+    collection order, and a heavy test left for the end keeps one worker busy while the
+    others have nothing left (CI keeps no timings from run to run to order them by)."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 def user_env(env=None):
     """The environment of a user's shell: this one without PYTHONUNBUFFERED (so standard
     output is block-buffered, as in a terminal session) and without CI, plus ``env``.
