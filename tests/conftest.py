@@ -12,6 +12,12 @@ from hypothesis import settings
 
 from testkit.hardcheck import awkward_mesh, spread_triangles, triangles_mesh  # noqa: F401 (the tests' mesh builders)
 
+# pytest keeps each test module as it rewrote its asserts (in tests/__pycache__) unless
+# PYTHONDONTWRITEBYTECODE says not to, and rewriting them all again costs each test process
+# some 5 CPU seconds: the test processes keep them whatever that says (the commands the
+# tests start still follow it).
+sys.dont_write_bytecode = False
+
 # Property tests explore a fixed sequence of examples: a CI run is reproducible.
 settings.register_profile("scatter", derandomize=True, database=None, deadline=None)
 settings.load_profile("scatter")

@@ -1,6 +1,7 @@
 """The Dask engine on a real local cluster: a `dask scheduler` and two `dask worker`
 processes on 127.0.0.1, started here and torn down after."""
 
+import importlib.util
 import json
 import os
 import shutil
@@ -21,7 +22,8 @@ from .conftest import ROOT, SAMPLES, popen_user, scatter_command
 from .batchtools import (HANG, Feeder, alive, collection, outputs, parent_of, reference, run_elsewhere,
                          sample_in_process, sample_warnings, warning_lines, warning_meshes)
 
-distributed = pytest.importorskip("distributed")
+# (Dask is imported by the tests that start a cluster, not at collection: it takes a second)
+pytestmark = pytest.mark.skipif(importlib.util.find_spec("distributed") is None, reason="dask[distributed] not installed")
 
 
 def free_port():
@@ -41,6 +43,8 @@ def start_cluster(workers, scheduler_env=None, home=None):
                         **quiet)]
     procs += [start_worker(address, home) for _ in range(workers)]
     try:
+        import distributed
+
         client = distributed.Client(address, timeout=60, set_as_default=False)
         client.wait_for_workers(workers, timeout=60)
     except BaseException:

@@ -304,7 +304,13 @@ def write_and_check(tmp_path, kind, frame, variant):
     return samples
 
 
-@pytest.mark.parametrize("variant", OUTPUTS)
+def open3d_slow(variants, output_of):
+    """The variants as parameters, those that Open3D reads (PCD) marked slow: its import
+    takes seconds."""
+    return [pytest.param(v, marks=pytest.mark.slow) if output_of(v) == "pcd" else v for v in variants]
+
+
+@pytest.mark.parametrize("variant", open3d_slow(OUTPUTS, lambda v: OUTPUTS[v][0]))
 @pytest.mark.parametrize("kind", KINDS)
 def test_every_column_of_every_run_reads_back(tmp_path, kind, variant):
     samples = write_and_check(tmp_path, kind, "plain", variant)
@@ -366,7 +372,7 @@ BROKEN = {  # a writer that drops, renames or alters a column -> the run and out
 }
 
 
-@pytest.mark.parametrize("broken", BROKEN)
+@pytest.mark.parametrize("broken", open3d_slow(BROKEN, lambda b: OUTPUTS[BROKEN[b][2]][0]))
 def test_a_dropped_renamed_or_altered_column_fails_the_check(tmp_path, monkeypatch, broken):
     breaking, kind, variant = BROKEN[broken]
     write_and_check(tmp_path, kind, "plain", variant)

@@ -153,6 +153,7 @@ def path(request, monkeypatch):
 
 # ---- distances ----
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ALL)
 def test_distances_are_exact(name, path):
     v, f = mesh(name)
@@ -161,6 +162,7 @@ def test_distances_are_exact(name, path):
     assert agrees(tree, tri, query_points(tri))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["icosphere", "instanced", "open-sphere"])
 def test_a_tree_that_skips_a_node_fails(name, path):
     v, f = mesh(name)

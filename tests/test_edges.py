@@ -150,6 +150,7 @@ def random_meshes():
                      st.lists(st.booleans(), min_size=30, max_size=30))
 
 
+@pytest.mark.slow
 @given(random_meshes(), st.sampled_from(["1", "3", "7"]))
 def test_the_kernel_finds_the_edges_numpy_finds(mesh, threads):
     """Fuzzed triangle lists, on several thread counts (more threads than vertices too):

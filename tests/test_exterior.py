@@ -106,6 +106,7 @@ def classify_cells(name, occluder_class, n=20000, seed=3):
     return int(np.sum(exterior & ~kept)), int(np.sum(~exterior & kept)), int(exterior.sum())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SCENE_NAMES)
 def test_classifier_drops_under_1e3_of_exterior_and_keeps_no_hidden(name):
     dropped, kept_hidden, exterior = classify_cells(name, exterior_rays.Occluder)

@@ -13,7 +13,7 @@ from scatter_cli.loading.load import load_surface
 from scatter_cli.writers import pointfiles
 from scatter_cli.writers.pointfiles import PointFile
 
-from .conftest import SAMPLES, run_scatter, run_user, scatter_command
+from .conftest import SAMPLES, run_user, scatter_command, scatter_in_process
 
 COUNT = 300
 FILES = {  # name -> (suffix, sample options)
@@ -26,10 +26,13 @@ COUNT_LINES = {"ply": b"element vertex %d", "npy": b"'shape': (%d,)", "pcd": b"P
 
 @pytest.fixture(scope="module")
 def written(tmp_path_factory):
+    """The files ``scatter sample`` writes, one per format (the command run in this process:
+    what is checked here is the files)."""
     folder = tmp_path_factory.mktemp("written")
     for name, (suffix, options) in FILES.items():
-        run_scatter("sample", SAMPLES / "spot_triangulated.obj", "-n", COUNT, "-a", "normal", *options, "-o",
-                    folder / f"{name}.{suffix}", check=True)
+        proc = scatter_in_process("sample", SAMPLES / "spot_triangulated.obj", "-n", COUNT, "-a", "normal", *options,
+                                  "-o", folder / f"{name}.{suffix}")
+        assert proc.returncode == 0, proc.stderr.decode()
     return folder
 
 
@@ -122,13 +125,19 @@ MALFORMED = {  # what is wrong -> (the header, the error's words)
 
 
 @pytest.mark.parametrize("case", MALFORMED)
-def test_a_malformed_ply_header_is_one_error_in_merge_preview_and_sample(case, tmp_path):
+def test_a_malformed_ply_header_is_one_error_in_merge_preview_and_sample(case, tmp_path, monkeypatch):
+    """Each command's words and exit code; the first case through real processes (what a
+    shell sees), the others through the commands in this process."""
     header, words = MALFORMED[case]
     (tmp_path / "bad.ply").write_bytes(header + MESH_BODY)
     expected = f"error: bad.ply: {words}"
+    monkeypatch.chdir(tmp_path)
     for args in (["merge", "bad.ply", "bad.ply", "-o", "m.ply"], ["preview", "bad.ply", "-o", "s.png"],
                  ["sample", "bad.ply", "-o", "o.csv"]):
-        proc = run_user(scatter_command(*args), cwd=tmp_path)
+        if case == next(iter(MALFORMED)):
+            proc = run_user(scatter_command(*args), cwd=tmp_path)
+        else:
+            proc = scatter_in_process(*args)
         lines = proc.stderr.decode().splitlines()
         assert proc.returncode == 1 and lines[0].startswith(expected), (args, lines)
         assert "Traceback" not in proc.stderr.decode()

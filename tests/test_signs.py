@@ -58,6 +58,7 @@ def test_a_terrain_warns_once_with_the_share_of_its_coin_flips(tmp_path, monkeyp
         assert_warns_with_its_share(path, str(path), near=(0.5,))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("options", [dict(near=(0.01,)), dict(volume=True), dict(near=(0.05,), box_share=0.5)])
 def test_a_closed_mesh_does_not_warn(options, monkeypatch):
     assert_silent(SAMPLES / "skull.ply", **options)

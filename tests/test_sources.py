@@ -112,6 +112,7 @@ def whole(src):
 cuts = st.lists(st.integers(0, N), max_size=6).map(sorted)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("want_bary", [False, True])
 @pytest.mark.parametrize("kind", list(BUILDERS))
 @settings(max_examples=15)

@@ -512,6 +512,7 @@ def nested_links(rng, size, triangles):
     return np.array(rows, dtype=np.int64)
 
 
+@pytest.mark.slow
 @needs_kernel
 @pytest.mark.parametrize("seed", range(6))
 def test_kernel_walks_any_nested_links_as_the_numpy_path(seed):

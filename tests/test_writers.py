@@ -235,6 +235,7 @@ def format_literals(root, skip=("writers", "loading")):
     return sorted(found)
 
 
+@pytest.mark.slow
 def test_no_module_outside_the_writers_names_an_output_format(tmp_path):
     from pathlib import Path
 
