@@ -42,7 +42,7 @@ def pytest_configure(config):
         import compileall
 
         for package in ("scatter_cli", "testkit"):
-            compileall.compile_dir(ROOT / package, quiet=1)
+            compileall.compile_dir(ROOT / package, quiet=2)  # (a read-only checkout: nothing said)
 
 
 def pytest_collection_modifyitems(config, items):
