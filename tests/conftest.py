@@ -36,8 +36,8 @@ def pytest_configure(config):
     """Compile the package's bytecode once, before the test processes start (in the main
     process only, not in pytest-xdist's workers). An editable install leaves the checkout
     uncompiled, and where PYTHONDONTWRITEBYTECODE is set (as on CI's machines) every
-    ``scatter`` the tests start would compile the modules it imports again, about 0.08 s
-    of each of some 800 commands; a plain ``pip install .`` compiles them at install."""
+    ``scatter`` the tests start (hundreds in a run) would compile the modules it imports
+    again, about 0.08 s each time; a plain ``pip install .`` compiles them at install."""
     if not hasattr(config, "workerinput"):
         import compileall
 
