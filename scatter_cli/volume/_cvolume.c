@@ -50,6 +50,17 @@ static int finite_all(const double *x, npy_intp n)
     return 1;
 }
 
+/* whether ``leaves`` leaves of ``leaf`` slots each are the complete tree that
+ * distance.leaf_count makes for nf faces (a power of two, the fewest that hold them;
+ * compared without a product that could overflow) */
+static int leaves_fit(int64_t leaves, int64_t leaf, int64_t nf)
+{
+    if (leaf < 1 || leaf > 64 || leaves < 1 || leaves > ((int64_t)1 << MAX_DEPTH) || (leaves & (leaves - 1)))
+        return 0;
+    int64_t least = (nf + leaf - 1) / leaf; /* leaves needed */
+    return leaves >= least && (leaves == 1 || leaves / 2 < least);
+}
+
 /* the tree's arrays checked into *t; 0 with an exception set when wrong */
 static int get_tree(PyObject *otri, PyObject *oorder, PyObject *othin, PyObject *olo, PyObject *ohi, long long leaf,
                     Tree *t)
@@ -66,8 +77,7 @@ static int get_tree(PyObject *otri, PyObject *oorder, PyObject *othin, PyObject 
         return 0;
     }
     int64_t leaves = (nodes + 1) / 2;
-    if (nodes < 1 || (leaves & (leaves - 1)) != 0 || 2 * leaves - 1 != nodes || leaves > ((int64_t)1 << MAX_DEPTH) ||
-        leaves * leaf < nf || (leaves > 1 && leaves / 2 * leaf >= nf)) {
+    if (nodes < 1 || 2 * leaves - 1 != nodes || !leaves_fit(leaves, leaf, nf)) {
         PyErr_SetString(PyExc_ValueError, "tree: node count does not fit the faces");
         return 0;
     }
@@ -966,9 +976,7 @@ static PyObject *order_py(PyObject *self, PyObject *args)
     if (!PyArg_ParseTuple(args, "OLL", &oc, &leaf, &leaves) || !get(oc, NPY_FLOAT64, -1, &ca, "centres"))
         return NULL;
     npy_intp nf = PyArray_SIZE(ca) / 3;
-    if (PyArray_NDIM(ca) != 2 || PyArray_DIM(ca, 1) != 3 || nf < 1 || leaf < 1 || leaf > 64 || leaves < 1 ||
-        leaves > ((long long)1 << MAX_DEPTH) || (leaves & (leaves - 1)) != 0 || leaves * leaf < nf ||
-        (leaves > 1 && leaves / 2 * leaf >= nf)) {
+    if (PyArray_NDIM(ca) != 2 || PyArray_DIM(ca, 1) != 3 || nf < 1 || !leaves_fit(leaves, leaf, nf)) {
         PyErr_SetString(PyExc_ValueError, "order: bad shapes");
         return NULL;
     }
@@ -1069,8 +1077,7 @@ static PyObject *boxes_py(PyObject *self, PyObject *args)
     long long leaf, leaves;
     if (!PyArg_ParseTuple(args, "OLL", &ot, &leaf, &leaves) || !get_rows(ot, NPY_FLOAT64, 9, &ta, &nf, "triangles"))
         return NULL;
-    if (leaf < 1 || leaf > 64 || leaves < 1 || leaves > ((long long)1 << MAX_DEPTH) || (leaves & (leaves - 1)) != 0 ||
-        leaves * leaf < nf || (leaves > 1 && leaves / 2 * leaf >= nf)) {
+    if (!leaves_fit(leaves, leaf, nf)) {
         PyErr_SetString(PyExc_ValueError, "boxes: bad shapes");
         return NULL;
     }

@@ -258,14 +258,14 @@ def closest_points(tree, points):
                             np.take(points, rows, axis=0), np.arange(m), tol, part_dist, part_closest, part_face,
                             native.worker_count(), tree.wide())
             dist[rows], face[rows] = part_dist, part_face
-            whole_rows(closest)[rows] = whole_rows(part_closest)
+            _whole_rows(closest)[rows] = _whole_rows(part_closest)
     else:
         for i in range(0, n, BLOCK):
             dist[i:i + BLOCK], closest[i:i + BLOCK], face[i:i + BLOCK] = _closest_numpy(tree, points[i:i + BLOCK], tol)
     return dist / tree.unit, closest / tree.unit, face
 
 
-def whole_rows(a):
+def _whole_rows(a):
     """(n,) view of the rows of ``a`` (n, k) C-contiguous, each one item: NumPy moves a
     row in one copy where fancy indexing of ``a`` itself goes element by element."""
     return a.view(np.dtype((np.void, a.strides[0]))).reshape(len(a))
