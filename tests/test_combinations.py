@@ -2,7 +2,7 @@
 
 Each combination is written in this process (``api.write``, what ``scatter sample -o``
 does after its checks), read back by a reader that is not ours where one exists (NumPy
-for NPY and the text formats, trimesh for PLY, Open3D for PCD, laspy for LAS/LAZ, pxr for
+for NPY and the text formats, trimesh for PLY, pypcd4 for PCD, laspy for LAS/LAZ, pxr for
 USD), and every column is compared with the run's in-memory ``Samples`` within the
 format's precision; the file's columns must be those the contract names, in its order,
 none dropped or renamed. A combination the contract refuses is a usage error: exit 2 and
@@ -24,6 +24,7 @@ from scatter_cli.writers import run_precision
 
 from .batchtools import command_in_process
 from .conftest import SAMPLES
+from .test_pcd import read_pcd as read_pcd_fields
 
 BOX, TRUCK = str(SAMPLES / "boxtextured.glb"), str(SAMPLES / "cesiummilktruck.glb")
 COUNT = 48
@@ -136,23 +137,11 @@ PCL_NAMES = {"nx": "normal_x", "ny": "normal_y", "nz": "normal_z"}
 
 
 def read_pcd(path, want):
-    import open3d as o3d
-
-    from scatter_cli.writers.pcd import read as table_reader
-
     with open(path, "rb") as f:
         names = next(line for line in f if line.startswith(b"FIELDS")).decode().split()[1:]
-    cloud = o3d.t.io.read_point_cloud(str(path)).point
-    columns = dict(zip("xyz", cloud.positions.numpy().T))
-    for known, cols in (("normals", CONTRACT["normal"]), ("colors", CONTRACT["color"][:3])):
-        if known in cloud:
-            columns.update(zip(cols, cloud[known].numpy().T))
-    for n in names:
-        if n not in ("x", "y", "z", "rgb", *PCL_NAMES.values()):
-            columns[n] = cloud[n].numpy()[:, 0]
-    if "rgb" in names:  # Open3D keeps no alpha: the format table's reader
-        columns["alpha"] = table_reader(str(path)).columns()["alpha"]
-    return names, columns, 0.0
+    fields = read_pcd_fields(path)
+    pcl_to_contract = {pcl: ours for ours, pcl in PCL_NAMES.items()}
+    return names, {pcl_to_contract.get(n, n): column for n, column in fields.items()}, 0.0
 
 
 def pcd_names(names):
@@ -304,13 +293,7 @@ def write_and_check(tmp_path, kind, frame, variant):
     return samples
 
 
-def open3d_slow(variants, output_of):
-    """The variants as parameters, those that Open3D reads (PCD) marked slow: its import
-    takes seconds."""
-    return [pytest.param(v, marks=pytest.mark.slow) if output_of(v) == "pcd" else v for v in variants]
-
-
-@pytest.mark.parametrize("variant", open3d_slow(OUTPUTS, lambda v: OUTPUTS[v][0]))
+@pytest.mark.parametrize("variant", OUTPUTS)
 @pytest.mark.parametrize("kind", KINDS)
 def test_every_column_of_every_run_reads_back(tmp_path, kind, variant):
     samples = write_and_check(tmp_path, kind, "plain", variant)
@@ -372,7 +355,7 @@ BROKEN = {  # a writer that drops, renames or alters a column -> the run and out
 }
 
 
-@pytest.mark.parametrize("broken", open3d_slow(BROKEN, lambda b: OUTPUTS[BROKEN[b][2]][0]))
+@pytest.mark.parametrize("broken", BROKEN)
 def test_a_dropped_renamed_or_altered_column_fails_the_check(tmp_path, monkeypatch, broken):
     breaking, kind, variant = BROKEN[broken]
     write_and_check(tmp_path, kind, "plain", variant)

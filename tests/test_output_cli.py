@@ -9,26 +9,29 @@ from scatter_cli.errors import ScatterError
 
 from .conftest import SAMPLES, run_scatter
 from .test_cli import assert_one_line_error
+from .test_pcd import read_pcd
 
 MESH = SAMPLES / "boxvertexcolors.glb"
 
 
 @pytest.mark.slow
 def test_pcd_ascii_and_las_stats(tmp_path):
-    o3d = pytest.importorskip("open3d")
+    pytest.importorskip("pypcd4")
     laspy = pytest.importorskip("laspy")
+    import trimesh
+
     run_scatter("sample", MESH, "-n", 300, "-a", "color,normal", "--ascii", "-o", tmp_path / "a.pcd", check=True)
     run_scatter("sample", MESH, "-n", 300, "-a", "color,normal", "-o", tmp_path / "a.ply", check=True)
-    cloud = o3d.io.read_point_cloud(str(tmp_path / "a.pcd"))
-    ply = o3d.io.read_point_cloud(str(tmp_path / "a.ply"))
-    np.testing.assert_array_equal(np.asarray(cloud.points, np.float32), np.asarray(ply.points, np.float32))
-    np.testing.assert_array_equal(np.asarray(cloud.colors), np.asarray(ply.colors))
+    pcd = read_pcd(tmp_path / "a.pcd")
+    ply = trimesh.load(tmp_path / "a.ply")
+    np.testing.assert_array_equal(np.stack([pcd["x"], pcd["y"], pcd["z"]], axis=1), np.asarray(ply.vertices, np.float32))
+    np.testing.assert_array_equal(np.stack([pcd[c] for c in ("red", "green", "blue", "alpha")], axis=1), ply.colors)
     run_scatter("sample", MESH, "-n", 300, "-a", "color", "-o", tmp_path / "a.laz", "--stats", tmp_path / "s.json",
                 check=True)
     report = json.loads((tmp_path / "s.json").read_text())["output"]["las"]
     las = laspy.read(tmp_path / "a.laz")
     xyz = np.stack([las.x, las.y, las.z], axis=1)
-    assert np.abs(xyz - np.asarray(ply.points)).max() <= report["scale"][0] / 2 + 1e-7  # ply: float32
+    assert np.abs(xyz - np.asarray(ply.vertices)).max() <= report["scale"][0] / 2 + 1e-7  # ply: float32
     assert las.header.point_count == 300
 
 

@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from scatter_cli.core import native
-from scatter_cli.volume import winding
+from scatter_cli.volume import distance, winding
 from scatter_cli.volume.winding import WindingTree, winding_numbers
 
 from .conftest import SAMPLES
@@ -51,14 +51,9 @@ def exact_winding(tri, points, chunk=32):
 
 
 def distance_to(tri, points):
-    """(n,) distance from ``points`` to the triangles (Open3D, float32: enough to keep
-    points away from the surface)."""
-    import open3d as o3d
-
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(tri.reshape(-1, 3).astype(np.float32)),
-                        o3d.core.Tensor(np.arange(3 * len(tri), dtype=np.uint32).reshape(-1, 3)))
-    return scene.compute_distance(o3d.core.Tensor(points.astype(np.float32))).numpy().astype(np.float64)
+    """(n,) distance from ``points`` to the triangles ``tri`` (F, 3, 3): the volume's exact
+    closest points, which tests/test_distance.py holds to brute force."""
+    return distance.closest_points(distance.TriangleTree.from_triangles(tri), points)[0]
 
 
 def query_points(tri, n_box=1200, n_near=600, seed=0):
