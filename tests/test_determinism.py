@@ -9,7 +9,7 @@ import scatter_cli
 from scatter_cli.api import prepare
 from scatter_cli.sampling.plan import uniforms
 
-from .conftest import run_scatter
+from .conftest import run_scatter, scatter_in_process
 
 
 def test_stream_positions_do_not_depend_on_chunking():
@@ -84,15 +84,22 @@ def test_seeds_give_different_points(sample_mesh):
 @pytest.mark.slow
 @pytest.mark.parametrize("fmt,method", [("ply", "random"), ("csv", "random"), ("npy", "random"),
                                         ("ply", "stratified"), ("ply", "sobol")])
-def test_command_output_bytes_identical_across_chunk_sizes_and_threads(sample_mesh, tmp_path, fmt, method):
+def test_command_output_bytes_identical_across_chunk_sizes_and_threads(sample_mesh, tmp_path, fmt, method,
+                                                                      monkeypatch):
+    """The first run in a real process, the others through the command's entry point in
+    this process (SCATTER_THREADS is read at each run)."""
     mesh = sample_mesh("spot_triangulated.obj")
     digests = set()
-    for chunk, threads in [(None, "1"), ("999", "2"), ("65536", "2"), ("1", "1")]:
+    for k, (chunk, threads) in enumerate([(None, "1"), ("999", "2"), ("65536", "2"), ("1", "1")]):
         out = tmp_path / f"out-{chunk}-{threads}.{fmt}"
         args = ["sample", mesh, "-n", "3000", "-a", "face,bary", "--seed", "9", "--method", method, "-o", out]
         if chunk:
             args += ["--chunk-size", chunk]
-        run_scatter(*args, check=True, env={"SCATTER_THREADS": threads})
+        if k == 0:
+            run_scatter(*args, check=True, env={"SCATTER_THREADS": threads})
+        else:
+            monkeypatch.setenv("SCATTER_THREADS", threads)
+            assert scatter_in_process(*args).returncode == 0
         digests.add(hashlib.sha256(out.read_bytes()).hexdigest())
     assert len(digests) == 1
 

@@ -12,7 +12,7 @@ from scatter_cli.commands import render
 from scatter_cli.errors import ScatterError
 from scatter_cli.writers.pointfiles import read_points
 
-from .conftest import SAMPLES, run_scatter, run_user, scatter_command
+from .conftest import SAMPLES, run_scatter, run_user, scatter_command, scatter_in_process
 
 Image = pytest.importorskip("PIL.Image")  # the preview extra
 
@@ -250,16 +250,17 @@ FORMATS = ["ply", "csv", "xyz", "npy", "pcd", "las", "laz", "usda", "usdc"]
 
 @pytest.fixture(scope="module")
 def point_files(tmp_path_factory):
+    """Every format the command writes, as ``scatter sample`` writes it: the first file
+    through a real process, the rest through the command's entry point in this process."""
     folder = tmp_path_factory.mktemp("points")
-    for fmt in FORMATS:
-        run_scatter("sample", SAMPLES / "spot_triangulated.obj", "-n", "3000", "-a", "normal", "-o",
-                    folder / f"spot.{fmt}", check=True)
-    for fmt in ("ply", "pcd"):
-        run_scatter("sample", SAMPLES / "spot_triangulated.obj", "-n", "3000", "-a", "normal", "--ascii", "-o",
-                    folder / f"spot-ascii.{fmt}", check=True)
-    for fmt in ("pcd", "las", "usda"):
-        run_scatter("sample", SAMPLES / "boxvertexcolors.glb", "-n", "3000", "-a", "color", "-o",
-                    folder / f"box.{fmt}", check=True)
+    spot, box = SAMPLES / "spot_triangulated.obj", SAMPLES / "boxvertexcolors.glb"
+    jobs = [(spot, f"spot.{fmt}", ["-a", "normal"]) for fmt in FORMATS]
+    jobs += [(spot, f"spot-ascii.{fmt}", ["-a", "normal", "--ascii"]) for fmt in ("ply", "pcd")]
+    jobs += [(box, f"box.{fmt}", ["-a", "color"]) for fmt in ("pcd", "las", "usda")]
+    for k, (mesh, name, options) in enumerate(jobs):
+        result = (run_scatter if k == 0 else scatter_in_process)("sample", mesh, "-n", "3000", *options, "-o",
+                                                                 folder / name)
+        assert result.returncode == 0, result.stderr.decode()
     return folder
 
 
