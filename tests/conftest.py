@@ -93,11 +93,12 @@ def run_scatter(*args, input=None, check=False, env=None, timeout=120, stdout=No
     return proc
 
 
-def scatter_in_process(*args):
+def scatter_in_process(*args, env=None, check=False):
     """``scatter ARGS`` through the command's entry point in this process, for checks of
-    what a command says and returns (usage errors): a CompletedProcess like run_scatter's,
-    its standard output and error captured as bytes. Each family of such checks keeps one
-    case in a real subprocess (run_scatter) for what only a process shows."""
+    what a command says, returns and writes: a CompletedProcess like run_scatter's, its
+    standard output and error captured as bytes; ``env``: variables set for the run (as
+    SCATTER_THREADS), then put back. Each family of such checks keeps one case in a real
+    subprocess (run_scatter) for what only a process shows."""
     import contextlib
     import io
 
@@ -106,8 +107,19 @@ def scatter_in_process(*args):
     out, err = io.BytesIO(), io.BytesIO()
     text_out = io.TextIOWrapper(out, encoding="utf-8", write_through=True)
     text_err = io.TextIOWrapper(err, encoding="utf-8", write_through=True)
-    with contextlib.redirect_stdout(text_out), contextlib.redirect_stderr(text_err):
-        code = command_in_process([str(a) for a in args])
+    saved = {k: os.environ.get(k) for k in env or {}}
+    try:
+        os.environ.update(env or {})
+        with contextlib.redirect_stdout(text_out), contextlib.redirect_stderr(text_err):
+            code = command_in_process([str(a) for a in args])
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    if check and code != 0:
+        raise AssertionError(f"scatter {' '.join(map(str, args))} failed: {err.getvalue().decode()}")
     return subprocess.CompletedProcess(["scatter", *map(str, args)], code, out.getvalue(), err.getvalue())
 
 

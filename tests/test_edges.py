@@ -384,12 +384,12 @@ def test_chunks_threads_and_shards_give_the_same_bytes(tmp_path, monkeypatch):
     args = ["sample", box_mesh_file(tmp_path), "-n", "20000", "--edges", "0.37", "-a", "normal,sharp,bary"]
     whole = tmp_path / "whole.ply"
     run_scatter(*args, "-o", whole, check=True)
-    chunked = tmp_path / "chunked.ply"
-    run_scatter(*args, "--chunk-size", "999", "-o", chunked, env={"SCATTER_THREADS": "3"}, check=True)
+    chunked = tmp_path / "chunked.ply"  # (it and the shards through the command's entry point in this process)
+    scatter_in_process(*args, "--chunk-size", "999", "-o", chunked, env={"SCATTER_THREADS": "3"}, check=True)
     parts = []
     for k in range(3):
         parts.append(tmp_path / f"part{k}.ply")
-        run_scatter(*args, "--shard", f"{k}/3", "-o", parts[-1], check=True)
+        scatter_in_process(*args, "--shard", f"{k}/3", "-o", parts[-1], check=True)
     merged = tmp_path / "merged.ply"
     run_scatter("merge", *parts, "-o", merged, check=True)
     assert whole.read_bytes() == chunked.read_bytes() == merged.read_bytes()
