@@ -13,7 +13,7 @@ from scatter_cli.surface import topology
 from scatter_cli.loading.load import load_surface
 from scatter_cli.surface.model import Geometry, Instance, Surface, corners, doubled_areas
 
-from .conftest import SAMPLES, run_scatter
+from .conftest import SAMPLES, run_scatter, scatter_in_process
 
 SAMPLES_CLOSED = {"icosahedron_binary.stl": True, "hemisphere.off": False, "moebius-160-10.ply": False,
                   "pediment_join_plate_12.stl": False}
@@ -117,14 +117,15 @@ def test_a_scene_counts_every_instance_and_its_area():
 def test_info_says_it_in_text_and_json(tmp_path):
     closed = json.loads(run_scatter("info", SAMPLES / "icosahedron_binary.stl", "--json", check=True).stdout)
     assert closed["closed"] and closed["boundary_edges"] == closed["non_manifold_edges"] == 0
-    report = json.loads(run_scatter("info", SAMPLES / "hemisphere.off", "--json", check=True).stdout)
+    # (the rest through the command's entry point in this process)
+    report = json.loads(scatter_in_process("info", SAMPLES / "hemisphere.off", "--json", check=True).stdout)
     g = geometry("hemisphere.off")
     b, n, i, at = reference(g.vertices, g.faces)
     assert (report["closed"], report["boundary_edges"], report["non_manifold_edges"], report["inconsistent_edges"]) == (
         False, b, n, i)
     assert report["boundary_area"] == pytest.approx(0.5 * doubled_areas(corners(g.vertices, g.faces))[at].sum())
-    text = run_scatter("info", SAMPLES / "hemisphere.off", check=True).stdout.decode()
+    text = scatter_in_process("info", SAMPLES / "hemisphere.off", check=True).stdout.decode()
     line = [s for s in text.splitlines() if s.startswith("closed")]
     assert len(line) == 1 and line[0].split()[1] == "no:" and f"{b:,} boundary" in line[0]
-    text = run_scatter("info", SAMPLES / "icosahedron_binary.stl", check=True).stdout.decode()
+    text = scatter_in_process("info", SAMPLES / "icosahedron_binary.stl", check=True).stdout.decode()
     assert [s.split()[1] for s in text.splitlines() if s.startswith("closed")] == ["yes"]

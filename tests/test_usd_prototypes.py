@@ -14,7 +14,7 @@ from scatter_cli.loading import usd as usdread
 from scatter_cli.commands.info import describe
 from scatter_cli.loading.load import load_surface
 
-from .conftest import run_scatter
+from .conftest import run_scatter, scatter_in_process
 
 pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom  # noqa: E402
@@ -126,7 +126,7 @@ def test_info_lists_what_is_not_sampled_and_why(tmp_path):
     assert got["/World/ball"] == ("a Sphere prim, not a mesh", pytest.approx(np.pi))
     assert got["/World/dust"] == ("a Points prim, not a mesh", 0.0)
     assert set(got) == {"/World/hidden", "/World/guide", "/World/proxy", "/World/ball", "/World/dust"}
-    text = run_scatter("info", path, check=True).stdout.decode()
+    text = scatter_in_process("info", path, check=True).stdout.decode()  # (the text in this process)
     assert sum(line.startswith("not sampled") for line in text.splitlines()) == 5
 
 
