@@ -17,7 +17,11 @@ from scatter_cli.writers import FORMATS, write_stream
 from .conftest import SAMPLES, popen_user, scatter_command
 
 EXPECTED = {signal.SIGINT: (130, "error: interrupted"), signal.SIGTERM: (143, "error: terminated")}
-COUNT = {"usd": 3_000_000}  # USD gathers its points in memory: a count that fits
+# A run that takes seconds to write: long enough to be signalled mid-write. A binary output
+# of known size is first checked against the free space (10^9 LAS points would need 42 GB
+# free: 10^8 need 4.2 GB), and USD gathers its points in memory: a count that fits.
+COUNT = {"usd": 3_000_000}
+DEFAULT_COUNT = 10**8
 
 
 def writing_started(folder, fmt):
@@ -34,8 +38,9 @@ def writing_started(folder, fmt):
 def test_a_signal_during_a_write_stops_it_cleanly(tmp_path, fmt, sig):
     out = tmp_path / "out"
     out.mkdir()
-    proc = popen_user(scatter_command("sample", SAMPLES / "skull.ply", "-n", COUNT.get(fmt, 10**9), "-a", "normal",
-                                      "-o", out / f"points.{fmt}"), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    argv = scatter_command("sample", SAMPLES / "skull.ply", "-n", COUNT.get(fmt, DEFAULT_COUNT), "-a", "normal",
+                           "-o", out / f"points.{fmt}")
+    proc = popen_user(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 60
         while not writing_started(out, fmt):

@@ -24,7 +24,8 @@ def test_pcd_ascii_and_las_stats(tmp_path):
     run_scatter("sample", MESH, "-n", 300, "-a", "color,normal", "-o", tmp_path / "a.ply", check=True)
     pcd = read_pcd(tmp_path / "a.pcd")
     ply = trimesh.load(tmp_path / "a.ply")
-    np.testing.assert_array_equal(np.stack([pcd["x"], pcd["y"], pcd["z"]], axis=1), np.asarray(ply.vertices, np.float32))
+    xyz = np.stack([pcd["x"], pcd["y"], pcd["z"]], axis=1)
+    np.testing.assert_array_equal(xyz, np.asarray(ply.vertices, np.float32))
     np.testing.assert_array_equal(np.stack([pcd[c] for c in ("red", "green", "blue", "alpha")], axis=1), ply.colors)
     run_scatter("sample", MESH, "-n", 300, "-a", "color", "-o", tmp_path / "a.laz", "--stats", tmp_path / "s.json",
                 check=True)
