@@ -101,23 +101,16 @@ def scatter_in_process(*args, env=None, check=False):
     subprocess (run_scatter) for what only a process shows."""
     import contextlib
     import io
+    from unittest import mock
 
     from .batchtools import command_in_process
 
     out, err = io.BytesIO(), io.BytesIO()
     text_out = io.TextIOWrapper(out, encoding="utf-8", write_through=True)
     text_err = io.TextIOWrapper(err, encoding="utf-8", write_through=True)
-    saved = {k: os.environ.get(k) for k in env or {}}
-    try:
-        os.environ.update(env or {})
-        with contextlib.redirect_stdout(text_out), contextlib.redirect_stderr(text_err):
-            code = command_in_process([str(a) for a in args])
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+    with mock.patch.dict(os.environ, env or {}), contextlib.redirect_stdout(text_out), \
+            contextlib.redirect_stderr(text_err):
+        code = command_in_process([str(a) for a in args])
     if check and code != 0:
         raise AssertionError(f"scatter {' '.join(map(str, args))} failed: {err.getvalue().decode()}")
     return subprocess.CompletedProcess(["scatter", *map(str, args)], code, out.getvalue(), err.getvalue())

@@ -173,7 +173,7 @@ def test_cli_shards_merge_into_the_whole_run(tmp_path, suffix, extra):
     parts = []
     for k in range(3):  # (the shards through the command's entry point in this process)
         parts.append(tmp_path / f"part{k}.{suffix}")
-        assert scatter_in_process("sample", mesh, *common, "--shard", f"{k}/3", "-o", parts[-1]).returncode == 0
+        scatter_in_process("sample", mesh, *common, "--shard", f"{k}/3", "-o", parts[-1], check=True)
     run_scatter("merge", *parts, "-o", tmp_path / f"merged.{suffix}", check=True)
     assert (tmp_path / f"merged.{suffix}").read_bytes() == (tmp_path / f"whole.{suffix}").read_bytes()
 

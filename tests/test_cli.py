@@ -450,8 +450,7 @@ def test_counts_and_densities_in_scientific_notation(sample_mesh, tmp_path, comm
         target = out / "p.npy" if command == "sample" else out / "{stem}.npy"
         # (sample through the command's entry point in this process; its error below and
         # every batch in a real process)
-        run = run_scatter if command == "batch" else scatter_in_process
-        assert run(command, mesh, *options, "-o", target).returncode == 0
+        (run_scatter if command == "batch" else scatter_in_process)(command, mesh, *options, "-o", target, check=True)
         return next(out.iterdir()).read_bytes()  # its only file
 
     assert written("-n", "1e3") == written("-n", "1000") == written("-n", "1.0e3")

@@ -30,9 +30,8 @@ def written(tmp_path_factory):
     what is checked here is the files)."""
     folder = tmp_path_factory.mktemp("written")
     for name, (suffix, options) in FILES.items():
-        proc = scatter_in_process("sample", SAMPLES / "spot_triangulated.obj", "-n", COUNT, "-a", "normal", *options,
-                                  "-o", folder / f"{name}.{suffix}")
-        assert proc.returncode == 0, proc.stderr.decode()
+        scatter_in_process("sample", SAMPLES / "spot_triangulated.obj", "-n", COUNT, "-a", "normal", *options,
+                           "-o", folder / f"{name}.{suffix}", check=True)
     return folder
 
 

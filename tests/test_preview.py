@@ -258,9 +258,8 @@ def point_files(tmp_path_factory):
     jobs += [(spot, f"spot-ascii.{fmt}", ["-a", "normal", "--ascii"]) for fmt in ("ply", "pcd")]
     jobs += [(box, f"box.{fmt}", ["-a", "color"]) for fmt in ("pcd", "las", "usda")]
     for k, (mesh, name, options) in enumerate(jobs):
-        result = (run_scatter if k == 0 else scatter_in_process)("sample", mesh, "-n", "3000", *options, "-o",
-                                                                 folder / name)
-        assert result.returncode == 0, result.stderr.decode()
+        (run_scatter if k == 0 else scatter_in_process)("sample", mesh, "-n", "3000", *options, "-o", folder / name,
+                                                        check=True)
     return folder
 
 

@@ -66,7 +66,7 @@ def test_shards_merge_to_the_whole_run(suffix, tmp_path):
     parts = []
     for k in range(3):  # (the shards through the command's entry point in this process)
         part = tmp_path / f"part{k}.{suffix}"
-        assert scatter_in_process("sample", ICO, *args, "--shard", f"{k}/3", "-o", part).returncode == 0
+        scatter_in_process("sample", ICO, *args, "--shard", f"{k}/3", "-o", part, check=True)
         parts.append(part)
     merged = tmp_path / f"merged.{suffix}"
     run_scatter("merge", *parts, "-o", merged, check=True)
