@@ -412,7 +412,12 @@ def test_fuzz_kernel_against_numpy_and_brute_force(seed, faces, scale, degenerat
         tri[k] = tri[0]
     elif degenerate == "slivers":
         tri[k, 2] = tri[k, 0] * 0.5 + tri[k, 1] * 0.5 + rng.normal(size=(len(k), 3)) * scale * 1e-9
-    points = np.vstack([rng.normal(size=(40, 3)) * scale * 2, tri[rng.integers(0, faces, 10), 0]])
+    # points anywhere, at corners, and just off the faces (where the faces' disks and the
+    # nodes' cylinders bound the distance most tightly)
+    w = rng.dirichlet(np.ones(3), 20)
+    on = np.einsum("ij,ijk->ik", w, tri[rng.integers(0, faces, 20)])
+    points = np.vstack([rng.normal(size=(40, 3)) * scale * 2, tri[rng.integers(0, faces, 10), 0],
+                        on + rng.normal(size=(20, 3)) * scale * 10.0 ** rng.integers(-12, 0, (20, 1))])
     tree = distance.TriangleTree.from_triangles(tri)
     kernel = distance.closest_points(tree, points) + (parity.parity_inside(tree, points),)
     with monkeypatch.context() as m:

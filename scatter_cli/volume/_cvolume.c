@@ -272,7 +272,9 @@ typedef struct {
 
 /* Four faces: their boxes, and the disks holding them (centre, unit normal, radius; a
  * radius of +inf and a zero normal for a thin or tiny face, whose normal rounding may
- * tilt, or a slot without a face). A face lies in its disk, so its distance is at least
+ * tilt, or a slot without a face). Each disk is the face's smallest: about the middle of
+ * its longest side when the angle across that side is not acute, else about its
+ * circumcentre (either in the face's plane). A face lies in its disk, so its distance is at least
  * the disk's: sqrt(h^2 + max(0, l - r)^2), h the height over the disk's plane, l the
  * distance from the centre along the plane. The rounding of that (the normal of a face
  * that is not thin is within some 20 ulp of exact, each other step a few ulp of the
@@ -285,9 +287,11 @@ typedef struct {
 } Faces4;
 
 /* The cylinders holding a wide node's four children (for children of at most CYLINDER
- * faces; the others and empty ones: radius and half height +inf): an axis (c, n, unit n)
- * and, over the children's corners, the greatest distance from the axis (r) and from the
- * plane through c across it (t). A face lies in the cylinder of its node, so its
+ * faces; the others and empty ones: radius and half height +inf): an axis (c, n, unit n:
+ * along the faces' summed area normal, c at mid-height of their corners along it, so
+ * that the cylinder is no taller than it must be) and, over the children's corners, the
+ * greatest distance from the axis (r) and from the plane through c across it (t). A
+ * face lies in the cylinder of its node, so its
  * distance is at least the cylinder's, sqrt(max(0, |h| - t)^2 + max(0, l - r)^2) for a
  * point at height h over that plane and distance l from the axis; rounding moves that by
  * less than 1e-14 times the largest coordinate, and it is tested as the disks are
@@ -326,8 +330,8 @@ static void box_empty(Box4 *b)
 }
 
 /* the wide node of heap node i at depth d; its index */
-/* lane of y: the cylinder of slots s0 .. s1 - 1 of t about the centre of box lo, hi, none
- * when there are more than CYLINDER of them */
+/* lane of y: the cylinder of slots s0 .. s1 - 1 of t, its axis through the centre of box
+ * lo, hi moved to mid-height; none when there are more than CYLINDER of them */
 static void cylinder_lane(const Tree *t, Cyl4 *y, int lane, int64_t s0, int64_t s1, const double *lo, const double *hi)
 {
     for (int k = 0; k < 3; k++)
@@ -347,9 +351,17 @@ static void cylinder_lane(const Tree *t, Cyl4 *y, int lane, int64_t s0, int64_t 
     double nn = dot(n, n);
     if (!(nn > 1e-250 && nn < 1e250))
         return;
-    double len = sqrt(nn);
+    double len = sqrt(nn), low = INFINITY, high = -INFINITY;
     for (int k = 0; k < 3; k++)
         n[k] /= len, c[k] = lo[k] * 0.5 + hi[k] * 0.5;
+    for (int64_t s = s0; s < s1; s++)
+        for (int v = 0; v < 3; v++) {
+            const double *x = t->tri + 9 * s + 3 * v;
+            double u[3] = {x[0] - c[0], x[1] - c[1], x[2] - c[2]}, e = dot(n, u);
+            low = e < low ? e : low, high = e > high ? e : high;
+        }
+    for (int k = 0; k < 3; k++)
+        c[k] += (low * 0.5 + high * 0.5) * n[k];
     for (int64_t s = s0; s < s1; s++)
         for (int v = 0; v < 3; v++) {
             const double *x = t->tri + 9 * s + 3 * v;
@@ -399,7 +411,7 @@ static void disk_lane(Faces4 *q, int lane, const double *f)
     const double *a = f, *b = f + 3, *c = f + 6;
     double ab[3], ac[3], bc[3], n[3], g[3], r2 = 0;
     for (int k = 0; k < 3; k++)
-        ab[k] = b[k] - a[k], ac[k] = c[k] - a[k], bc[k] = c[k] - b[k], g[k] = (a[k] + b[k] + c[k]) / 3.0;
+        ab[k] = b[k] - a[k], ac[k] = c[k] - a[k], bc[k] = c[k] - b[k];
     n[0] = ab[1] * ac[2] - ab[2] * ac[1], n[1] = ab[2] * ac[0] - ab[0] * ac[2], n[2] = ab[0] * ac[1] - ab[1] * ac[0];
     double nn = dot(n, n), longest = dot(ab, ab);
     longest = dot(ac, ac) > longest ? dot(ac, ac) : longest;
@@ -407,6 +419,19 @@ static void disk_lane(Faces4 *q, int lane, const double *f)
     /* not thin (distance.THIN), nor so small that the products lose bits, nor overflowing */
     if (!(nn > 1e-250 && nn < 1e250 && nn >= 0.01 * longest * longest))
         return;
+    /* the angles at a, b and c: acute when these are positive */
+    double at_a = dot(ab, ac), at_b = -dot(ab, bc), at_c = dot(ac, bc);
+    if (at_a <= 0 || at_b <= 0 || at_c <= 0) {
+        const double *u = at_a <= 0 ? b : a, *v = at_a <= 0 || at_b <= 0 ? c : b; /* the longest side */
+        for (int k = 0; k < 3; k++)
+            g[k] = u[k] * 0.5 + v[k] * 0.5;
+    } else { /* a + (|ac|^2 (n x ab) + |ab|^2 (ac x n)) / (2 |n|^2) */
+        double x[3], y[3], sac = dot(ac, ac), sab = dot(ab, ab), half = 0.5 / nn;
+        x[0] = n[1] * ab[2] - n[2] * ab[1], x[1] = n[2] * ab[0] - n[0] * ab[2], x[2] = n[0] * ab[1] - n[1] * ab[0];
+        y[0] = ac[1] * n[2] - ac[2] * n[1], y[1] = ac[2] * n[0] - ac[0] * n[2], y[2] = ac[0] * n[1] - ac[1] * n[0];
+        for (int k = 0; k < 3; k++)
+            g[k] = a[k] + (sac * x[k] + sab * y[k]) * half;
+    }
     for (int v = 0; v < 3; v++) {
         double d[3] = {f[3 * v] - g[0], f[3 * v + 1] - g[1], f[3 * v + 2] - g[2]};
         r2 = dot(d, d) > r2 ? dot(d, d) : r2;

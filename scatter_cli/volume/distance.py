@@ -37,7 +37,7 @@ from ..core import native
 
 _kernel = native.kernel("_cvolume")
 
-LEAF = 4
+LEAF = 8
 # Points up to this many times the surface's largest coordinate keep every product in
 # the distance (fourth powers of coordinates) finite.
 LIMIT = 1e60
