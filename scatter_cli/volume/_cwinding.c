@@ -56,8 +56,10 @@ typedef struct {
  * point: the walk visits, in preorder, every node that any of the four would visit
  * alone (lane l's next node is next[l]; the walk goes to the least of them), and at each
  * node a lane whose own walk is there adds what it would add alone, in the same order
- * (the other lanes compute but keep their sum). Every lane does the scalar code's
- * float64 operations in its order, so the sums are the same bytes. */
+ * (the other lanes compute but keep their sum). At a near leaf that few lanes reach
+ * (fewer than its triangles over four), each of them takes its triangles four at a time
+ * instead, one in each lane, and adds their terms in turn. Every lane does the scalar
+ * code's float64 operations in its order, so the sums are the same bytes. */
 
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic ignored "-Wpsabi" /* vectors pass only between inlined functions */
@@ -103,12 +105,9 @@ INLINE v4d atan2_4(v4d y, v4d x)
     return pick(y < 0, -a, a);
 }
 
-/* winding._triangle_terms, lane by lane */
-INLINE v4d triangle_term4(const double *t, v4d qx, v4d qy, v4d qz)
+/* winding._triangle_terms, lane by lane, of the corners a, b, c less the point */
+INLINE v4d solid_angle4(v4d ax, v4d ay, v4d az, v4d bx, v4d by, v4d bz, v4d cx, v4d cy, v4d cz)
 {
-    v4d ax = t[0] - qx, ay = t[1] - qy, az = t[2] - qz;
-    v4d bx = t[3] - qx, by = t[4] - qy, bz = t[5] - qz;
-    v4d cx = t[6] - qx, cy = t[7] - qy, cz = t[8] - qz;
     v4d la = sqrt4(ax * ax + ay * ay + az * az);
     v4d lb = sqrt4(bx * bx + by * by + bz * bz);
     v4d lc = sqrt4(cx * cx + cy * cy + cz * cz);
@@ -118,6 +117,23 @@ INLINE v4d triangle_term4(const double *t, v4d qx, v4d qy, v4d qz)
     v4d ca = cx * ax + cy * ay + cz * az;
     v4d den = la * lb * lc + ab * lc + bc * la + ca * lb;
     return atan2_4(det, den) * INV2PI;
+}
+
+/* the terms of triangle t (9 doubles) at four points */
+INLINE v4d triangle_term4(const double *t, v4d qx, v4d qy, v4d qz)
+{
+    return solid_angle4(t[0] - qx, t[1] - qy, t[2] - qz, t[3] - qx, t[4] - qy, t[5] - qz, t[6] - qx, t[7] - qy, t[8] - qz);
+}
+
+/* the terms of triangles t, t + 9, ... t + 9 (k - 1) at one point (x, y, z), in lanes
+ * 0 .. k - 1 (the others: triangle t's again) */
+INLINE v4d triangles_term4(const double *t, int k, double x, double y, double z)
+{
+    v4d c[9] = {{0}};
+    for (int l = 0; l < 4; l++)
+        for (int j = 0; j < 9; j++)
+            c[j][l] = t[9 * (l < k ? l : 0) + j];
+    return solid_angle4(c[0] - x, c[1] - y, c[2] - z, c[3] - x, c[4] - y, c[5] - z, c[6] - x, c[7] - y, c[8] - z);
 }
 
 /* winding._far_terms, lane by lane */
@@ -177,7 +193,21 @@ TARGETS static void winding_4(const Work *w, const int64_t *at, int64_t m)
                 end[top] = h->skip, lanes[top] = here, top++, here = near;
             i = i + 1;
         } else {
-            if (near)
+            int reach = __builtin_popcount(near);
+            if (reach && reach * ((h->count + 3) / 4) < h->count) {
+                /* few lanes here: each lane's triangles four at a time, added in turn */
+                for (unsigned b = near; b; b &= b - 1) {
+                    int l = __builtin_ctz(b);
+                    double sum = acc[l];
+                    for (int64_t k = 0; k < h->count; k += 4) {
+                        int left = h->count - k < 4 ? (int)(h->count - k) : 4;
+                        v4d term = triangles_term4(w->tri + 9 * (h->first + k), left, qx[l], qy[l], qz[l]);
+                        for (int j = 0; j < left; j++)
+                            sum = sum + term[j];
+                    }
+                    acc[l] = sum;
+                }
+            } else if (reach)
                 for (int64_t k = 0; k < h->count; k++)
                     acc = pick(LANES[near], acc + triangle_term4(w->tri + 9 * (h->first + k), qx, qy, qz), acc);
             i = h->skip;
