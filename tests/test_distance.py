@@ -380,7 +380,10 @@ def test_the_kernel_refuses_bad_arrays():
         with pytest.raises((ValueError, TypeError)):
             KERNEL.crossings(t.triangles, t.order, t.thin, t.lo, t.hi, t.leaf, p, *args, inside, 2)
     with pytest.raises(ValueError):
-        KERNEL.order(np.full((5, 3), np.nan), 4, 2)
+        KERNEL.order(np.full((5, 9), np.nan), 4, 2)
+    for bad in (t.triangles.reshape(-1, 3), t.triangles[:, :6]):
+        with pytest.raises(ValueError):
+            KERNEL.order(np.ascontiguousarray(bad), t.leaf, len(t.lo) // 2 + 1)
     assert KERNEL.thin(t.triangles).tobytes() == t.thin.tobytes()
     assert all(a.tobytes() == b.tobytes() for a, b in zip(KERNEL.boxes(t.triangles, t.leaf, len(t.lo) // 2 + 1), (t.lo, t.hi)))
     for args in ((t.triangles.reshape(-1, 3),), (t.triangles.astype(np.float32),), (np.asfortranarray(t.triangles),)):

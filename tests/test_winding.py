@@ -393,6 +393,62 @@ def test_kernel_morton_codes_and_order_are_numpys(points):
     assert order.tobytes() == want_order.astype(np.int64).tobytes()
 
 
+def _numpy_layout(codes, leaf, top_bit=None):
+    """winding._layout on the NumPy path (with another ``_top_bit``: a broken variant)."""
+    saved, saved_top = winding._kernel, winding._top_bit
+    winding._kernel = None
+    if top_bit is not None:
+        winding._top_bit = top_bit
+    try:
+        return winding._layout(codes, leaf)
+    finally:
+        winding._kernel, winding._top_bit = saved, saved_top
+
+
+@needs_kernel
+@settings(max_examples=80, deadline=None)
+@given(codes=st.lists(st.one_of(st.integers(0, 2**63 - 1), st.integers(0, 7), st.sampled_from([0, 1 << 40, 3 << 40])),
+                      max_size=300), leaf=st.integers(1, 9))
+def test_kernel_layout_is_numpys(codes, leaf):
+    """The kernel's nodes over sorted codes (distinct, tied, all equal, sharing high bits)
+    are _layout's, and it refuses codes out of order."""
+    codes = np.sort(np.array(codes, dtype=np.uint64))
+    got = KERNEL.layout(codes, leaf)
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(got, _numpy_layout(codes, leaf)))
+    if len(np.unique(codes)) > 1:
+        with pytest.raises(ValueError):
+            KERNEL.layout(np.ascontiguousarray(codes[::-1]), leaf)
+    with pytest.raises(ValueError):
+        KERNEL.layout(codes, 0)
+
+
+@needs_kernel
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(*[coordinate] * 9), min_size=0, max_size=30))
+def test_kernel_area_normals_and_centroids_are_numpys(rows):
+    """The kernel's area normals and centroids are the NumPy path's, on finite, huge and
+    non-finite corners."""
+    tri = np.array(rows, dtype=np.float64).reshape(-1, 3, 3)
+    with np.errstate(all="ignore"):
+        an, g = KERNEL.faces(np.ascontiguousarray(tri.reshape(-1, 9)))
+        want_an, want_g = winding._area_normals(tri), (tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0
+    np.testing.assert_array_equal(an, want_an)
+    np.testing.assert_array_equal(g, want_g)
+    with pytest.raises((TypeError, ValueError)):
+        KERNEL.faces(tri.reshape(-1, 3))
+
+
+@needs_kernel
+def test_a_layout_split_at_the_wrong_bit_is_not_the_kernels():
+    """The paired failure: splitting where the last code begins (bit 0) instead of at
+    the top differing bit gives other nodes than the kernel's."""
+    codes = np.array([0, 1, 2, 3, 8, 9, 10, 11], dtype=np.uint64)
+    got = KERNEL.layout(codes, 1)
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(got, _numpy_layout(codes, 1)))
+    broken = _numpy_layout(codes, 1, lambda x: np.zeros(len(x), np.uint64))
+    assert any(a.tobytes() != b.tobytes() for a, b in zip(got, broken))
+
+
 @pytest.mark.slow
 def test_trees_built_with_and_without_the_kernel_are_the_same(monkeypatch):
     mesh = trimesh.load(SAMPLES / "skull.ply", process=False)

@@ -990,24 +990,24 @@ static void select_least(Item *a, int64_t n, int64_t k)
     }
 }
 
-PyDoc_STRVAR(order_doc, "order(centres (F,3) f8, leaf, leaves) -> (F,) i8: distance.median_order from the faces' "
-                        "box centres.");
+PyDoc_STRVAR(order_doc, "order(triangles (F,9) f8, leaf, leaves) -> (F,) i8: distance.median_order, from the "
+                        "centres of the faces' boxes.");
 
 static PyObject *order_py(PyObject *self, PyObject *args)
 {
-    PyObject *oc;
-    PyArrayObject *ca;
+    PyObject *ot;
+    PyArrayObject *ta;
     long long leaf, leaves;
-    if (!PyArg_ParseTuple(args, "OLL", &oc, &leaf, &leaves) || !get(oc, NPY_FLOAT64, -1, &ca, "centres"))
+    if (!PyArg_ParseTuple(args, "OLL", &ot, &leaf, &leaves) || !get(ot, NPY_FLOAT64, -1, &ta, "triangles"))
         return NULL;
-    npy_intp nf = PyArray_SIZE(ca) / 3;
-    if (PyArray_NDIM(ca) != 2 || PyArray_DIM(ca, 1) != 3 || nf < 1 || !leaves_fit(leaves, leaf, nf)) {
+    npy_intp nf = PyArray_SIZE(ta) / 9;
+    if (PyArray_NDIM(ta) != 2 || PyArray_DIM(ta, 1) != 9 || nf < 1 || !leaves_fit(leaves, leaf, nf)) {
         PyErr_SetString(PyExc_ValueError, "order: bad shapes");
         return NULL;
     }
-    const double *c = PyArray_DATA(ca);
-    if (!finite_all(c, 3 * nf)) {
-        PyErr_SetString(PyExc_ValueError, "order: non-finite centre");
+    const double *tri = PyArray_DATA(ta);
+    if (!finite_all(tri, 9 * nf)) {
+        PyErr_SetString(PyExc_ValueError, "order: non-finite coordinate");
         return NULL;
     }
     PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){nf}, NPY_INT64);
@@ -1019,8 +1019,16 @@ static PyObject *order_py(PyObject *self, PyObject *args)
     }
     int64_t *o = PyArray_DATA(out);
     Py_BEGIN_ALLOW_THREADS
-    for (npy_intp i = 0; i < nf; i++)
-        items[i] = (Item){0.0, {c[3 * i], c[3 * i + 1], c[3 * i + 2]}, i};
+    for (npy_intp i = 0; i < nf; i++) {
+        const double *f = tri + 9 * i;
+        Item it = {0.0, {0, 0, 0}, i};
+        for (int k = 0; k < 3; k++) { /* as np.minimum and np.maximum of the corners, then lo * 0.5 + hi * 0.5 */
+            double lo = f[k] < f[3 + k] ? f[k] : f[3 + k], hi = f[k] > f[3 + k] ? f[k] : f[3 + k];
+            lo = lo < f[6 + k] ? lo : f[6 + k], hi = hi > f[6 + k] ? hi : f[6 + k];
+            it.c[k] = lo * 0.5 + hi * 0.5;
+        }
+        items[i] = it;
+    }
     for (int64_t size = leaves * leaf; size > leaf; size /= 2)
         for (int64_t s = 0; s < nf; s += size) {
             int64_t e = s + size < nf ? s + size : nf, half = size / 2;

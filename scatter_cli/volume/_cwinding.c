@@ -21,6 +21,7 @@
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 #include "_cthreads.h"
 
 #define FIELDS 28
@@ -663,6 +664,134 @@ static PyObject *order_py(PyObject *self, PyObject *args)
     return (PyObject *)out;
 }
 
+PyDoc_STRVAR(faces_doc, "faces(triangles (T, 9) float64) -> (area normals (T, 3), centroids (T, 3)) float64: "
+                        "winding._area_normals and the centroids (a + b + c) / 3.");
+
+static PyObject *faces_py(PyObject *self, PyObject *args)
+{
+    PyObject *ot;
+    PyArrayObject *ta;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "O", &ot) || !get2(ot, NPY_FLOAT64, 9, &ta, "triangles"))
+        return NULL;
+    npy_intp n = PyArray_DIM(ta, 0), dims[2] = {n, 3};
+    PyArrayObject *an = (PyArrayObject *)PyArray_SimpleNew(2, dims, NPY_FLOAT64);
+    PyArrayObject *g = (PyArrayObject *)PyArray_SimpleNew(2, dims, NPY_FLOAT64);
+    if (!an || !g) {
+        Py_XDECREF(an), Py_XDECREF(g);
+        return NULL;
+    }
+    const double *tri = PyArray_DATA(ta);
+    double *a = PyArray_DATA(an), *c = PyArray_DATA(g);
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp t = 0; t < n; t++) {
+        const double *f = tri + 9 * t;
+        double u[3], v[3];
+        for (int k = 0; k < 3; k++)
+            u[k] = f[3 + k] - f[k], v[k] = f[6 + k] - f[k];
+        for (int k = 0; k < 3; k++) {
+            int i = (k + 1) % 3, j = (k + 2) % 3;
+            a[3 * t + k] = 0.5 * (u[i] * v[j] - u[j] * v[i]);
+            c[3 * t + k] = (f[k] + f[3 + k] + f[6 + k]) / 3.0;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    PyObject *out = PyTuple_Pack(2, an, g);
+    Py_DECREF(an), Py_DECREF(g);
+    return out;
+}
+
+PyDoc_STRVAR(layout_doc, "layout(codes (T,) uint64 in order, leaf) -> (start, end, skip) (N,) int64 each: "
+                         "winding._layout's nodes, in preorder.");
+
+/* the highest set bit of x > 0 */
+static inline int top_bit(uint64_t x) { return 63 - __builtin_clzll(x); }
+
+/* the first index in c[s .. e-1] (in order) whose code is at least key, e if none */
+static int64_t first_at_least(const uint64_t *c, int64_t s, int64_t e, uint64_t key)
+{
+    while (s < e) {
+        int64_t m = s + (e - s) / 2;
+        if (c[m] < key)
+            s = m + 1;
+        else
+            e = m;
+    }
+    return s;
+}
+
+static PyObject *layout_py(PyObject *self, PyObject *args)
+{
+    PyObject *oc;
+    PyArrayObject *ca;
+    long long leaf;
+    (void)self;
+    if (!PyArg_ParseTuple(args, "OL", &oc, &leaf) || !get(oc, NPY_UINT64, -1, &ca, "codes"))
+        return NULL;
+    npy_intp n = PyArray_SIZE(ca);
+    const uint64_t *c = PyArray_DATA(ca);
+    if (leaf < 1 || PyArray_NDIM(ca) != 1) {
+        PyErr_SetString(PyExc_ValueError, "layout: codes (T,) and leaf >= 1");
+        return NULL;
+    }
+    for (npy_intp i = 1; i < n; i++)
+        if (c[i] < c[i - 1]) {
+            PyErr_SetString(PyExc_ValueError, "layout: codes not in order");
+            return NULL;
+        }
+    npy_intp most = n > 0 ? 2 * n - 1 : 0; /* nodes: every inner node splits its triangles in two */
+    int64_t *start = malloc(sizeof(int64_t) * (size_t)(most + 1)), *end = malloc(sizeof(int64_t) * (size_t)(most + 1)),
+            *skip = malloc(sizeof(int64_t) * (size_t)(most + 1));
+    /* pending work: a range to visit (id -1) or a node whose subtree is done (its id); a
+     * split either drops the top differing bit (63 at most) or halves equal codes (63 at
+     * most), two entries a level */
+    enum { STACK = 4 * 130 };
+    int64_t stack_s[STACK], stack_e[STACK], stack_id[STACK];
+    int64_t count = 0;
+    int top = 0;
+    if (!start || !end || !skip) {
+        free(start), free(end), free(skip);
+        return PyErr_NoMemory();
+    }
+    Py_BEGIN_ALLOW_THREADS
+    if (n > 0)
+        stack_s[0] = 0, stack_e[0] = n, stack_id[0] = -1, top = 1;
+    while (top > 0) {
+        top--;
+        if (stack_id[top] >= 0) {
+            skip[stack_id[top]] = count;
+            continue;
+        }
+        int64_t s = stack_s[top], e = stack_e[top], id = count++;
+        start[id] = s, end[id] = e;
+        if (e - s <= leaf) {
+            skip[id] = id + 1;
+            continue;
+        }
+        uint64_t first = c[s], last = c[e - 1], diff = first ^ last;
+        int64_t m = diff == 0 ? (s + e) / 2 : first_at_least(c, s, e, (last >> top_bit(diff)) << top_bit(diff));
+        stack_id[top] = id, top++;                                       /* then its subtree is done */
+        stack_s[top] = m, stack_e[top] = e, stack_id[top] = -1, top++;   /* then the right child */
+        stack_s[top] = s, stack_e[top] = m, stack_id[top] = -1, top++;   /* first the left child */
+    }
+    Py_END_ALLOW_THREADS
+    PyObject *out = NULL;
+    PyArrayObject *a[3] = {NULL, NULL, NULL};
+    int64_t *from[3] = {start, end, skip};
+    for (int k = 0; k < 3; k++) {
+        a[k] = (PyArrayObject *)PyArray_SimpleNew(1, (npy_intp[]){count}, NPY_INT64);
+        if (!a[k])
+            break;
+        memcpy(PyArray_DATA(a[k]), from[k], sizeof(int64_t) * (size_t)count);
+    }
+    if (a[0] && a[1] && a[2])
+        out = PyTuple_Pack(3, a[0], a[1], a[2]);
+    for (int k = 0; k < 3; k++)
+        Py_XDECREF(a[k]);
+    free(start), free(end), free(skip);
+    return out;
+}
+
 static PyMethodDef methods[] = {
     {"winding", winding, METH_VARARGS, winding_doc},
     {"morton", morton_py, METH_VARARGS, morton_doc},
@@ -671,6 +800,8 @@ static PyMethodDef methods[] = {
     {"moments", moments_py, METH_VARARGS, moments_doc},
     {"expansions", expansions_py, METH_VARARGS, expansions_doc},
     {"order", order_py, METH_VARARGS, order_doc},
+    {"layout", layout_py, METH_VARARGS, layout_doc},
+    {"faces", faces_py, METH_VARARGS, faces_doc},
     {NULL, NULL, 0, NULL},
 };
 

@@ -92,7 +92,7 @@ class TriangleTree:
         self.unit = 2.0 ** -int(np.frexp(max(-tri.min(), tri.max()))[1])
         tri = tri * self.unit
         self.order = median_order(tri, LEAF)
-        self.triangles = np.ascontiguousarray(tri[self.order].reshape(-1, 9))
+        self.triangles = np.take(tri.reshape(-1, 9), self.order, axis=0)  # (whole rows: faster than tri[order])
         self.thin = thin_faces(self.triangles)
         self.lo, self.hi = node_boxes(self.triangles, LEAF)
         self.leaf = LEAF
@@ -145,12 +145,12 @@ def median_order(tri, leaf):
     its share of leaves' worth of faces with the least centre along that side (ties by
     face index). Each leaf's faces in index order."""
     nf = len(tri)
-    lo = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])  # (not tri.min(axis=1): a slow reduction)
-    hi = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])
-    centre = np.ascontiguousarray(lo * 0.5 + hi * 0.5)
     leaves = leaf_count(nf, leaf)
     if _kernel is not None:
-        return _kernel.order(centre, leaf, leaves)
+        return _kernel.order(np.ascontiguousarray(tri.reshape(nf, 9)), leaf, leaves)
+    lo = np.minimum(np.minimum(tri[:, 0], tri[:, 1]), tri[:, 2])  # (not tri.min(axis=1): a slow reduction)
+    hi = np.maximum(np.maximum(tri[:, 0], tri[:, 1]), tri[:, 2])
+    centre = lo * 0.5 + hi * 0.5
     order = np.arange(nf)
     size = leaves * leaf
     while size > leaf:

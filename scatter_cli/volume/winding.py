@@ -71,14 +71,13 @@ class WindingTree:
     def __init__(self, vertices, faces=None):
         v = np.asarray(vertices, dtype=np.float64)
         tri = v.reshape(-1, 3, 3) if faces is None else np.take(v, np.asarray(faces, dtype=np.int64), axis=0)
-        an = _area_normals(tri)
+        an, centroid = _faces(tri)
         keep = (an[:, 0] != 0) | (an[:, 1] != 0) | (an[:, 2] != 0)
         if not (np.isfinite(tri).all() and np.isfinite(an).all()):  # (row by row only when needed: slower)
             keep &= np.isfinite(tri).all(axis=(1, 2)) & np.isfinite(an).all(axis=1)
         self.face = np.flatnonzero(keep)
         if len(self.face) < len(tri):
-            tri, an = np.compress(keep, tri, axis=0), np.compress(keep, an, axis=0)
-        centroid = (tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0
+            tri, an, centroid = (np.compress(keep, a, axis=0) for a in (tri, an, centroid))
         codes = _morton(centroid)
         order = _stable_order(codes)
         self.face, tri, an, centroid = (np.take(a, order, axis=0) for a in (self.face, tri, an, centroid))
@@ -162,7 +161,10 @@ def _layout(codes, leaf):
     """The nodes over triangles sorted by ``codes`` (T,) uint64, in preorder: (start,
     end, skip) (N,) int64 each, a node's triangles start..end-1, skip the index after
     its subtree. A node of more than ``leaf`` triangles splits where the highest
-    differing bit of its codes turns on (in the middle when all codes are equal)."""
+    differing bit of its codes turns on (in the middle when all codes are equal). The
+    kernel's ``layout`` makes the same nodes."""
+    if _kernel is not None:
+        return _kernel.layout(codes, leaf)
     if not len(codes):
         return (np.zeros(0, np.int64),) * 3
     levels = []  # per depth: start, end, index of the left child in the next depth (-1: leaf)
@@ -354,6 +356,15 @@ def _radii(tri, centre, start, end, skip):
         r[k] = np.maximum.reduceat(far, np.cumsum(end[k] - start[k]) - (end[k] - start[k]))
     r[np.isnan(r)] = np.nan  # (one NaN, whichever the operations made: a NaN radius never makes a node far)
     return r
+
+
+def _faces(tri):
+    """(area normals (T, 3), centroids (T, 3)) float64 of the triangles ``tri`` (T, 3, 3):
+    :func:`_area_normals`, and (a + b + c) / 3. The kernel's ``faces`` computes the same
+    values."""
+    if _kernel is not None:
+        return _kernel.faces(np.ascontiguousarray(tri.reshape(-1, 9)))
+    return _area_normals(tri), (tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0
 
 
 def _area_normals(tri):
