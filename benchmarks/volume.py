@@ -8,7 +8,8 @@ building its tree or scene each time) and its ratio to the fastest peer of the s
 - scatter: distance (distance.closest_points), parity (parity.parity_inside, 3 rays),
   distance + parity, and distance + winding when scatter_cli/volume/winding.py is present
   (`--sign winding`). One tree for distance and parity; distance + winding builds its two
-  trees as a volume run does (source.label_trees); queries in chunks of CHUNK points.
+  trees and queries them as a volume run does (source.label_trees, then
+  source.distances_and_windings: both queries at once); queries in chunks of CHUNK points.
 - peers: Open3D ``RaycastingScene.compute_signed_distance`` (float32, Embree), point-cloud-
   utils ``signed_distance_to_mesh`` (fast winding number signs), libigl
   ``signed_distance`` with ``SIGNED_DISTANCE_TYPE_FAST_WINDING_NUMBER``; with
@@ -43,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from scatter_cli.volume import distance, parity  # noqa: E402
-from scatter_cli.volume.source import label_trees  # noqa: E402
+from scatter_cli.volume.source import distances_and_windings, label_trees  # noqa: E402
 
 try:  # the winding numbers of --sign winding, when present
     from scatter_cli.volume import winding
@@ -99,9 +100,10 @@ def ours_distance_parity(v, f, p):
 def ours_distance_winding(v, f, p):
     tree, wtree = label_trees(v[f], True, True)  # as a volume run builds them
     d, inside = [], []
-    for i in range(0, len(p), CHUNK):
-        d.append(distance.closest_points(tree, p[i:i + CHUNK])[0])
-        inside.append(winding.winding_numbers(wtree, p[i:i + CHUNK]) >= 0.5)
+    for i in range(0, len(p), CHUNK):  # and labels them: both queries at once
+        found, w = distances_and_windings(tree, wtree, p[i:i + CHUNK])
+        d.append(found[0])
+        inside.append(w >= 0.5)
     d, inside = np.concatenate(d), np.concatenate(inside)
     return np.where(inside, -d, d), inside
 

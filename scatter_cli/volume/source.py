@@ -150,6 +150,24 @@ def label_trees(triangles, distance: bool, winding: bool):
         return distance_tree(), later.result()
 
 
+def distances_and_windings(distance_tree, winding_tree, points):
+    """(closest_points's (distance, closest point, face) or None, the winding numbers (n,)
+    float64 or None) of ``points`` (n, 3) float64, each None when its tree is. Both wanted
+    and more than one worker thread: at the same time, the winding numbers on another
+    thread, so that one's serial steps (visit orders, gathers) run while the other's
+    kernel threads do (the same values either way)."""
+    from ..core.native import thread_pool, worker_count
+    from .distance import closest_points
+    from .winding import winding_numbers
+
+    if distance_tree is None or winding_tree is None or worker_count() <= 1:
+        return (None if distance_tree is None else closest_points(distance_tree, points),
+                None if winding_tree is None else winding_numbers(winding_tree, points))
+    with thread_pool(1, one_level=False) as pool:  # (its kernels keep their threads)
+        later = pool.submit(winding_numbers, winding_tree, points)
+        return closest_points(distance_tree, points), later.result()
+
+
 class VolumeLabels:
     """Turns chunks of volume points into the asked-for label arrays (``make``)."""
 
@@ -191,17 +209,13 @@ class VolumeLabels:
         labelled as written (:meth:`stored_points`)."""
         p = self.stored_points(raw.points, real_dtype)
         out = {}
-        distance = closest = face = winding = inside = None
-        if self.needs_distance:
-            from .distance import closest_points
-
-            distance, closest, face = closest_points(self._distance_tree, p)
-        if self.needs_winding:
-            from .winding import winding_numbers
-
-            winding = winding_numbers(self._winding_tree, p)
-            if self.tally is not None:
-                self.tally.add(winding)
+        distance = closest = face = inside = None
+        found, winding = distances_and_windings(self._distance_tree if self.needs_distance else None,
+                                                self._winding_tree, p)
+        if found is not None:
+            distance, closest, face = found
+        if winding is not None and self.tally is not None:
+            self.tally.add(winding)
         if self.needs_parity:
             from .parity import parity_inside
 
