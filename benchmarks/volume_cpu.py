@@ -1,14 +1,14 @@
 """CPU and wall seconds of scatter's volume labels on a shared machine.
 
-On the points of benchmarks/volume.py (10^6 uniform in the skull's padded box): the
-distance (distance.TriangleTree and closest_points) and the winding numbers
-(winding.WindingTree and winding_numbers), each with its tree built, after a warm-up on
-10^4 points; with ``--open3d``, Open3D's compute_signed_distance too. CPU seconds (all
+On the points of benchmarks/volume.py (10^6 uniform in the padded box of the skull, or
+of ``--mesh``): the distance (distance.TriangleTree and closest_points) and the winding
+numbers (winding.WindingTree and winding_numbers), each with its tree built, after a
+warm-up on 10^4 points; with ``--open3d``, Open3D's compute_signed_distance too. CPU seconds (all
 threads) move less than wall seconds when other work shares the cores, so runs of two
 builds alternated on a busy machine compare them better than wall time does.
 
-    PYTHONPATH=. python benchmarks/volume_cpu.py [--open3d] [--points N] [--parts]
-    python benchmarks/volume_cpu.py --checkouts BEFORE AFTER [--rounds R] [--points N]
+    PYTHONPATH=. python benchmarks/volume_cpu.py [--open3d] [--points N] [--parts] [--mesh NAME]
+    python benchmarks/volume_cpu.py --checkouts BEFORE AFTER [--rounds R] [--points N] [--mesh NAME]
 
 ``--parts``: instead, the steps of a distance + winding run (``sdf,inside``) apart: each
 tree's build, both built as a run builds them (``source.label_trees``), and each kind of
@@ -20,7 +20,8 @@ in a fresh process of each checkout (its kernels built in place), the checkouts 
 turns for R rounds, then each one's medians over the rounds: a before-and-after on a
 shared machine, where the load moves between rounds.
 
-Figures: benchmarks/results/2026-12-03-volume-speed.md, 2026-12-05-volume-builds.md.
+Figures: benchmarks/results/2026-12-03-volume-speed.md, 2026-12-05-volume-builds.md,
+2026-12-05-volume-bounds.md.
 """
 
 import argparse
@@ -80,7 +81,7 @@ import sys, time
 import numpy as np
 sys.path.insert(0, "benchmarks")
 import volume as bench
-v, f = bench.load("skull")
+v, f = bench.load(sys.argv[2])
 p = bench.box_points(v, int(sys.argv[1]))
 bench.ours_distance_winding(v, f, p[:10000])
 runs = []
@@ -92,7 +93,7 @@ print(*np.median(runs, axis=0))
 """
 
 
-def checkouts(folders, points, rounds):
+def checkouts(folders, points, rounds, mesh="skull"):
     """{checkout: [(wall s, CPU s) per round]}: the checkouts' runs, taking turns."""
     import os
     import subprocess
@@ -101,7 +102,7 @@ def checkouts(folders, points, rounds):
     for r in range(rounds):
         for d in folders:
             env = dict(os.environ, PYTHONPATH=str(Path(d).resolve()))
-            done = subprocess.run([sys.executable, "-c", ONE_CHECKOUT, str(points)], cwd=d, env=env,
+            done = subprocess.run([sys.executable, "-c", ONE_CHECKOUT, str(points), mesh], cwd=d, env=env,
                                   capture_output=True, text=True, check=True)
             out[d].append(tuple(map(float, done.stdout.split())))
             print(f"round {r}: {d}: wall {out[d][-1][0]:.3f} cpu {out[d][-1][1]:.3f}", flush=True)
@@ -115,14 +116,15 @@ def main():
     ap.add_argument("--parts", action="store_true")
     ap.add_argument("--checkouts", nargs=2, metavar=("BEFORE", "AFTER"))
     ap.add_argument("--rounds", type=int, default=6)
+    ap.add_argument("--mesh", default="skull", help="a mesh of benchmarks/volume.py (skull, sphere7, hemisphere)")
     args = ap.parse_args()
     if args.checkouts:
-        for d, runs in checkouts(args.checkouts, args.points, args.rounds).items():
+        for d, runs in checkouts(args.checkouts, args.points, args.rounds, args.mesh).items():
             wall, cpu = np.median(runs, axis=0)
             print(f"{d}: median over {args.rounds} rounds: wall {wall:.3f} s, cpu {cpu:.3f} s")
         print("load", open("/proc/loadavg").read().split()[0])
         return
-    v, f = bench.load("skull")
+    v, f = bench.load(args.mesh)
     p = bench.box_points(v, args.points)
     if args.parts:
         for name, (c, w) in parts(v, f, p).items():
