@@ -274,13 +274,14 @@ typedef struct {
  * radius of +inf and a zero normal for a thin or tiny face, whose normal rounding may
  * tilt, or a slot without a face). Each disk is the face's smallest: about the middle of
  * its longest side when the angle across that side is not acute, else about its
- * circumcentre (either in the face's plane). A face lies in its disk, so its distance is at least
- * the disk's: sqrt(h^2 + max(0, l - r)^2), h the height over the disk's plane, l the
- * distance from the centre along the plane. The rounding of that (the normal of a face
- * that is not thin is within some 20 ulp of exact, each other step a few ulp of the
- * point's distance from the centre) is under 1e-14 times the largest coordinate of the
- * points and the surface, a hundredth of ``tol``: the disk is tested against the best
- * distance plus twice ``tol``, and so skips only faces farther than the best plus tol. */
+ * circumcentre (either in the face's plane). A face lies in its disk, so its distance
+ * is at least the disk's: sqrt(h^2 + max(0, l - r)^2), h the height over the disk's
+ * plane, l the distance from the centre along the plane. The rounding of that (the
+ * normal of a face that is not thin is within some 20 ulp of exact, each other step a
+ * few ulp of the point's distance from the centre) is under 1e-14 times the largest
+ * coordinate of the points and the surface, a hundredth of ``tol``: the disk is tested
+ * against the best distance plus twice ``tol``, and so skips only faces farther than the
+ * best plus tol. */
 typedef struct {
     Box4 box;
     v4d c[3], n[3], r;
@@ -291,11 +292,11 @@ typedef struct {
  * along the faces' summed area normal, c at mid-height of their corners along it, so
  * that the cylinder is no taller than it must be) and, over the children's corners, the
  * greatest distance from the axis (r) and from the plane through c across it (t). A
- * face lies in the cylinder of its node, so its
- * distance is at least the cylinder's, sqrt(max(0, |h| - t)^2 + max(0, l - r)^2) for a
- * point at height h over that plane and distance l from the axis; rounding moves that by
- * less than 1e-14 times the largest coordinate, and it is tested as the disks are
- * (against the best distance plus twice ``tol``). */
+ * face lies in the cylinder of its node, so its distance is at least the cylinder's,
+ * sqrt(max(0, |h| - t)^2 + max(0, l - r)^2) for a point at height h over that plane and
+ * distance l from the axis; rounding moves that by less than 1e-14 times the largest
+ * coordinate, and it is tested as the disks are (against the best distance plus twice
+ * ``tol``). */
 typedef struct {
     v4d c[3], n[3], r, t;
 } Cyl4;
