@@ -61,6 +61,18 @@ def user_env(env=None):
     return full
 
 
+def numpy_baseline_env():
+    """The environment that holds NumPy to its baseline code: every dispatched CPU feature
+    this machine has (AVX2, AVX-512, ...) switched off with NPY_DISABLE_CPU_FEATURES; {}
+    where NumPy dispatches nothing beyond its baseline here."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    except ImportError:  # NumPy 1
+        from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    found = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
+    return {"NPY_DISABLE_CPU_FEATURES": " ".join(found)} if found else {}
+
+
 def scatter_command(*args):
     """The argv that runs the real command: ``python -m scatter_cli ARGS``."""
     return [sys.executable, "-m", "scatter_cli", *map(str, args)]

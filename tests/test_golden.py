@@ -1,5 +1,5 @@
 """The pinned output bytes (tests/golden.py): every command's digest, with the compiled
-kernels and on the NumPy path, equals the one committed in tests/golden_digests.json.
+kernels, on the NumPy path and with NumPy held to its baseline code, equals the one committed in tests/golden_digests.json.
 
 A change that must move bytes says so in its commit and updates only its own digests
 (``python tests/golden.py --update``)."""
@@ -9,15 +9,19 @@ import sys
 
 import pytest
 
-from tests.conftest import ROOT, run_user
+from tests.conftest import ROOT, numpy_baseline_env, run_user
 from tests.golden import COMMANDS, DIGESTS
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("numpy_path", [False, True], ids=["kernels", "numpy"])
-def test_every_command_writes_its_pinned_bytes(numpy_path, tmp_path):
+@pytest.mark.parametrize("numpy_path, baseline", [(False, False), (True, False), (False, True)],
+                         ids=["kernels", "numpy", "numpy-baseline"])
+def test_every_command_writes_its_pinned_bytes(numpy_path, baseline, tmp_path):
+    """numpy-baseline: NumPy held to its baseline code (no AVX2, no AVX-512), as on an older CPU."""
     # this tree's package, whatever PYTHONPATH or the installed copy say (the child runs elsewhere)
     env = {"SCATTER_NUMPY": "1" if numpy_path else "0", "PYTHONPATH": str(ROOT)}
+    if baseline:
+        env.update(numpy_baseline_env() or pytest.skip("NumPy dispatches no CPU feature beyond its baseline here"))
     proc = run_user([sys.executable, str(ROOT / "tests" / "golden.py")], env=env, cwd=tmp_path, timeout=600)
     assert proc.returncode == 0, proc.stderr.decode()
     got = json.loads(proc.stdout)

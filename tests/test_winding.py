@@ -204,16 +204,6 @@ def test_tree_covers_every_triangle_once_within_each_nodes_radius():
         assert np.linalg.norm(corners - tree.nodes[i, :3], axis=1).max() <= tree.nodes[i, 3] * (1 + 1e-12)
 
 
-def test_arctangent_is_within_two_ulp_of_numpys():
-    rng = np.random.default_rng(1)
-    y = np.concatenate([rng.normal(size=50000) * 10.0 ** rng.integers(-8, 8, 50000), [0.0, 1.0, -1.0, 0.0, 5.0]])
-    x = np.concatenate([rng.normal(size=50000) * 10.0 ** rng.integers(-8, 8, 50000), [1.0, 0.0, 0.0, -1.0, np.inf]])
-    ref = np.arctan2(y, x)
-    assert np.all(np.abs(winding.atan2(y, x) - ref) <= 2 * np.spacing(np.abs(ref)))
-    assert np.isnan(winding.atan2(np.array([np.nan, 1.0]), np.array([1.0, np.nan]))).all()
-
-
-@pytest.mark.slow
 def test_infinite_accuracy_is_the_exact_sum(case_data):
     tri, points, exact, _ = case_data("open_sphere")
     w = winding_numbers(WindingTree(tri), points, accuracy=float("inf"))

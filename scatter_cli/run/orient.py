@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.elementary import sincos
 from ..core.hashing import lane, to_unit
 
 # Keeps the spin stream apart from every placement stream of the same seed.
@@ -57,7 +58,7 @@ def orientations(normals: np.ndarray, angles: np.ndarray) -> np.ndarray:
     about +Z: q = a * (0, 0, sin t/2, cos t/2), written out for a_z = 0.
     """
     a = align_z(np.asarray(normals, dtype=np.float64))
-    s, c = np.sin(0.5 * angles), np.cos(0.5 * angles)
+    s, c = sincos(0.5 * angles)
     q = np.empty_like(a)
     q[:, 0] = a[:, 0] * c + a[:, 1] * s
     q[:, 1] = a[:, 1] * c - a[:, 0] * s

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import native
+from ..core.elementary import atan2
 from ..surface.topology import welded
 
 SHARP_ANGLE = 15.0  # degrees: the default --sharp-angle
@@ -148,7 +149,7 @@ def angle_between(n1, n2):
     length and the dot product: accurate for small angles and for angles near 180)."""
     cross = np.cross(n1, n2)
     sine = np.sqrt(np.einsum("ij,ij->i", cross, cross))
-    return np.degrees(np.arctan2(sine, np.einsum("ij,ij->i", n1, n2)))
+    return np.degrees(atan2(sine, np.einsum("ij,ij->i", n1, n2)))
 
 
 def edge_normals(edges: EdgeSlots, index, normals):

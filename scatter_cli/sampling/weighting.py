@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.elementary import asin, sin
 from ..errors import ScatterError, ScatterUsageError
 from ..loading import textures as textures_named
 from .plan import SamplePlan
@@ -182,7 +183,7 @@ def barycentric(w, u):
     zero = w[np.arange(n), k] <= 0
     if zero.any():
         k[zero] = np.argmax(w[zero], axis=1)
-    t = 0.5 + np.sin(np.arcsin(2.0 * u[:, 1] - 1.0) / 3.0)
+    t = 0.5 + sin(asin(2.0 * u[:, 1] - 1.0) / 3.0)
     np.clip(t, 0.0, 1.0, out=t)
     b = np.empty((n, 3))
     rows = np.arange(n)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.elementary import atan2
 from .texture import REPEAT, Texture
 
 
@@ -56,7 +57,7 @@ def weighted_vertex_normals(vertices, faces):
     angles = np.empty(faces.shape)
     for k in range(3):
         a, b = tri[:, (k + 1) % 3] - tri[:, k], tri[:, (k + 2) % 3] - tri[:, k]
-        angles[:, k] = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+        angles[:, k] = atan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
     angles[~np.isfinite(angles)] = 0.0
     flat = faces.ravel()
     out = np.empty((len(vertices), 3))

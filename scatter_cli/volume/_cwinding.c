@@ -87,7 +87,7 @@ INLINE v4d sqrt4(v4d x)
 
 INLINE v4d abs4(v4d x) { return (v4d)((v4l)x & (v4l){INT64_MAX, INT64_MAX, INT64_MAX, INT64_MAX}); }
 
-/* winding.atan2, lane by lane */
+/* elementary.atan2 (the NumPy path's), lane by lane */
 INLINE v4d atan2_4(v4d y, v4d x)
 {
     v4d ay = abs4(y), ax = abs4(x), t, arg, z, a;

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import numpy as np
 
+from ..core.elementary import cos, log, sincos
 from ..errors import ScatterError
 from ..sampling.plan import RawChunk, SamplePlan, apply_matrix
 from .signs import SignTally
@@ -66,11 +67,11 @@ def volume_uniforms(seed: int, start: int, stop: int):
 
 def gaussians(u):
     """Three independent N(0, 1) values per row from four uniforms ``u`` (n, 4) in [0, 1)
-    (Box-Muller; 1 - u keeps the logarithm finite): (n, 3) float64."""
-    r1 = np.sqrt(-2.0 * np.log1p(-u[:, 0]))
-    r2 = np.sqrt(-2.0 * np.log1p(-u[:, 2]))
-    t1, t2 = 2.0 * math.pi * u[:, 1], 2.0 * math.pi * u[:, 3]
-    return np.stack([r1 * np.cos(t1), r1 * np.sin(t1), r2 * np.cos(t2)], axis=1)
+    (Box-Muller; 1 - u, exact, keeps the logarithm finite): (n, 3) float64."""
+    r1 = np.sqrt(-2.0 * log(1.0 - u[:, 0]))
+    r2 = np.sqrt(-2.0 * log(1.0 - u[:, 2]))
+    s1, c1 = sincos(2.0 * math.pi * u[:, 1])
+    return np.stack([r1 * c1, r1 * s1, r2 * cos(2.0 * math.pi * u[:, 3])], axis=1)
 
 
 def parts_of(u, box_share: float, sigmas: int):

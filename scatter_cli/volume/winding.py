@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core import native
+from ..core.elementary import atan2
 
 _kernel = native.kernel("_cwinding")
 
@@ -42,16 +43,6 @@ FIELDS = 28  # float64 fields of a node, see _node_fields
 
 INV2PI = 0.15915494309189535  # 1 / (2 pi), as in _cwinding.c
 INV4PI = 0.07957747154594767  # 1 / (4 pi)
-PIO2 = 1.5707963267948966
-PIO4 = 0.7853981633974483
-PI = 3.141592653589793
-MOREBITS = 6.123233995736765886130e-17  # pi/2 - PIO2
-TAN3PIO8 = 2.41421356237309504880
-# Cephes' rational approximation of atan on [0, 0.66]
-P = (-8.750608600031904122785e-01, -1.615753718733365076637e+01, -7.500855792314704667340e+01,
-     -1.228866684490136173410e+02, -6.485021904942025371773e+01)
-Q = (2.485846490142306297962e+01, 1.650270098316988542046e+02, 4.328810604912902668951e+02,
-     4.853903996359136964868e+02, 1.945506571482613964425e+02)
 
 
 class WindingTree:
@@ -386,24 +377,6 @@ def _norms(v):
 
 
 # ---- the NumPy path: the kernel's float64 operations, in its order ----
-
-def atan2(y, x):
-    """Elementwise arctangent of y / x in [-pi, pi] (y, x float64 arrays), from + - * /
-    only (Cephes' atan), as the kernel computes it: within 2 ulp of np.arctan2."""
-    ay, ax = np.abs(y), np.abs(x)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(ax == 0, np.inf, ay / ax)  # (NaN stays NaN)
-        small, large = t <= 0.66, t > TAN3PIO8
-        arg = np.where(small, t, np.where(large, 1.0 / t, (t - 1.0) / (t + 1.0)))
-        z = arg * arg
-        z = z * ((((P[0] * z + P[1]) * z + P[2]) * z + P[3]) * z + P[4]) / (
-            ((((z + Q[0]) * z + Q[1]) * z + Q[2]) * z + Q[3]) * z + Q[4])
-        z = arg * z + arg
-        a = np.where(small, z, np.where(large, PIO2 - z + MOREBITS, PIO4 + z + 0.5 * MOREBITS))
-    a = np.where(ay == 0, 0.0, a)
-    a = np.where(x < 0, PI - a, a)
-    return np.where(y < 0, -a, a)
-
 
 def _triangle_terms(tri, q):
     """(m,) float64 solid angles over 2 pi of triangles ``tri`` (m, 9) seen from ``q``

@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from ...core.elementary import sincos
 from ..normals import face_normals
 from ...surface.model import column_bounds
 
@@ -30,15 +31,16 @@ def fibonacci_sphere(k: int) -> np.ndarray:
     i = np.arange(k, dtype=np.float64) + 0.5
     z = 1.0 - 2.0 * i / k
     r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
-    phi = i * (math.pi * (3.0 - math.sqrt(5.0)))
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    s, c = sincos(i * (math.pi * (3.0 - math.sqrt(5.0))))
+    return np.stack([r * c, r * s, z], axis=1)
 
 
 def random_rotations(u) -> np.ndarray:
     """(n, 4) unit quaternions (x, y, z, w), uniform over rotations, from ``u`` (n, 3) in [0, 1)."""
     a, b = np.sqrt(1.0 - u[:, 0]), np.sqrt(u[:, 0])
-    t1, t2 = 2 * math.pi * u[:, 1], 2 * math.pi * u[:, 2]
-    return np.stack([a * np.sin(t1), a * np.cos(t1), b * np.sin(t2), b * np.cos(t2)], axis=1)
+    s1, c1 = sincos(2 * math.pi * u[:, 1])
+    s2, c2 = sincos(2 * math.pi * u[:, 2])
+    return np.stack([a * s1, a * c1, b * s2, b * c2], axis=1)
 
 
 def rotate(q, v) -> np.ndarray:
