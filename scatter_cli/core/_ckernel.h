@@ -8,6 +8,20 @@
 
 #define HUGE_PAGE ((size_t)1 << 21)
 
+/* A hot walk compiled once for each kind of x86-64 CPU, chosen at load (an ifunc): for
+ * AVX-512 (x86-64-v4: 32 vector registers, masks), for AVX2 (four doubles in one
+ * register) and plain. Built with -ffp-contract=off, every clone rounds every operation
+ * as the others do: the same bytes on any CPU. */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__GLIBC__)
+#if __GNUC__ >= 11 /* (x86-64-v4 is known from GCC 11) */
+#define TARGETS __attribute__((target_clones("arch=x86-64-v4", "avx2", "default")))
+#else
+#define TARGETS __attribute__((target_clones("avx2", "default")))
+#endif
+#else
+#define TARGETS
+#endif
+
 /* size bytes, aligned to 64, for a large buffer read in random order: on huge pages
  * where the system offers them (as NumPy asks for its own large arrays), so that fewer
  * reads miss the address cache and fewer pages fault in. Freed with free(). */

@@ -253,12 +253,6 @@ static int64_t faces_tested, nodes_opened;
 #pragma GCC diagnostic ignored "-Wpsabi" /* vectors pass only between inlined functions */
 #endif
 typedef double v4d __attribute__((vector_size(32)));
-/* the walk compiled twice, chosen at load: for AVX2 (the vectors in one register) and plain */
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__GLIBC__) /* (ifunc) */
-#define TARGETS __attribute__((target_clones("avx2", "default")))
-#else
-#define TARGETS
-#endif
 typedef int64_t v4l __attribute__((vector_size(32)));
 
 typedef struct {

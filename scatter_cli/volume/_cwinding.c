@@ -68,11 +68,6 @@ typedef struct {
 typedef double v4d __attribute__((vector_size(32)));
 typedef int64_t v4l __attribute__((vector_size(32)));
 
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__GLIBC__) /* (ifunc) */
-#define TARGETS __attribute__((target_clones("avx2", "default")))
-#else
-#define TARGETS
-#endif
 #define INLINE __attribute__((always_inline)) static inline
 
 /* lanes of a where m is set, else of b */
