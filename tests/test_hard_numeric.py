@@ -274,19 +274,46 @@ def signed_zero_vertices(n, seed):
     return v
 
 
-@pytest.mark.parametrize("rows", [1, 7, 64, 1 << 16])
-@pytest.mark.parametrize("n", [1, 6, 7, 8, 63, 64, 65, 1000])
+def compiled_bounds(v):
+    """sampling.plan.column_bounds with its kernel (skipped where it is not built)."""
+    from scatter_cli.sampling import plan
+
+    if plan._kernel is None:
+        pytest.skip("_csampling is not built")
+    return plan.column_bounds(v)
+
+
+@pytest.mark.parametrize("rows", [1, 7, 64, 1 << 16, "kernel"])
+@pytest.mark.parametrize("n", [1, 6, 7, 8, 9, 63, 64, 65, 1000])
 def test_column_bounds_are_numpys_bit_for_bit(n, rows):
     """The blocked bounds (precision, LAS offsets) are v.min/max(axis=0)'s, signed zeros
-    and infinities included, whatever the block size; NaN wins as in NumPy."""
+    and infinities included, whatever the block size, and so are the kernel's (four runs
+    of rows, then the four in order); NaN wins as in NumPy."""
     from scatter_cli.surface.model import column_bounds
 
     for seed in range(4):
         v = signed_zero_vertices(n, seed)
         if seed == 3:
             v[n // 2, 1] = np.nan
-        lo, hi = column_bounds(v, rows)
+        lo, hi = compiled_bounds(v) if rows == "kernel" else column_bounds(v, rows)
         assert lo.tobytes() == v.min(axis=0).tobytes() and hi.tobytes() == v.max(axis=0).tobytes()
+
+
+@given(st.lists(st.sampled_from([-0.0, 0.0, 1.0, -1.0, np.inf, -np.inf, np.nan, 5e-324]), min_size=3, max_size=120))
+def test_the_kernels_bounds_are_numpys_on_any_values(values):
+    v = np.array(values[: len(values) // 3 * 3]).reshape(-1, 3)
+    lo, hi = compiled_bounds(v)
+    assert lo.tobytes() == v.min(axis=0).tobytes() and hi.tobytes() == v.max(axis=0).tobytes()
+
+
+def test_four_runs_combined_first_to_last_are_needed():
+    """The paired failure: the four runs combined last to first give the other zero
+    where the ties fall in two runs (the kernel must combine them in order)."""
+    v = np.zeros((8, 3))
+    v[:4] = -0.0  # runs of 2 rows: the first two runs hold -0.0, the last two 0.0
+    runs = [v[k * 2:(k + 1) * 2].min(axis=0) for k in range(4)]
+    backwards = np.minimum.reduce(runs[::-1])
+    assert backwards.tobytes() != v.min(axis=0).tobytes() == compiled_bounds(v)[0].tobytes()
 
 
 def test_column_bounds_without_the_last_block_fail_the_same_check():

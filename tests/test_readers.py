@@ -562,3 +562,36 @@ def test_format_rules_hold_for_smooth_normals(suffix, case, text, tmp_path):
     path.write_bytes(text.encode())
     assert (fast_read(path, suffix, smooth=True) is None) == carries_normals_or_uv(path)
     assert_same_smooth_normals(path)
+
+
+def binary_stl(corners):
+    """The bytes of a binary STL of ``corners`` (n, 3, 3) float32, zero normals."""
+    records = np.zeros(len(corners), dtype=[("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
+    records["corners"] = corners
+    return b"\0" * 80 + np.uint32(len(corners)).tobytes() + records.tobytes()
+
+
+@pytest.mark.parametrize("threads", ["1", "2", "3"])
+def test_binary_stl_read_in_blocks_on_threads_is_trimeshs(threads, monkeypatch, tmp_path):
+    """200,003 faces: blocks of 65,536 records at least, on the worker threads, the last
+    one short; every corner and face as trimesh reads them (process=False)."""
+    from scatter_cli.loading import fast
+
+    corners = np.random.default_rng(4).standard_normal((200003, 3, 3)).astype(np.float32)
+    path = tmp_path / "soup.stl"
+    path.write_bytes(binary_stl(corners))
+    monkeypatch.setenv("SCATTER_THREADS", threads)
+    [(vertices, faces)] = fast._stl(path.read_bytes())
+    mesh = trimesh.load(path, process=False)
+    assert vertices.dtype == np.float64 and faces.dtype == np.int64
+    assert vertices.tobytes() == np.asarray(mesh.vertices, dtype=np.float64).tobytes()
+    assert faces.tobytes() == np.asarray(mesh.faces, dtype=np.int64).tobytes()
+
+
+def test_a_copy_that_drops_the_short_last_block_is_not_trimeshs():
+    """The paired failure: whole blocks only leave the last rows of a 200,003-face file unset."""
+    corners = np.random.default_rng(4).standard_normal((200003, 3, 3)).astype(np.float32)
+    rows = np.zeros((200003, 3, 3))
+    for i in range(0, 200003 - 65536 + 1, 65536):
+        rows[i : i + 65536] = corners[i : i + 65536]
+    assert rows.tobytes() != corners.astype(np.float64).tobytes()

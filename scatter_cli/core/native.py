@@ -164,3 +164,19 @@ def _threads(env) -> int:
         from ..errors import ScatterUsageError
 
         raise ScatterUsageError(f"SCATTER_THREADS must be a whole number of threads, not {env!r}") from None
+
+
+def in_blocks(fn, n, min_block=1 << 15):
+    """[fn(i, j)] over consecutive blocks covering range(n), on the worker threads: many
+    blocks a thread (each of ``min_block`` at least), taken as the threads finish the last.
+
+    For element-wise work only: the blocks depend on n and the thread count, so the
+    result must not depend on where the cuts fall.
+    """
+    threads = worker_count()
+    blocks = min(PIECES_PER_THREAD * threads, n // max(min_block, 1))
+    if threads == 1 or blocks < 2:
+        return [fn(0, n)]
+    cuts = [n * k // blocks for k in range(blocks + 1)]
+    with thread_pool(threads) as pool:
+        return list(pool.map(fn, cuts[:-1], cuts[1:]))

@@ -11,7 +11,8 @@ import math
 import numpy as np
 
 from ..errors import ScatterError
-from ..surface.model import column_bounds, transformed_columns
+from ..sampling.plan import column_bounds
+from ..surface.model import transformed_columns
 
 # --precision auto keeps float32 while its rounding moves no point by more than this
 # fraction of the bounding-box diagonal.

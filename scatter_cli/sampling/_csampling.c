@@ -91,6 +91,68 @@ static inline void place_one(const double *t, double b1, double b2, double *p)
     }
 }
 
+PyDoc_STRVAR(bounds_doc,
+"bounds(vertices, out)\n\n"
+"The minimum and maximum of each column of vertices (n, 3) float64, n > 0, into out\n"
+"(2, 3) float64: surface.column_bounds's values bit for bit. Row after row as NumPy's\n"
+"minimum and maximum reduce: of equal values the later (so signed zeros as NumPy gives\n"
+"them), and NaN wins.");
+
+#define MIN_OF(a, x) (((a) < (x) || (a) != (a)) ? (a) : (x)) /* np.minimum(a, x) */
+#define MAX_OF(a, x) (((a) > (x) || (a) != (a)) ? (a) : (x))
+
+/* Four runs of consecutive rows, each reduced in turn, then the four in order: the same
+ * values as one run (of equal values the later still wins, the first NaN still wins),
+ * with four independent chains of comparisons instead of one. */
+static void bounds_of(const double *v, npy_intp n, double *out)
+{
+    npy_intp m = n < 8 ? n : n / 4, runs = n < 8 ? 1 : 4;
+    double lo[4][3], hi[4][3];
+    for (npy_intp k = 0; k < runs; k++)
+        for (int c = 0; c < 3; c++)
+            lo[k][c] = hi[k][c] = v[3 * k * m + c];
+    for (npy_intp r = 1; r < m; r++)
+        for (npy_intp k = 0; k < runs; k++)
+            for (int c = 0; c < 3; c++) {
+                double x = v[3 * (k * m + r) + c];
+                lo[k][c] = MIN_OF(lo[k][c], x);
+                hi[k][c] = MAX_OF(hi[k][c], x);
+            }
+    for (npy_intp r = runs * m; r < n; r++) /* the rows left over: the last run's */
+        for (int c = 0; c < 3; c++) {
+            lo[runs - 1][c] = MIN_OF(lo[runs - 1][c], v[3 * r + c]);
+            hi[runs - 1][c] = MAX_OF(hi[runs - 1][c], v[3 * r + c]);
+        }
+    for (int c = 0; c < 3; c++) {
+        out[c] = lo[0][c];
+        out[3 + c] = hi[0][c];
+        for (npy_intp k = 1; k < runs; k++) {
+            out[c] = MIN_OF(out[c], lo[k][c]);
+            out[3 + c] = MAX_OF(out[3 + c], hi[k][c]);
+        }
+    }
+}
+
+static PyObject *bounds(PyObject *self, PyObject *args)
+{
+    PyObject *ov, *oout;
+    PyArrayObject *v_a, *out_a;
+    npy_intp n;
+    if (!PyArg_ParseTuple(args, "OO", &ov, &oout) || !get_rows(ov, NPY_FLOAT64, 3, &v_a, &n, "vertices") ||
+        !get(oout, NPY_FLOAT64, 6, &out_a, "out"))
+        return NULL;
+    if (n < 1) {
+        PyErr_SetString(PyExc_ValueError, "bounds: no rows");
+        return NULL;
+    }
+    const double *v = PyArray_DATA(v_a);
+    double *out = PyArray_DATA(out_a);
+    Py_BEGIN_ALLOW_THREADS
+    bounds_of(v, n, out);
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
 PyDoc_STRVAR(areas_doc,
 "areas(vertices, faces, cof, out)\n\n"
 "Twice the area of each face (F, 3) int64 of vertices (V, 3) float64 into out (F,)\n"
@@ -475,6 +537,7 @@ static PyObject *draw(PyObject *self, PyObject *args)
 
 static PyMethodDef methods[] = {
     {"areas", areas, METH_VARARGS, areas_doc},
+    {"bounds", bounds, METH_VARARGS, bounds_doc},
     {"unit_normals", unit_normals, METH_VARARGS, unit_normals_doc},
     {"guide", guide, METH_VARARGS, guide_doc},
     {"select", select_faces, METH_VARARGS, select_doc},

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core import native
-from .plan import in_blocks
+from ..core.native import in_blocks
 
 _kernel = native.kernel("_csampling")
 

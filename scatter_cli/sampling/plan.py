@@ -17,9 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import native, seeding
+from ..core.native import in_blocks
 from ..errors import ScatterError
 from ..surface.areas import norms
-from ..surface.model import Surface, apply_matrix, cofactor, cofactors, corners, face_cross, transformed_columns
+from ..surface.model import (Surface, apply_matrix, cofactor, cofactors, column_bounds as numpy_column_bounds, corners,
+                             face_cross, transformed_columns)
 from .warps import square_to_triangle
 
 DRAWS_PER_POINT = 3
@@ -423,20 +425,15 @@ def _guide_table(cdf):
     return np.where(first[1:] == first[:-1], first[:-1], -1 - first[:-1])
 
 
-def in_blocks(fn, n, min_block=1 << 15):
-    """[fn(i, j)] over consecutive blocks covering range(n), on the worker threads: many
-    blocks a thread (each of ``min_block`` at least), taken as the threads finish the last.
-
-    For element-wise work only: the blocks depend on n and the thread count, so the
-    result must not depend on where the cuts fall.
-    """
-    threads = native.worker_count()
-    blocks = min(native.PIECES_PER_THREAD * threads, n // max(min_block, 1))
-    if threads == 1 or blocks < 2:
-        return [fn(0, n)]
-    cuts = np.linspace(0, n, blocks + 1).astype(np.int64).tolist()
-    with native.thread_pool(threads) as pool:
-        return list(pool.map(fn, cuts[:-1], cuts[1:]))
+def column_bounds(v):
+    """(lo, hi): the (3,) minimum and maximum of each column of ``v`` (n, 3) float64, n > 0:
+    surface.column_bounds's values bit for bit, in one pass where the kernel is built
+    (about twice as fast on the 3.9M vertices of a 1.3M-face binary STL)."""
+    if _kernel is None:
+        return numpy_column_bounds(v)
+    out = np.empty((2, 3))
+    _kernel.bounds(np.ascontiguousarray(v, dtype=np.float64), out)
+    return out[0], out[1]
 
 
 def chunk_ranges(stop: int, chunk_size: int, start: int = 0):

@@ -17,7 +17,7 @@ import numpy as np
 
 from ...core.elementary import sincos
 from ..normals import face_normals
-from ...surface.model import column_bounds
+from ..plan import column_bounds
 
 
 # Design directions after the two normal rays (docs/exterior.md: false drops against K).

@@ -23,7 +23,8 @@ from ...errors import ScatterError, ScatterUsageError
 from .count_search import search_radius, trim_to_count
 from .greedy import PairGraph
 from .pairs import as_points, cross_pairs
-from ..plan import RawChunk, in_blocks
+from ...core.native import in_blocks
+from ..plan import RawChunk
 from .spacing import hex_spacing, nearest_distances, relative_radius
 
 # Candidates drawn per output point before thinning: more buy a larger spacing (rho) for

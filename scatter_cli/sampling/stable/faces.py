@@ -14,7 +14,8 @@ from ...core import native
 from ...surface.areas import doubled_areas
 from ...errors import ScatterError
 from ...core.hashing import GOLDEN, lane, mix, seed_word
-from ..plan import DEFAULT_CHUNK, LARGE_MESH_CHUNK, SORT_FACES, in_blocks
+from ...core.native import in_blocks
+from ..plan import DEFAULT_CHUNK, LARGE_MESH_CHUNK, SORT_FACES
 from ...surface.model import apply_matrix
 
 _G = np.uint64(GOLDEN)
