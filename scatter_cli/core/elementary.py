@@ -70,8 +70,14 @@ def _horner(terms, z):
 
 
 def log(x):
-    """Natural logarithm of ``x`` (float64 array, > 0; 0 gives -inf)."""
+    """Natural logarithm of ``x`` (float64 array; 0 gives -inf, inf inf, below 0 NaN)."""
     x = np.asarray(x, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(x > 0, _log_positive(np.where(x > 0, x, 1.0)), np.where(x == 0, -np.inf, np.nan))
+
+
+def _log_positive(x):
+    """log of ``x`` (float64 array, 0 < x <= inf)."""
     m, e = np.frexp(x)  # x = m 2^e, m in [0.5, 1)
     low = m < SQRT_HALF
     m = np.where(low, 2.0 * m, m)  # now in [sqrt(1/2), sqrt(2))
@@ -81,14 +87,14 @@ def log(x):
     z = s * s
     half = 0.5 * f * f
     log1 = f - (half - s * (half + z * _horner(LOG_TERMS, z)))
-    with np.errstate(divide="ignore"):
-        return np.where(x == 0.0, -np.inf, e * LN2_HI + (log1 + e * LN2_LO))
+    return np.where(x == np.inf, np.inf, e * LN2_HI + (log1 + e * LN2_LO))
 
 
 def _reduced(x):
     """(r, k): x = k pi/2 + r, |r| <= pi/4 (about), for |x| < 2**20 pi/2."""
     k = np.rint(x * TWO_OVER_PI)
-    return ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_3, k.astype(np.int64) & 3
+    with np.errstate(invalid="ignore"):  # (NaN and inf: r is NaN, the quadrant any)
+        return ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_3, k.astype(np.int64) & 3
 
 
 def sincos(x):
