@@ -1,5 +1,6 @@
 """The pinned output bytes (tests/golden.py): every command's digest, with the compiled
-kernels, on the NumPy path and with NumPy held to its baseline code, equals the one committed in tests/golden_digests.json.
+kernels, on the NumPy path and with NumPy held to its baseline code, equals the one
+committed in tests/golden_digests.json.
 
 A change that must move bytes says so in its commit and updates only its own digests
 (``python tests/golden.py --update``)."""
