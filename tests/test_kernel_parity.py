@@ -361,7 +361,8 @@ CASES = {
 # For every function each kernel exports, a case that must call it (small ones: these cases
 # run in the fast loop, pytest -m "not slow", and all the others are marked slow).
 CALLED_BY = {
-    "_csampling": {"areas": "sample-skull-plain", "bounds": "sample-skull-plain", "draw": "sample-skull-plain", "guide": "sample-skull-plain",
+    "_csampling": {"areas": "sample-skull-plain", "bounds": "sample-skull-plain", "draw": "sample-skull-plain",
+                   "guide": "sample-skull-plain",
                    "place": "sample-skull-method=stratified", "select": "sample-skull-method=stratified",
                    "unit_normals": "normals-0-none"},
     "_cthinning": {"grid": "pairs-far", "pairs": "pairs-far", "greedy": "thin-line",
