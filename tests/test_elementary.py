@@ -6,6 +6,7 @@ import ast
 import json
 import math
 import sys
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -34,6 +35,27 @@ def test_log_is_within_one_ulp_of_the_c_librarys():
     with np.errstate(all="raise"):  # (no warning for the special values)
         special = elementary.log(np.array([1.0, 0.0, np.inf, -1.0, np.nan]))
     assert special[:3].tolist() == [0.0, -np.inf, np.inf] and np.isnan(special[3:]).all()
+
+
+def split(value, bits):
+    """``value`` (a Fraction) rounded to a double of ``bits`` significant bits."""
+    m, e = math.frexp(float(value))
+    return math.ldexp(round(math.ldexp(m, bits)), e - bits)
+
+
+def test_the_written_constants_are_the_derived_ones():
+    pio2 = Fraction("1.57079632679489661923132169163975144209858469968755291048747")
+    ln2 = Fraction("0.693147180559945309417232121458176568075500134360255254120680")
+    p1 = split(pio2, 33)
+    p2 = split(pio2 - Fraction(p1), 33)
+    assert (elementary.PIO2_1, elementary.PIO2_2) == (p1, p2)
+    assert elementary.PIO2_3 == float(pio2 - Fraction(p1) - Fraction(p2))
+    assert elementary.TWO_OVER_PI == float(1 / pio2)
+    assert elementary.LN2_HI == split(ln2, 40) and elementary.LN2_LO == float(ln2 - Fraction(split(ln2, 40)))
+    assert elementary.SIN_TERMS == tuple(float(Fraction((-1) ** k, math.factorial(2 * k + 1))) for k in range(8, 0, -1))
+    assert elementary.COS_TERMS == tuple(float(Fraction((-1) ** k, math.factorial(2 * k))) for k in range(9, 1, -1))
+    assert elementary.LOG_TERMS == tuple(float(Fraction(2, 2 * k + 1)) for k in range(11, 0, -1))
+    assert elementary.SQRT_HALF == float(math.sqrt(0.5))
 
 
 def sine_cosine_ulps(t):

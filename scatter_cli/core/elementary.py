@@ -12,43 +12,30 @@ kept.
 
 from __future__ import annotations
 
-from fractions import Fraction
-
 import numpy as np
 
-# pi / 2 and ln 2, to 60 digits (more than three doubles hold)
-_PIO2 = Fraction("1.57079632679489661923132169163975144209858469968755291048747")
-_LN2 = Fraction("0.693147180559945309417232121458176568075500134360255254120680")
-
-
-def _split(value: Fraction, bits: int) -> float:
-    """``value`` rounded to a double of ``bits`` significant bits (so that small integer
-    multiples of it are exact)."""
-    x = float(value)
-    m, e = np.frexp(x)
-    return float(np.ldexp(np.rint(np.ldexp(m, bits)), int(e) - bits))
-
-
-# pi / 2 as three parts, the first two of 33 bits: k * part is exact for |k| < 2**20
-PIO2_1 = _split(_PIO2, 33)
-PIO2_2 = _split(_PIO2 - Fraction(PIO2_1), 33)
-PIO2_3 = float(_PIO2 - Fraction(PIO2_1) - Fraction(PIO2_2))
-TWO_OVER_PI = float(1 / _PIO2)
-# ln 2 as two parts, the first of 40 bits: e * LN2_HI is exact for every exponent
-LN2_HI = _split(_LN2, 40)
-LN2_LO = float(_LN2 - Fraction(LN2_HI))
+# The constants below are written out (tests/test_elementary.py derives each again from
+# pi/2 and ln 2 to 60 digits, and from the series' exact terms), so that importing this
+# module costs no arithmetic on fractions at start-up.
+# pi / 2 as three parts, the first two of 33 significant bits: k * part is exact for |k| < 2**20
+PIO2_1 = 1.5707963267341256
+PIO2_2 = 6.077100506303966e-11
+PIO2_3 = 2.0222662487959506e-21
+TWO_OVER_PI = 0.6366197723675814
+# ln 2 as two parts, the first of 40 significant bits: e * LN2_HI is exact for every exponent
+LN2_HI = 0.6931471805601177
+LN2_LO = -1.7239444525614835e-13
 SQRT_HALF = 0.7071067811865476
-
-
-def _factorial(n: int) -> int:
-    return 1 if n < 2 else n * _factorial(n - 1)
-
-
-# Taylor terms on [-pi/4, pi/4], highest first: sin r = r + r^3 S(r^2), cos r = 1 - r^2/2 + r^4 C(r^2)
-SIN_TERMS = tuple(float(Fraction((-1) ** k, _factorial(2 * k + 1))) for k in range(8, 0, -1))
-COS_TERMS = tuple(float(Fraction((-1) ** k, _factorial(2 * k))) for k in range(9, 1, -1))
-# log(1 + f) = 2 atanh(s), s = f / (2 + f): the terms 2 / (2k + 1) of z = s^2, highest first
-LOG_TERMS = tuple(float(Fraction(2, 2 * k + 1)) for k in range(11, 0, -1))
+# Taylor terms on [-pi/4, pi/4], highest first: sin r = r + r^3 S(r^2) with S's terms
+# (-1)^k / (2k + 1)!, k = 8..1; cos r = 1 - r^2/2 + r^4 C(r^2) with C's (-1)^k / (2k)!, k = 9..2
+SIN_TERMS = (2.8114572543455206e-15, -7.647163731819816e-13, 1.6059043836821613e-10, -2.505210838544172e-08,
+             2.7557319223985893e-06, -0.0001984126984126984, 0.008333333333333333, -0.16666666666666666)
+COS_TERMS = (-1.5619206968586225e-16, 4.779477332387385e-14, -1.1470745597729725e-11, 2.08767569878681e-09,
+             -2.755731922398589e-07, 2.48015873015873e-05, -0.001388888888888889, 0.041666666666666664)
+# log(1 + f) = 2 atanh(s), s = f / (2 + f): the terms 2 / (2k + 1) of z = s^2, k = 11..1
+LOG_TERMS = (0.08695652173913043, 0.09523809523809523, 0.10526315789473684, 0.11764705882352941,
+             0.13333333333333333, 0.15384615384615385, 0.18181818181818182, 0.2222222222222222,
+             0.2857142857142857, 0.4, 0.6666666666666666)
 
 # Cephes' rational approximation of atan on [0, 0.66]
 PIO2 = 1.5707963267948966
